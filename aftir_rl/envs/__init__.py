@@ -1,0 +1,27 @@
+"""Gymnasium environments of aftir_rl and their registration."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+from aftir_rl.envs.tank_grid import Action, TankGridEnv
+
+__all__ = ["Action", "TankGridEnv", "ENV_IDS", "register_envs"]
+
+#: Every environment id registered by :func:`register_envs`.
+ENV_IDS: tuple[str, ...] = ("AFTIR-Tank-v0",)
+
+
+def register_envs() -> None:
+    """Register the aftir_rl environments with Gymnasium (idempotent).
+
+    Runs at ``import aftir_rl``; Gymnasium 1.x no longer reads pyproject entry points, and
+    ``gym.make("aftir_rl:AFTIR-Tank-v0")`` imports ``aftir_rl`` first, which is what subprocess
+    vector envs rely on.
+    """
+    if "AFTIR-Tank-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-Tank-v0",
+            entry_point="aftir_rl.envs.tank_grid:TankGridEnv",
+            max_episode_steps=500,
+        )

@@ -1,0 +1,28 @@
+"""Exception types a caller can catch.
+
+Every error that a user can cause (a bad file, a target the arm cannot reach, an invalid action) is
+an :class:`AftirError`, so a CLI prints its one-line message and exits with status 2 instead of a
+traceback. Each also derives from the built-in type a caller would expect (``ValueError``...).
+"""
+
+from __future__ import annotations
+
+
+class AftirError(Exception):
+    """Base class of every user-facing error of aftir_rl."""
+
+
+class ConfigError(AftirError, ValueError):
+    """A YAML configuration (tank, agent) is malformed: unknown key, bad value, missing file."""
+
+
+class TargetError(AftirError, ValueError):
+    """A target is outside the tank, inside an obstacle, or unreachable from the start."""
+
+
+class CheckpointError(AftirError, ValueError):
+    """A saved model (Q-table ``.npz``) cannot be read or does not fit the environment."""
+
+
+class InvalidActionError(AftirError, ValueError):
+    """An action outside the environment's action space was passed to ``step``."""

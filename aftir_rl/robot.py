@@ -1,0 +1,249 @@
+"""The AFTIR arm: specification, posture and batched forward kinematics.
+
+The arm is a linear module that pushes a chain of ``N`` constant-curvature sections of equal length
+``l`` through the access panel (design.md §1). A configuration is ``q = (dis, θ_1, φ_1, …, θ_N,
+φ_N)``: ``dis`` [cm] is the module's travel along the panel normal, ``θ_i`` [rad] the bending angle
+and ``φ_i`` [rad] the bending-plane angle of section ``i``.
+
+Frame S has its origin at the centre of the access panel, ``z`` along the panel normal into the tank.
+The base of section 1 sits at ``(0, 0, dis)`` pointing ``+z``. Each section transform is seed 004
+eq. 7, expressed in the end frame of the previous section and chained ``T = T_1 · T_2 ⋯ T_N``::
+
+    T_i = [[c²φ cθ + s²φ,  cφ sφ (cθ−1),   cφ sθ,  (l/θ)(1−cθ) cφ],
+           [cφ sφ (cθ−1),  s²φ cθ + c²φ,   sφ sθ,  (l/θ)(1−cθ) sφ],
+           [−cφ sθ,        −sφ sθ,          cθ,     (l/θ) sθ      ],
+           [0, 0, 0, 1]]
+
+``(1−cθ)/θ`` is computed as ``2 sin²(θ/2)/θ`` (no cancellation) and both it and ``sθ/θ`` switch to
+their Taylor series below ``|θ| = 1e-4``, where the two agree to far below float precision, so the
+kinematics is smooth through the straight arm. A point at arc length ``s`` of a section is the same
+transform with ``θ·s/l`` and ``s`` in place of ``θ`` and ``l``.
+
+Everything is batched: angles of shape ``(..., N)`` give results of shape ``(..., ·, 3)`` with no
+Python loop over the batch (only over the N ≤ 12 sections). Units: cm and rad.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "ArmSpec",
+    "Posture",
+    "section_transforms",
+    "forward_kinematics",
+    "body_points",
+    "tip_position",
+]
+
+_SMALL = 1e-4
+
+
+@dataclass(frozen=True)
+class ArmSpec:
+    """Physical parameters of the arm.
+
+    Attributes:
+        section_length: length ``l`` of every section [cm].
+        max_sections: the most sections the arm has.
+        radius: body radius used for collision checking [cm].
+        theta_max: bound on ``|θ_i|`` [rad].
+    """
+
+    section_length: float = 50.0
+    max_sections: int = 12
+    radius: float = 2.5
+    theta_max: float = math.pi / 2
+
+    def __post_init__(self) -> None:
+        if not self.section_length > 0:
+            raise ValueError(f"section_length must be positive, got {self.section_length}")
+        if self.max_sections < 1:
+            raise ValueError(f"max_sections must be at least 1, got {self.max_sections}")
+        if self.radius < 0:
+            raise ValueError(f"radius must not be negative, got {self.radius}")
+        if not 0 < self.theta_max <= math.pi:
+            raise ValueError(f"theta_max must be in (0, pi], got {self.theta_max}")
+
+
+@dataclass(frozen=True)
+class Posture:
+    """One configuration of the arm.
+
+    Attributes:
+        dis: linear module travel along the panel normal [cm], may be negative.
+        theta: bending angle of each section [rad].
+        phi: bending-plane (rotation) angle of each section [rad].
+    """
+
+    dis: float
+    theta: tuple[float, ...]
+    phi: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "dis", float(self.dis))
+        object.__setattr__(self, "theta", tuple(float(t) for t in self.theta))
+        object.__setattr__(self, "phi", tuple(float(p) for p in self.phi))
+        if len(self.theta) != len(self.phi):
+            raise ValueError(
+                f"theta and phi must have one value per section, got {len(self.theta)} and "
+                f"{len(self.phi)}"
+            )
+
+    @property
+    def n_sections(self) -> int:
+        """Number of sections ``N``."""
+        return len(self.theta)
+
+    def tip(self, section_length: float) -> NDArray[np.float64]:
+        """Tip position [cm] by forward kinematics."""
+        return tip_position(self.dis, self.theta, self.phi, section_length)
+
+    def points(self, section_length: float, points_per_section: int = 8) -> NDArray[np.float64]:
+        """Body points [cm], shape ``(N·K + 1, 3)``: the base, then K points per section."""
+        return body_points(self.dis, self.theta, self.phi, section_length, points_per_section)
+
+
+def _bend_terms(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Return ``(1 − cos θ)/θ`` and ``sin θ/θ``, smooth through ``θ = 0``."""
+    small = np.abs(theta) < _SMALL
+    safe = np.where(small, 1.0, theta)
+    t2 = theta * theta
+    one_minus_cos = np.where(small, theta * (0.5 - t2 / 24.0), 2.0 * np.sin(0.5 * safe) ** 2 / safe)
+    sinc = np.where(small, 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0), np.sin(safe) / safe)
+    return one_minus_cos, sinc
+
+
+def section_transforms(theta: ArrayLike, phi: ArrayLike, arc: ArrayLike) -> NDArray[np.float64]:
+    """Homogeneous transforms of constant-curvature arcs (seed 004 eq. 7).
+
+    Args:
+        theta: bending angle over the arc [rad], any shape.
+        phi: bending-plane angle [rad], broadcastable with ``theta``.
+        arc: arc length [cm], broadcastable with ``theta``.
+
+    Returns:
+        Array of shape ``broadcast(theta, phi, arc).shape + (4, 4)``.
+    """
+    theta, phi, arc = np.broadcast_arrays(
+        np.asarray(theta, dtype=np.float64),
+        np.asarray(phi, dtype=np.float64),
+        np.asarray(arc, dtype=np.float64),
+    )
+    ct, st = np.cos(theta), np.sin(theta)
+    cp, sp = np.cos(phi), np.sin(phi)
+    one_minus_cos, sinc = _bend_terms(theta)
+    radial = arc * one_minus_cos
+    out = np.zeros(theta.shape + (4, 4))
+    out[..., 0, 0] = cp * cp * ct + sp * sp
+    out[..., 0, 1] = cp * sp * (ct - 1.0)
+    out[..., 0, 2] = cp * st
+    out[..., 0, 3] = radial * cp
+    out[..., 1, 0] = out[..., 0, 1]
+    out[..., 1, 1] = sp * sp * ct + cp * cp
+    out[..., 1, 2] = sp * st
+    out[..., 1, 3] = radial * sp
+    out[..., 2, 0] = -cp * st
+    out[..., 2, 1] = -sp * st
+    out[..., 2, 2] = ct
+    out[..., 2, 3] = arc * sinc
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def _as_batch(
+    dis: ArrayLike, theta: ArrayLike, phi: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    theta = np.asarray(theta, dtype=np.float64)
+    phi = np.asarray(phi, dtype=np.float64)
+    if theta.ndim == 0 or theta.shape != phi.shape:
+        raise ValueError(
+            f"theta and phi must have the same shape (..., N), got {theta.shape} and {phi.shape}"
+        )
+    dis = np.broadcast_to(np.asarray(dis, dtype=np.float64), theta.shape[:-1])
+    return dis, theta, phi
+
+
+def forward_kinematics(
+    dis: ArrayLike, theta: ArrayLike, phi: ArrayLike, section_length: float
+) -> NDArray[np.float64]:
+    """Frames along the arm.
+
+    Args:
+        dis: module travel [cm], shape ``(...)`` or scalar.
+        theta: bending angles [rad], shape ``(..., N)``.
+        phi: bending-plane angles [rad], shape ``(..., N)``.
+        section_length: ``l`` [cm].
+
+    Returns:
+        Shape ``(..., N + 1, 4, 4)``: frame 0 is the base of section 1 at ``(0, 0, dis)``, frame
+        ``i`` the end of section ``i`` in frame S.
+    """
+    dis, theta, phi = _as_batch(dis, theta, phi)
+    n = theta.shape[-1]
+    local = section_transforms(theta, phi, section_length)
+    frames = np.empty(theta.shape[:-1] + (n + 1, 4, 4))
+    base = np.broadcast_to(np.eye(4), theta.shape[:-1] + (4, 4)).copy()
+    base[..., 2, 3] = dis
+    frames[..., 0, :, :] = base
+    for i in range(n):
+        frames[..., i + 1, :, :] = frames[..., i, :, :] @ local[..., i, :, :]
+    return frames
+
+
+def body_points(
+    dis: ArrayLike,
+    theta: ArrayLike,
+    phi: ArrayLike,
+    section_length: float,
+    points_per_section: int = 8,
+) -> NDArray[np.float64]:
+    """Points along the arm's backbone [cm].
+
+    Args:
+        dis: module travel [cm], shape ``(...)`` or scalar.
+        theta: bending angles [rad], shape ``(..., N)``.
+        phi: bending-plane angles [rad], shape ``(..., N)``.
+        section_length: ``l`` [cm].
+        points_per_section: K, the points per section at arc lengths ``l·j/K``, ``j = 1..K``.
+
+    Returns:
+        Shape ``(..., N·K + 1, 3)``: the base point, then K points per section, ending at the tip.
+    """
+    if points_per_section < 1:
+        raise ValueError(f"points_per_section must be at least 1, got {points_per_section}")
+    dis, theta, phi = _as_batch(dis, theta, phi)
+    frames = forward_kinematics(dis, theta, phi, section_length)
+    k = points_per_section
+    frac = np.arange(1, k + 1, dtype=np.float64) / k
+    # Local position of each sample in its section's base frame: shape (..., N, K, 3).
+    local = section_transforms(theta[..., None] * frac, phi[..., None], section_length * frac)
+    local_pos = local[..., :3, 3]
+    rot = frames[..., :-1, None, :3, :3]
+    origin = frames[..., :-1, None, :3, 3]
+    world = np.einsum("...ij,...j->...i", rot, local_pos) + origin
+    lead = theta.shape[:-1]
+    world = world.reshape(lead + (-1, 3))
+    return np.concatenate([frames[..., 0:1, :3, 3], world], axis=-2)
+
+
+def tip_position(
+    dis: ArrayLike, theta: ArrayLike, phi: ArrayLike, section_length: float
+) -> NDArray[np.float64]:
+    """Tip position [cm], shape ``(..., 3)``."""
+    return forward_kinematics(dis, theta, phi, section_length)[..., -1, :3, 3]
+
+
+def postures_to_arrays(
+    postures: Sequence[Posture],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Stack postures with the same number of sections into ``(dis, theta, phi)`` arrays."""
+    dis = np.array([p.dis for p in postures])
+    theta = np.array([p.theta for p in postures])
+    phi = np.array([p.phi for p in postures])
+    return dis, theta, phi
