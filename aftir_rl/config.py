@@ -30,6 +30,7 @@ def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
 
     Raises:
         ConfigError: the file is missing, is not valid YAML, or does not hold a mapping.
+
     """
     path = Path(path)
     try:
@@ -120,6 +121,7 @@ def from_mapping(cls: type[T], data: dict[str, Any], source: str) -> T:
 
     Raises:
         ConfigError: an unknown key, a missing required key or a value of the wrong type.
+
     """
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]

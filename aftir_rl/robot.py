@@ -53,6 +53,7 @@ class ArmSpec:
         max_sections: the most sections the arm has.
         radius: body radius used for collision checking [cm].
         theta_max: bound on ``|θ_i|`` [rad].
+
     """
 
     section_length: float = 50.0
@@ -79,6 +80,7 @@ class Posture:
         dis: linear module travel along the panel normal [cm], may be negative.
         theta: bending angle of each section [rad].
         phi: bending-plane (rotation) angle of each section [rad].
+
     """
 
     dis: float
@@ -129,6 +131,7 @@ def section_transforms(theta: ArrayLike, phi: ArrayLike, arc: ArrayLike) -> NDAr
 
     Returns:
         Array of shape ``broadcast(theta, phi, arc).shape + (4, 4)``.
+
     """
     theta, phi, arc = np.broadcast_arrays(
         np.asarray(theta, dtype=np.float64),
@@ -183,6 +186,7 @@ def forward_kinematics(
     Returns:
         Shape ``(..., N + 1, 4, 4)``: frame 0 is the base of section 1 at ``(0, 0, dis)``, frame
         ``i`` the end of section ``i`` in frame S.
+
     """
     dis, theta, phi = _as_batch(dis, theta, phi)
     n = theta.shape[-1]
@@ -214,6 +218,7 @@ def body_points(
 
     Returns:
         Shape ``(..., N·K + 1, 3)``: the base point, then K points per section, ending at the tip.
+
     """
     if points_per_section < 1:
         raise ValueError(f"points_per_section must be at least 1, got {points_per_section}")

@@ -199,6 +199,7 @@ class Raster:
         origin: the box minimum [cm].
         cell_size: edge of a cell [cm].
         obstructed: boolean array of shape ``shape``; True where a solid overlaps the cell.
+
     """
 
     origin: Vec3
@@ -224,6 +225,7 @@ class Raster:
 
         Raises:
             TargetError: the point is outside the box.
+
         """
         p = np.asarray(point, dtype=np.float64)
         rel = (p - np.array(self.origin)) / self.cell_size
@@ -315,6 +317,7 @@ class Tank:
         targets: reference targets [cm].
         description: one line for people.
         source: the file the tank was read from.
+
     """
 
     name: str
@@ -371,6 +374,7 @@ class Tank:
 
         Raises:
             ConfigError: the tank has no ``cell_size``.
+
         """
         if self.cell_size is None:
             raise ConfigError(f"{self.source or self.name}: this tank has no cell_size, so no raster")
@@ -413,6 +417,7 @@ class Tank:
 
         Raises:
             TargetError: outside the box, in an obstructed cell, or unreachable.
+
         """
         cell = self.raster.point_to_cell(point)
         self.check_target_cell(cell, what=f"target {_fmt(np.asarray(point, float))} cm")
@@ -550,6 +555,7 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
 
     Raises:
         ConfigError: naming ``source`` and the offending key.
+
     """
     src = source
     unknown = sorted(set(data) - _TOP_KEYS)
@@ -695,6 +701,7 @@ def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
 
     Raises:
         ConfigError: the tank does not exist or its file is malformed.
+
     """
     if isinstance(tank, Tank):
         return tank

@@ -25,7 +25,6 @@ from __future__ import annotations
 import json
 import os
 import random
-import tempfile
 import time
 import zipfile
 from collections import deque
@@ -39,6 +38,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
+from aftir_rl.atomic import atomic_open
 from aftir_rl.errors import CheckpointError
 
 __all__ = ["QLearningConfig", "QLearning", "greedy_rollout"]
@@ -63,6 +63,7 @@ class QLearningConfig:
         max_episode_steps: truncation limit of an episode.
         step_penalty: reward subtracted per free move (AFTIR envs only).
         log_interval: episodes between two logger dumps.
+
     """
 
     env_id: str = "AFTIR-Tank-v0"
@@ -117,6 +118,7 @@ class QLearning:
             return there is, 100 for the tank) makes the greedy policy try every untried action,
             which finds a distant target in a few hundred episodes where zeros wander.
         seed: seed of the exploration generator and of the first ``env.reset``.
+
     """
 
     def __init__(
@@ -186,6 +188,7 @@ class QLearning:
 
         Returns:
             self, trained further (``episodes_done`` and ``num_timesteps`` advance).
+
         """
         env, rng = self.env, self._rng
         q = self.q_table.tolist()  # lists index and max() far faster than numpy rows
@@ -263,6 +266,7 @@ class QLearning:
         Args:
             path: destination; ``.npz`` is appended if missing.
             extra: more JSON-serialisable metadata (env id, target...).
+
         """
         path = Path(path)
         if path.suffix != ".npz":
@@ -275,15 +279,8 @@ class QLearning:
             "rng_state": _state_to_json(self._rng.getstate()),
             **(extra or {}),
         }
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, q_table=self.q_table, metadata=np.array(json.dumps(meta)))
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with atomic_open(path, "wb") as fh:
+            np.savez(fh, q_table=self.q_table, metadata=np.array(json.dumps(meta)))
         return path
 
     @staticmethod
@@ -292,6 +289,7 @@ class QLearning:
 
         Raises:
             CheckpointError: missing, corrupt or not a Q-table checkpoint.
+
         """
         path = Path(path)
         hint = "retrain with `python -m aftir_rl.train q_table` or pass the right file"
@@ -315,6 +313,7 @@ class QLearning:
 
         Raises:
             CheckpointError: unreadable file, or a table that does not fit ``env``'s spaces.
+
         """
         q_table, meta = cls.read_checkpoint(path)
         n_states, n_actions = _discrete_sizes(env)
@@ -353,6 +352,7 @@ def greedy_rollout(
     Returns:
         The visited states (start first, repeats of a state in place dropped) and whether the
         episode terminated with ``info["is_success"]`` (or, without that key, a positive reward).
+
     """
     s, _ = env.reset(options=options)
     states = [int(s)]

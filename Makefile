@@ -1,0 +1,38 @@
+# Two commands do everything on a fresh clone: `make train` and `make test`.
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: install train test test-all lint bench tensorboard clean
+
+install: $(STAMP)
+
+$(STAMP): pyproject.toml constraints.txt
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[dev]" -c constraints.txt
+	$(PY) -m ipykernel install --sys-prefix --name python3 >/dev/null
+	touch $(STAMP)
+
+train: $(STAMP)  ## default Q-learning job: the four reference targets of the two-bay tank
+	$(PY) -m aftir_rl.train q_table
+
+test: $(STAMP)  ## the test suite (fast; long checks are marked slow and run by test-all)
+	$(PY) -m pytest -q -m "not slow"
+
+test-all: $(STAMP)
+	$(PY) -m pytest -q
+
+lint: $(STAMP)
+	$(PY) -m ruff check aftir_rl tests benchmarks
+	$(PY) -m ruff format --check aftir_rl tests benchmarks
+
+bench: $(STAMP)
+	$(PY) benchmarks/bench_tank.py
+
+tensorboard: $(STAMP)
+	$(VENV)/bin/tensorboard --logdir runs
+
+clean:
+	rm -rf runs .pytest_cache build *.egg-info

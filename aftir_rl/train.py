@@ -1,0 +1,287 @@
+"""Training command line: ``python -m aftir_rl.train q_table``.
+
+One run directory per target under ``--logdir``, named
+``{algo}__{env}__{target}__{seed}__{time}`` (design.md §8), holding:
+
+- ``q_table.npz``: the table and its metadata (resume with ``--resume``);
+- ``path.json``: the greedy tip path, ``{"target", "target_cell", "cells", "points_cm", ...}``,
+  start cell first, target cell last;
+- ``progress.csv`` and a TensorBoard event file with ``rollout/ep_rew_mean``,
+  ``rollout/ep_len_mean``, ``eval/success_rate``, ``eval/tip_error_cm``, ``eval/path_length_cm``,
+  the picture ``paths/<target>`` and the hyperparameters as text.
+
+The directory is built under a hidden ``.partial`` name and renamed when the run is complete, so a
+failed or interrupted run leaves no directory that looks finished. User errors (a bad target, a
+malformed config, a corrupt checkpoint) print one line and exit with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import shutil
+import sys
+import time
+from collections.abc import Sequence
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aftir_rl.atomic import write_json
+from aftir_rl.config import CONFIG_DIR, from_mapping, read_yaml
+from aftir_rl.errors import AftirError, CheckpointError, ConfigError
+
+__all__ = ["main", "train_q_table", "load_q_table_config"]
+
+ALGOS = ("q_table",)
+
+
+def load_q_table_config(path: str | Path) -> Any:
+    """Read ``configs/q_table.yaml`` (or another file) into a ``QLearningConfig``."""
+    from aftir_rl.agents.q_table import QLearningConfig
+
+    return from_mapping(QLearningConfig, read_yaml(path), str(path))
+
+
+def _target_tag(target: Sequence[float]) -> str:
+    return "_".join(f"{float(v):g}" for v in target)
+
+
+def _run_name(algo: str, env_id: str, target: Sequence[float], seed: int) -> str:
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
+    return f"{algo}__{env_id}__{_target_tag(target)}__{seed}__{stamp}"
+
+
+def _hyperparameter_text(params: dict[str, Any]) -> str:
+    rows = "\n".join(f"|{k}|{v}|" for k, v in params.items())
+    return "|param|value|\n|-|-|\n" + rows
+
+
+def train_q_table(
+    config: Any,
+    targets: Sequence[Sequence[float]],
+    seed: int = 0,
+    logdir: str | Path = "runs",
+    resume: str | Path | None = None,
+    progress_bar: bool = True,
+) -> list[dict[str, Any]]:
+    """Train one Q-table per target and write a run directory for each.
+
+    Args:
+        config: a ``QLearningConfig``.
+        targets: target points [cm].
+        seed: seed of exploration and of the env.
+        logdir: parent of the run directories.
+        resume: a ``q_table.npz`` (or a run directory holding one) to continue training from;
+            only with a single target, which must be the checkpoint's.
+        progress_bar: show a tqdm bar per target.
+
+    Returns:
+        One summary dict per target (what ``path.json`` holds, plus ``run_dir`` and ``seconds``).
+
+    Raises:
+        TargetError: a target outside the box, in an obstructed cell or unreachable; checked for
+            every target before any training starts.
+        CheckpointError: ``resume`` is unreadable or was trained for another env or target.
+    """
+    import gymnasium as gym
+    from stable_baselines3.common.logger import Image, configure
+
+    from aftir_rl.agents.q_table import QLearning, greedy_rollout
+    from aftir_rl.plotting import render_path
+
+    # Make (and so validate) every env before training anything.
+    envs = [
+        gym.make(
+            config.env_id,
+            tank=config.tank,
+            target=tuple(float(v) for v in t),
+            step_penalty=config.step_penalty,
+            max_episode_steps=config.max_episode_steps,
+        )
+        for t in targets
+    ]
+    checkpoint = None
+    if resume is not None:
+        checkpoint = Path(resume)
+        if checkpoint.is_dir():
+            checkpoint = checkpoint / "q_table.npz"
+        if len(envs) != 1:
+            raise CheckpointError("--resume continues one run: give at most one --target")
+    summaries = []
+    for target, env in zip(targets, envs):
+        base = env.unwrapped
+        if checkpoint is not None:
+            agent = QLearning.load(checkpoint, env)
+            _, meta = QLearning.read_checkpoint(checkpoint)
+            if meta.get("target_cell") not in (None, list(base.target_cell)):
+                raise CheckpointError(
+                    f"{checkpoint}: trained for target cell {meta['target_cell']}, not "
+                    f"{list(base.target_cell)}; resume with the same --target"
+                )
+        else:
+            agent = QLearning(
+                env,
+                learning_rate=config.learning_rate,
+                gamma=config.gamma,
+                exploration_initial_eps=config.exploration_initial_eps,
+                exploration_final_eps=config.exploration_final_eps,
+                exploration_decay=config.exploration_decay,
+                initial_q=config.initial_q,
+                seed=seed,
+            )
+        name = _run_name("q_table", config.env_id, target, seed)
+        logdir = Path(logdir)
+        partial = logdir / f".{name}.partial"
+        partial.mkdir(parents=True, exist_ok=False)
+        try:
+            logger = configure(str(partial), ["csv", "tensorboard"])
+            params = {**dataclasses.asdict(config), "seed": seed, "target": list(target)}
+            logger.record("hyperparameters", _hyperparameter_text(params), exclude=("csv",))
+            logger.dump(step=agent.num_timesteps)
+            start = time.perf_counter()
+            agent.learn(
+                config.episodes,
+                progress_bar=progress_bar,
+                logger=logger,
+                log_interval=config.log_interval,
+            )
+            seconds = time.perf_counter() - start
+            states, success = greedy_rollout(agent, env, max_steps=config.max_episode_steps)
+            cells = [base.raster.cell(s) for s in states]
+            points = np.array([base.raster.cell_center(c) for c in cells])
+            tip_error = float(np.linalg.norm(points[-1] - base.target_point))
+            length_cm = float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+            optimum = int(base.tank.reachable[base.target_cell])
+            summary: dict[str, Any] = {
+                "target": [float(v) for v in target],
+                "target_cell": list(base.target_cell),
+                "cells": [list(c) for c in cells],
+                "points_cm": points.tolist(),
+                "success": success,
+                "length_steps": len(cells) - 1,
+                "bfs_optimal_steps": optimum,
+                "optimal": success and len(cells) - 1 == optimum,
+                "tip_error_cm": tip_error,
+                "path_length_cm": length_cm,
+                "episodes": agent.episodes_done,
+                "seconds": seconds,
+            }
+            logger.record("eval/success_rate", float(success))
+            logger.record("eval/tip_error_cm", tip_error)
+            logger.record("eval/path_length_cm", length_cm)
+            logger.record("eval/path_length_steps", len(cells) - 1)
+            logger.record("eval/bfs_optimal_steps", optimum)
+            picture = render_path(
+                base.tank,
+                points,
+                base.target_point,
+                title=f"Q-learning greedy path to {_target_tag(target)} "
+                f"({len(cells) - 1} steps, BFS {optimum})",
+            )
+            logger.record(
+                f"paths/{_target_tag(target)}",
+                Image(picture, "HWC"),
+                exclude=("stdout", "log", "json", "csv"),
+            )
+            logger.dump(step=agent.num_timesteps)
+            logger.close()
+            agent.save(
+                partial / "q_table.npz",
+                extra={
+                    "env_id": config.env_id,
+                    "tank": config.tank,
+                    "target": [float(v) for v in target],
+                    "target_cell": list(base.target_cell),
+                    "config": dataclasses.asdict(config),
+                },
+            )
+            write_json(partial / "path.json", summary)
+            run_dir = logdir / name
+            partial.rename(run_dir)
+        except BaseException:
+            shutil.rmtree(partial, ignore_errors=True)
+            raise
+        summary["run_dir"] = str(run_dir)
+        summaries.append(summary)
+    return summaries
+
+
+def _print_summary(s: dict[str, Any]) -> None:
+    verdict = "optimal" if s["optimal"] else ("reached, not optimal" if s["success"] else "FAILED")
+    target = ", ".join(f"{v:g}" for v in s["target"])
+    print(
+        f"target ({target}) cm -> cell {tuple(s['target_cell'])}: {s['episodes']} episodes in "
+        f"{s['seconds']:.2f} s; greedy path {s['length_steps']} steps, BFS optimum "
+        f"{s['bfs_optimal_steps']} ({verdict}); {s['path_length_cm']:.0f} cm"
+    )
+    print("  cells: " + " ".join("(" + ",".join(map(str, c)) + ")" for c in s["cells"]))
+    print(f"  run dir: {s['run_dir']}")
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m aftir_rl.train",
+        description="Train an agent on an aftir_rl environment and log the run to TensorBoard.",
+    )
+    sub = parser.add_subparsers(dest="algo", required=True, metavar="ALGO")
+    q = sub.add_parser(
+        "q_table",
+        help="tabular Q-learning on AFTIR-Tank-v0 (seed 002)",
+        description="Tabular Q-learning on the rasterised tank, one run directory per target.",
+    )
+    q.add_argument(
+        "--config",
+        default=str(CONFIG_DIR / "q_table.yaml"),
+        help="YAML of QLearningConfig fields (default: configs/q_table.yaml)",
+    )
+    q.add_argument(
+        "--target",
+        nargs=3,
+        type=float,
+        action="append",
+        metavar=("X", "Y", "Z"),
+        help="target point in cm; repeat for several (default: the tank's reference targets)",
+    )
+    q.add_argument("--episodes", type=int, help="training episodes per target (overrides config)")
+    q.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    q.add_argument("--logdir", default="runs", help="parent of the run directories (default runs/)")
+    q.add_argument("--resume", help="q_table.npz or run directory to continue training from")
+    q.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m aftir_rl.train``."""
+    args = _parser().parse_args(argv)
+    try:
+        config = load_q_table_config(args.config)
+        if args.episodes is not None:
+            if args.episodes < 1:
+                raise ConfigError(f"--episodes must be at least 1, got {args.episodes}")
+            config = dataclasses.replace(config, episodes=args.episodes)
+        targets = args.target
+        if targets is None:
+            from aftir_rl.tank import load_tank
+
+            targets = [list(t) for t in load_tank(config.tank).targets]
+        summaries = train_q_table(
+            config,
+            targets,
+            seed=args.seed,
+            logdir=args.logdir,
+            resume=args.resume,
+            progress_bar=not args.no_progress,
+        )
+    except AftirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for s in summaries:
+        _print_summary(s)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,115 @@
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from aftir_rl.robot import ArmSpec, Posture, body_points, forward_kinematics, tip_position
+
+# Seed 000 Table II: theta, phi, dis, printed tip (l = 25 cm).
+SEED000 = [
+    ([0.62, -0.15, 0.32], [0.54, 0.54, 0.54], -13.99, [30.01, 18.01, 51.00]),
+    ([0.49, 0.65, -0.10], [1.22, 6.00, 6.79], -11.34, [30.03, 17.95, 51.00]),
+    ([0.71, 0.96, 0.57], [1.35, 5.41, 1.44], -9.57, [30.02, 17.94, 51.00]),
+    ([0.60, 1.07, 1.13], [1.42, 6.24, 3.99], -7.08, [29.95, 17.97, 51.00]),
+]
+# Seed 004 Table II: target, theta, d (planar arm in the plane through the target, l = 25 cm).
+SEED004 = [
+    ([11, 31, 31], [1.27, -0.82], -3.51),
+    ([11, 31, 31], [1.22, -0.64], -3.58),
+    ([30, 19, 50], [0.53, 0.17, -0.12], -14.18),
+    ([30, 19, 50], [0.53, 0.21, -0.25], -14.39),
+    ([30, 29, 67], [0.24, 0.54, -0.42, 0.40], -20.91),
+    ([30, 29, 67], [0.21, 0.66, -0.55, 0.46], -20.61),
+]
+
+
+def test_straight_arm_points_up():
+    pts = body_points(7.0, [0.0, 0.0, 0.0], [0.3, -1.0, 2.0], 50.0, points_per_section=5)
+    expected = np.stack([np.zeros(16), np.zeros(16), 7.0 + np.linspace(0, 150, 16)], axis=1)
+    np.testing.assert_allclose(pts, expected, atol=1e-12)
+
+
+def test_single_section_closed_form():
+    # A quarter circle of length l bends to (l/θ)(1 − cos θ) sideways and (l/θ) sin θ up.
+    l, th, ph = 50.0, math.pi / 2, 0.7
+    r = l / th
+    tip = tip_position(0.0, [th], [ph], l)
+    np.testing.assert_allclose(tip, [r * math.cos(ph), r * math.sin(ph), r], atol=1e-12)
+
+
+@pytest.mark.parametrize("theta, phi, dis, printed", SEED000)
+def test_seed000_table2_tips(theta, phi, dis, printed):
+    tip = tip_position(dis, theta, phi, 25.0)
+    assert np.linalg.norm(tip - printed) < 0.5
+
+
+@pytest.mark.parametrize("target, theta, dis", SEED004)
+def test_seed004_table2_tips(target, theta, dis):
+    phi = [math.atan2(target[1], target[0])] * len(theta)
+    tip = tip_position(dis, theta, phi, 25.0)
+    assert np.linalg.norm(tip - target) < 0.7
+
+
+def test_theta_to_zero_is_smooth_and_finite():
+    thetas = np.array([-1e-3, -1e-4, -9.999e-5, -1e-8, 0.0, 1e-8, 9.999e-5, 1e-4, 1e-3])
+    tips = tip_position(0.0, thetas[:, None], np.full((len(thetas), 1), 0.4), 50.0)
+    assert np.all(np.isfinite(tips))
+    # Lateral offset is l·θ/2 to first order, through the series/closed-form switch at 1e-4.
+    lateral = np.hypot(tips[:, 0], tips[:, 1]) * np.sign(thetas)
+    np.testing.assert_allclose(lateral, 50.0 * thetas / 2, rtol=1e-6, atol=1e-15)
+    np.testing.assert_allclose(tips[:, 2], 50.0 * np.sinc(thetas / np.pi), rtol=1e-14)
+    # Both sides of the switch agree to float precision.
+    a = tip_position(0.0, [1e-4 * (1 - 1e-12)], [0.4], 50.0)
+    b = tip_position(0.0, [1e-4 * (1 + 1e-12)], [0.4], 50.0)
+    np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-15)
+
+
+def test_derivative_through_zero_matches_finite_difference():
+    # d tip / d θ at θ = 0 for a single section: (l/2)·(cos φ, sin φ, 0).
+    h = 1e-6
+    plus = tip_position(0.0, [h], [0.9], 50.0)
+    minus = tip_position(0.0, [-h], [0.9], 50.0)
+    np.testing.assert_allclose((plus - minus) / (2 * h), [25 * math.cos(0.9), 25 * math.sin(0.9), 0], atol=1e-6)
+
+
+def test_arc_length_is_preserved():
+    rng = np.random.default_rng(0)
+    theta = rng.uniform(-1.5, 1.5, size=(5, 4))
+    phi = rng.uniform(-np.pi, np.pi, size=(5, 4))
+    pts = body_points(rng.uniform(-20, 20, 5), theta, phi, 30.0, points_per_section=400)
+    length = np.linalg.norm(np.diff(pts, axis=1), axis=-1).sum(axis=1)
+    np.testing.assert_allclose(length, 4 * 30.0, rtol=1e-4)
+
+
+def test_batched_equals_one_by_one():
+    rng = np.random.default_rng(1)
+    theta = rng.uniform(-1.5, 1.5, size=(2, 3, 5))
+    phi = rng.uniform(-np.pi, np.pi, size=(2, 3, 5))
+    dis = rng.uniform(-10, 10, size=(2, 3))
+    batch = body_points(dis, theta, phi, 25.0, points_per_section=4)
+    frames = forward_kinematics(dis, theta, phi, 25.0)
+    assert batch.shape == (2, 3, 21, 3) and frames.shape == (2, 3, 6, 4, 4)
+    for i in range(2):
+        for j in range(3):
+            one = Posture(dis[i, j], theta[i, j], phi[i, j]).points(25.0, points_per_section=4)
+            np.testing.assert_allclose(batch[i, j], one, atol=1e-12)
+            np.testing.assert_allclose(frames[i, j, -1, :3, 3], one[-1], atol=1e-12)
+
+
+def test_rotation_part_stays_orthonormal():
+    rng = np.random.default_rng(2)
+    frames = forward_kinematics(0.0, rng.uniform(-1.5, 1.5, (50, 6)), rng.uniform(-3, 3, (50, 6)), 50)
+    rot = frames[..., :3, :3]
+    np.testing.assert_allclose(rot @ np.swapaxes(rot, -1, -2), np.broadcast_to(np.eye(3), rot.shape), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(rot), 1.0, atol=1e-12)
+
+
+def test_bad_inputs_raise():
+    with pytest.raises(ValueError, match="same shape"):
+        tip_position(0.0, [0.1, 0.2], [0.1], 50.0)
+    with pytest.raises(ValueError, match="section_length"):
+        ArmSpec(section_length=-1)
+    with pytest.raises(ValueError, match="one value per section"):
+        Posture(0.0, (0.1, 0.2), (0.0,))

@@ -1,0 +1,131 @@
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from aftir_rl import tank as tank_module
+from aftir_rl.errors import ConfigError, TargetError
+from aftir_rl.tank import load_tank
+
+REF_YAML = tank_module.TANK_DIR / "b737_center.yaml"
+
+
+def test_reference_tank_matches_design(tank):
+    assert tank.box_min == (-60, -50, 0) and tank.box_max == (240, 150, 100)
+    assert tank.raster.shape == (15, 10, 5)
+    assert tank.start_cell == (3, 2, 0)
+    assert tank.panel.radius == 12
+    assert len(tank.targets) == 4
+
+
+def test_baffle_row_blocked_except_hatch(tank):
+    row = tank.raster.obstructed[:, 5, :]
+    free = {(int(a), int(c)) for a, c in np.argwhere(~row)}
+    assert free == {(7, 2), (8, 2)}
+
+
+def test_start_targets_and_hatch_are_free_and_everything_reachable(tank, scene_grid):
+    grid, dist = scene_grid
+    for cell in [(3, 2, 0), (7, 5, 2), (8, 5, 2)] + [tank.raster.point_to_cell(t) for t in tank.targets]:
+        assert not grid[cell]
+    free = {tuple(map(int, c)) for c in np.argwhere(~grid)}
+    assert set(dist) == free, "every free cell is reachable from the start cell"
+
+
+def test_obstruction_agrees_with_point_sampling(tank):
+    # Independent check: a cell is obstructed iff some sample point strictly inside it lies inside
+    # a solid. Samples every 1 cm resolve the 3 cm stringers and 5 cm pipes.
+    raster = tank.raster
+    offs = np.arange(0.5, raster.cell_size, 1.0)
+    grid = np.stack(np.meshgrid(offs, offs, offs, indexing="ij"), -1).reshape(-1, 3)
+    for cell in np.ndindex(raster.shape):
+        pts = np.array(raster.origin) + np.array(cell) * raster.cell_size + grid
+        inside = any(bool(np.any(s.contains(pts))) for s in tank.solids)
+        assert inside == bool(raster.obstructed[cell]), cell
+
+
+def test_point_cell_round_trip(tank):
+    r = tank.raster
+    for cell in [(0, 0, 0), (14, 9, 4), (7, 5, 2)]:
+        assert r.point_to_cell(r.cell_center(cell)) == cell
+        assert r.cell(r.index(cell)) == cell
+    assert r.point_to_cell((240, 150, 100)) == (14, 9, 4)
+    with pytest.raises(TargetError, match="outside the tank box"):
+        r.point_to_cell((300, 0, 10))
+
+
+def test_target_errors(tank):
+    with pytest.raises(TargetError, match="outside"):
+        tank.target_cell((0, 0, -5))
+    with pytest.raises(TargetError, match="obstructed cell.*baffle"):
+        tank.target_cell((0, 60, 50))
+
+
+def test_scene_export_schema(tank, capsys):
+    assert tank_module.main(["--json"]) == 0
+    scene = json.loads(capsys.readouterr().out)
+    assert set(scene) == {"units", "box", "panel", "solids", "raster", "arm"}
+    assert scene["units"] == "cm"
+    assert scene["box"] == {"min": [-60, -50, 0], "max": [240, 150, 100]}
+    assert scene["panel"] == {"center": [0, 0, 0], "radius": 12}
+    assert set(scene["raster"]) == {"shape", "cell_size", "origin", "obstructed"}
+    assert scene["raster"]["shape"] == [15, 10, 5] and scene["raster"]["cell_size"] == 20
+    assert set(scene["arm"]) == {"section_length", "max_sections", "radius", "theta_max"}
+    kinds = {"box": {"type", "min", "max"}, "cylinder": {"type", "p0", "p1", "radius"},
+             "sphere": {"type", "center", "radius"}}
+    for solid in scene["solids"]:
+        assert set(solid) == kinds[solid["type"]]
+    assert sum(s["type"] == "cylinder" for s in scene["solids"]) == 2
+
+
+def test_ascii_view(capsys):
+    assert tank_module.main([]) == 0
+    out = capsys.readouterr().out
+    assert "15 x 10 x 5" in out and "S" in out and "HH" in out
+
+
+def _write(tmp_path, text):
+    path = tmp_path / "tank.yaml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ("cell_size: 20", "cell_size: 20\ncolour: red", r"unknown key 'colour'"),
+        ("cell_size: 20", "cell_size: -20", r"cell_size: must be positive"),
+        ("radius: 5}", "radius: 5, length: 3}", r"obstacles\[0\]: unknown key 'length'"),
+        ("center: [100, 60, 50], width: 40", "center: [100, 60, 50], width: 400", r"hatch"),
+        ("center: [100, 60, 50]", "center: [100, 70, 50]", r"hatch.center: the hatch is not in its baffle"),
+        ("p1: [240, 20, 85]", "p1: [300, 20, 85]", r"obstacles\[0\].*reaches outside the box"),
+        ("box: {min:", "box: {mn:", r"box: unknown key 'mn'"),
+        ("radius: 2.5", "radius: lots", r"arm.radius: expected a number"),
+    ],
+)
+def test_malformed_yaml_names_file_and_key(tmp_path, old, new, message):
+    text = REF_YAML.read_text()
+    assert old in text
+    path = _write(tmp_path, text.replace(old, new, 1))
+    with pytest.raises(ConfigError, match=message) as info:
+        load_tank(path)
+    assert str(path) in str(info.value)
+
+
+def test_yaml_numbers_written_as_strings_are_parsed(tmp_path):
+    # PyYAML reads 2e1 as a string; the loader converts it deliberately.
+    path = _write(tmp_path, REF_YAML.read_text().replace("cell_size: 20", "cell_size: 2e1"))
+    assert load_tank(path).raster.shape == (15, 10, 5)
+
+
+def test_not_yaml_and_unknown_name(tmp_path, capsys):
+    path = _write(tmp_path, "box: {min: [0, 0\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_tank(path)
+    with pytest.raises(ConfigError, match="unknown tank 'nope'.*b737_center"):
+        load_tank("nope")
+    assert tank_module.main(["--tank", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error:") and "Traceback" not in err
