@@ -67,7 +67,10 @@ def to_int(value: Any, where: str) -> int:
     """Convert a YAML scalar to an int; floats must be whole numbers."""
     if isinstance(value, bool):
         raise ConfigError(f"{where}: expected an integer, got {value!r}")
-    number = to_float(value, where)
+    try:
+        number = to_float(value, where)
+    except ConfigError:
+        raise ConfigError(f"{where}: expected an integer, got {value!r}") from None
     if number != int(number):
         raise ConfigError(f"{where}: expected an integer, got {value!r}")
     return int(number)
