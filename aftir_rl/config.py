@@ -22,7 +22,9 @@ from aftir_rl.errors import ConfigError
 T = TypeVar("T")
 
 #: Folder of the shipped configuration files (``configs/`` at the repository root).
-CONFIG_DIR = Path(os.environ.get("AFTIR_RL_CONFIG_DIR", Path(__file__).resolve().parent.parent / "configs"))
+CONFIG_DIR = Path(
+    os.environ.get("AFTIR_RL_CONFIG_DIR", Path(__file__).resolve().parent.parent / "configs")
+)
 
 
 def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -46,7 +48,9 @@ def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping of keys to values, got {type(data).__name__}")
+        raise ConfigError(
+            f"{path}: expected a mapping of keys to values, got {type(data).__name__}"
+        )
     return data
 
 

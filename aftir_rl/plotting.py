@@ -17,11 +17,26 @@ from aftir_rl.tank import Box, Cylinder, Sphere, Tank
 
 __all__ = ["draw_tank", "path_figure", "figure_to_rgb", "render_path"]
 
-_EDGES = [(0, 1), (1, 3), (3, 2), (2, 0), (4, 5), (5, 7), (7, 6), (6, 4), (0, 4), (1, 5), (2, 6), (3, 7)]
+_EDGES = [
+    (0, 1),
+    (1, 3),
+    (3, 2),
+    (2, 0),
+    (4, 5),
+    (5, 7),
+    (7, 6),
+    (6, 4),
+    (0, 4),
+    (1, 5),
+    (2, 6),
+    (3, 7),
+]
 
 
 def _box_lines(ax, lo: Sequence[float], hi: Sequence[float], **style) -> None:  # noqa: ANN001
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    corners = np.array(
+        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    )
     for i, j in _EDGES:
         ax.plot(*corners[[i, j]].T, **style)
 
@@ -41,7 +56,10 @@ def draw_tank(ax, tank: Tank) -> None:  # noqa: ANN001
             for ang in np.linspace(0, 2 * np.pi, 6, endpoint=False):
                 p0, p1 = np.array(solid.p0, float), np.array(solid.p1, float)
                 off = np.zeros(3)
-                off[others[0]], off[others[1]] = solid.radius * np.cos(ang), solid.radius * np.sin(ang)
+                off[others[0]], off[others[1]] = (
+                    solid.radius * np.cos(ang),
+                    solid.radius * np.sin(ang),
+                )
                 ax.plot(*np.stack([p0 + off, p1 + off]).T, color="tab:gray", lw=0.8)
         elif isinstance(solid, Sphere):
             u, v = np.mgrid[0 : 2 * np.pi : 12j, 0 : np.pi : 7j]
@@ -100,7 +118,12 @@ def figure_to_rgb(fig: Figure) -> NDArray[np.uint8]:
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
 
-def render_path(tank: Tank, points: ArrayLike | None = None, target: ArrayLike | None = None,
-                arms: Sequence[ArrayLike] = (), title: str = "") -> NDArray[np.uint8]:
+def render_path(
+    tank: Tank,
+    points: ArrayLike | None = None,
+    target: ArrayLike | None = None,
+    arms: Sequence[ArrayLike] = (),
+    title: str = "",
+) -> NDArray[np.uint8]:
     """:func:`path_figure` rasterised to an RGB array."""
     return figure_to_rgb(path_figure(tank, points, target, arms, title))

@@ -5,9 +5,10 @@ The arm is a linear module that pushes a chain of ``N`` constant-curvature secti
 φ_N)``: ``dis`` [cm] is the module's travel along the panel normal, ``θ_i`` [rad] the bending angle
 and ``φ_i`` [rad] the bending-plane angle of section ``i``.
 
-Frame S has its origin at the centre of the access panel, ``z`` along the panel normal into the tank.
-The base of section 1 sits at ``(0, 0, dis)`` pointing ``+z``. Each section transform is seed 004
-eq. 7, expressed in the end frame of the previous section and chained ``T = T_1 · T_2 ⋯ T_N``::
+Frame S has its origin at the centre of the access panel, ``z`` along the panel normal into the
+tank. The base of section 1 sits at ``(0, 0, dis)`` pointing ``+z``. Each section transform is
+seed 004 eq. 7, expressed in the end frame of the previous section and chained
+``T = T_1 · T_2 ⋯ T_N``::
 
     T_i = [[c²φ cθ + s²φ,  cφ sφ (cθ−1),   cφ sθ,  (l/θ)(1−cθ) cφ],
            [cφ sφ (cθ−1),  s²φ cθ + c²φ,   sφ sθ,  (l/θ)(1−cθ) sφ],

@@ -2,8 +2,8 @@
 
 A tank is an axis-aligned interior box, an access panel in the floor ``z = 0``, an optional baffle
 (a slab across one horizontal axis) with a rectangular hatch, and solid obstacles (boxes, cylinders,
-spheres). Files live in ``configs/tanks/NAME.yaml`` and load into frozen dataclasses; an unknown key,
-a negative size, a hatch outside its baffle or an obstacle outside the box is a
+spheres). Files live in ``configs/tanks/NAME.yaml`` and load into frozen dataclasses; an unknown
+key, a negative size, a hatch outside its baffle or an obstacle outside the box is a
 :class:`~aftir_rl.errors.ConfigError` naming the file and the key (design.md §2).
 
 The raster splits the box into cubes of ``cell_size``; a cell is *obstructed* when a solid overlaps
@@ -101,8 +101,9 @@ class Cylinder:
         """Axis-aligned bounds ``(lo, hi)``."""
         p0, p1 = np.array(self.p0), np.array(self.p1)
         lo, hi = np.minimum(p0, p1) - self.radius, np.maximum(p0, p1) + self.radius
-        lo[self.axis], hi[self.axis] = min(p0[self.axis], p1[self.axis]), max(
-            p0[self.axis], p1[self.axis]
+        lo[self.axis], hi[self.axis] = (
+            min(p0[self.axis], p1[self.axis]),
+            max(p0[self.axis], p1[self.axis]),
         )
         return lo, hi
 
@@ -260,7 +261,7 @@ class Raster:
         return (int(a), int(b), int(c))
 
     def bfs_distances(self, start: Sequence[int]) -> NDArray[np.int64]:
-        """Steps from ``start`` to every cell through free cells (6-neighbourhood), -1 if unreachable."""
+        """BFS steps from ``start`` through free cells (6-neighbourhood); -1 where unreachable."""
         dist = np.full(self.shape, -1, dtype=np.int64)
         start = tuple(int(c) for c in start)
         if self.obstructed[start]:
@@ -292,7 +293,8 @@ class Raster:
             lines.append(f"z in [{z0:g}, {z0 + self.cell_size:g}) cm  (c = {c})")
             for b in reversed(range(ny)):
                 row = "".join(
-                    marks.get((a, b, c), "#" if self.obstructed[a, b, c] else ".") for a in range(nx)
+                    marks.get((a, b, c), "#" if self.obstructed[a, b, c] else ".")
+                    for a in range(nx)
                 )
                 lines.append(f"  b={b:<2d} {row}")
             lines.append("       " + "".join(str(a % 10) for a in range(nx)) + "  (a)")
@@ -377,7 +379,9 @@ class Tank:
 
         """
         if self.cell_size is None:
-            raise ConfigError(f"{self.source or self.name}: this tank has no cell_size, so no raster")
+            raise ConfigError(
+                f"{self.source or self.name}: this tank has no cell_size, so no raster"
+            )
         size = np.array(self.box_max) - np.array(self.box_min)
         shape = tuple(int(round(s / self.cell_size)) for s in size)
         empty = np.zeros(shape, dtype=bool)
@@ -434,7 +438,9 @@ class Tank:
                 "give a cell with 0 <= index < shape"
             )
         if raster.obstructed[cell]:
-            hit = [s.name or type(s).__name__ for s in self.solids if _overlaps_cell(s, raster, cell)]
+            hit = [
+                s.name or type(s).__name__ for s in self.solids if _overlaps_cell(s, raster, cell)
+            ]
             raise TargetError(
                 f"{what} lies in obstructed cell {list(cell)} (overlapped by {', '.join(hit)}); "
                 "choose a free cell (python -m aftir_rl.tank shows them as '.')"
@@ -490,7 +496,8 @@ def _section(data: Mapping[str, Any], key: str, allowed: Iterable[str], src: str
     unknown = sorted(set(value) - set(allowed))
     if unknown:
         raise ConfigError(
-            f"{src}: {key}: unknown key {unknown[0]!r}; allowed keys are {', '.join(sorted(allowed))}"
+            f"{src}: {key}: unknown key {unknown[0]!r}; allowed keys are "
+            f"{', '.join(sorted(allowed))}"
         )
     return dict(value)
 
@@ -504,7 +511,9 @@ def _require(data: Mapping[str, Any], keys: Iterable[str], where: str) -> None:
 def _positive(value: Any, where: str, allow_zero: bool = False) -> float:
     x = to_float(value, where)
     if x < 0 or (x == 0 and not allow_zero):
-        raise ConfigError(f"{where}: must be {'non-negative' if allow_zero else 'positive'}, got {x:g}")
+        raise ConfigError(
+            f"{where}: must be {'non-negative' if allow_zero else 'positive'}, got {x:g}"
+        )
     return x
 
 
@@ -598,7 +607,9 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
         arm = _section(data, "arm", {"section_length", "max_sections", "radius", "theta_max"}, src)
         try:
             kwargs["arm"] = ArmSpec(
-                section_length=to_float(arm.get("section_length", 50), f"{src}: arm.section_length"),
+                section_length=to_float(
+                    arm.get("section_length", 50), f"{src}: arm.section_length"
+                ),
                 max_sections=to_int(arm.get("max_sections", 12), f"{src}: arm.max_sections"),
                 radius=to_float(arm.get("radius", 2.5), f"{src}: arm.radius"),
                 theta_max=to_float(arm.get("theta_max", math.pi / 2), f"{src}: arm.theta_max"),
@@ -646,7 +657,12 @@ def _parse_baffle(
         _positive(raw["thickness"], f"{src}: baffle.thickness"),
     )
     k = baffle.index
-    if not lo[k] < baffle.position - baffle.thickness / 2 < baffle.position + baffle.thickness / 2 < hi[k]:
+    if (
+        not lo[k]
+        < baffle.position - baffle.thickness / 2
+        < baffle.position + baffle.thickness / 2
+        < hi[k]
+    ):
         raise ConfigError(f"{src}: baffle.position: the baffle slab must lie inside the box")
     if data.get("hatch") is None:
         return baffle, None
@@ -677,7 +693,9 @@ def _check_points(tank: Tank, src: str) -> None:
     if not tank.contains_point(tank.start_point):
         raise ConfigError(f"{src}: start_point: {tank.start_point} is outside the box")
     if abs(tank.panel.center[2] - tank.box_min[2]) > 1e-9:
-        raise ConfigError(f"{src}: panel.center: the panel must lie in the floor z = {tank.box_min[2]:g}")
+        raise ConfigError(
+            f"{src}: panel.center: the panel must lie in the floor z = {tank.box_min[2]:g}"
+        )
     for i, target in enumerate(tank.targets):
         if not tank.contains_point(target):
             raise ConfigError(f"{src}: targets[{i}]: {target} is outside the box")

@@ -85,6 +85,7 @@ def train_q_table(
         TargetError: a target outside the box, in an obstructed cell or unreachable; checked for
             every target before any training starts.
         CheckpointError: ``resume`` is unreadable or was trained for another env or target.
+
     """
     import gymnasium as gym
     from stable_baselines3.common.logger import Image, configure

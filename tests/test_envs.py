@@ -50,7 +50,9 @@ def test_pickle_round_trip(env_id):
 
 
 def test_make_from_fresh_interpreter():
-    code = "import gymnasium as gym; e = gym.make('aftir_rl:AFTIR-Tank-v0'); print(e.reset(seed=0)[0])"
+    code = (
+        "import gymnasium as gym; e = gym.make('aftir_rl:AFTIR-Tank-v0'); print(e.reset(seed=0)[0])"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == str(np.ravel_multi_index((3, 2, 0), (15, 10, 5)))
 
@@ -60,7 +62,14 @@ def test_spaces_and_registration():
     assert env.observation_space == gym.spaces.Discrete(750)
     assert env.action_space == gym.spaces.Discrete(6)
     assert env.spec.max_episode_steps == 500
-    assert [a.name for a in Action] == ["X_PLUS", "X_MINUS", "Y_PLUS", "Y_MINUS", "Z_PLUS", "Z_MINUS"]
+    assert [a.name for a in Action] == [
+        "X_PLUS",
+        "X_MINUS",
+        "Y_PLUS",
+        "Y_MINUS",
+        "Z_PLUS",
+        "Z_MINUS",
+    ]
 
 
 def _walk(env, actions):

@@ -7,8 +7,6 @@ import pytest
 from aftir_rl.agents import QLearning, QLearningConfig, greedy_rollout
 from aftir_rl.errors import CheckpointError
 
-from .conftest import bfs_steps
-
 CFG = QLearningConfig()
 
 

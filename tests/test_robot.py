@@ -33,9 +33,9 @@ def test_straight_arm_points_up():
 
 def test_single_section_closed_form():
     # A quarter circle of length l bends to (l/θ)(1 − cos θ) sideways and (l/θ) sin θ up.
-    l, th, ph = 50.0, math.pi / 2, 0.7
-    r = l / th
-    tip = tip_position(0.0, [th], [ph], l)
+    length, th, ph = 50.0, math.pi / 2, 0.7
+    r = length / th
+    tip = tip_position(0.0, [th], [ph], length)
     np.testing.assert_allclose(tip, [r * math.cos(ph), r * math.sin(ph), r], atol=1e-12)
 
 
@@ -71,7 +71,9 @@ def test_derivative_through_zero_matches_finite_difference():
     h = 1e-6
     plus = tip_position(0.0, [h], [0.9], 50.0)
     minus = tip_position(0.0, [-h], [0.9], 50.0)
-    np.testing.assert_allclose((plus - minus) / (2 * h), [25 * math.cos(0.9), 25 * math.sin(0.9), 0], atol=1e-6)
+    np.testing.assert_allclose(
+        (plus - minus) / (2 * h), [25 * math.cos(0.9), 25 * math.sin(0.9), 0], atol=1e-6
+    )
 
 
 def test_arc_length_is_preserved():
@@ -100,9 +102,13 @@ def test_batched_equals_one_by_one():
 
 def test_rotation_part_stays_orthonormal():
     rng = np.random.default_rng(2)
-    frames = forward_kinematics(0.0, rng.uniform(-1.5, 1.5, (50, 6)), rng.uniform(-3, 3, (50, 6)), 50)
+    frames = forward_kinematics(
+        0.0, rng.uniform(-1.5, 1.5, (50, 6)), rng.uniform(-3, 3, (50, 6)), 50
+    )
     rot = frames[..., :3, :3]
-    np.testing.assert_allclose(rot @ np.swapaxes(rot, -1, -2), np.broadcast_to(np.eye(3), rot.shape), atol=1e-12)
+    np.testing.assert_allclose(
+        rot @ np.swapaxes(rot, -1, -2), np.broadcast_to(np.eye(3), rot.shape), atol=1e-12
+    )
     np.testing.assert_allclose(np.linalg.det(rot), 1.0, atol=1e-12)
 
 

@@ -28,7 +28,9 @@ def test_baffle_row_blocked_except_hatch(tank):
 
 def test_start_targets_and_hatch_are_free_and_everything_reachable(tank, scene_grid):
     grid, dist = scene_grid
-    for cell in [(3, 2, 0), (7, 5, 2), (8, 5, 2)] + [tank.raster.point_to_cell(t) for t in tank.targets]:
+    for cell in [(3, 2, 0), (7, 5, 2), (8, 5, 2)] + [
+        tank.raster.point_to_cell(t) for t in tank.targets
+    ]:
         assert not grid[cell]
     free = {tuple(map(int, c)) for c in np.argwhere(~grid)}
     assert set(dist) == free, "every free cell is reachable from the start cell"
@@ -73,8 +75,11 @@ def test_scene_export_schema(tank, capsys):
     assert set(scene["raster"]) == {"shape", "cell_size", "origin", "obstructed"}
     assert scene["raster"]["shape"] == [15, 10, 5] and scene["raster"]["cell_size"] == 20
     assert set(scene["arm"]) == {"section_length", "max_sections", "radius", "theta_max"}
-    kinds = {"box": {"type", "min", "max"}, "cylinder": {"type", "p0", "p1", "radius"},
-             "sphere": {"type", "center", "radius"}}
+    kinds = {
+        "box": {"type", "min", "max"},
+        "cylinder": {"type", "p0", "p1", "radius"},
+        "sphere": {"type", "center", "radius"},
+    }
     for solid in scene["solids"]:
         assert set(solid) == kinds[solid["type"]]
     assert sum(s["type"] == "cylinder" for s in scene["solids"]) == 2
@@ -99,7 +104,11 @@ def _write(tmp_path, text):
         ("cell_size: 20", "cell_size: -20", r"cell_size: must be positive"),
         ("radius: 5}", "radius: 5, length: 3}", r"obstacles\[0\]: unknown key 'length'"),
         ("center: [100, 60, 50], width: 40", "center: [100, 60, 50], width: 400", r"hatch"),
-        ("center: [100, 60, 50]", "center: [100, 70, 50]", r"hatch.center: the hatch is not in its baffle"),
+        (
+            "center: [100, 60, 50]",
+            "center: [100, 70, 50]",
+            r"hatch.center: the hatch is not in its baffle",
+        ),
         ("p1: [240, 20, 85]", "p1: [300, 20, 85]", r"obstacles\[0\].*reaches outside the box"),
         ("box: {min:", "box: {mn:", r"box: unknown key 'mn'"),
         ("radius: 2.5", "radius: lots", r"arm.radius: expected a number"),

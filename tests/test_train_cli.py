@@ -20,15 +20,30 @@ def _events(run_dir: Path) -> EventAccumulator:
 
 
 def test_q_table_run_writes_everything(tmp_path, capsys):
-    rc = train.main(["q_table", "--target", "230", "140", "90", "--logdir", str(tmp_path),
-                     "--no-progress", "--seed", "3"])
+    rc = train.main(
+        [
+            "q_table",
+            "--target",
+            "230",
+            "140",
+            "90",
+            "--logdir",
+            str(tmp_path),
+            "--no-progress",
+            "--seed",
+            "3",
+        ]
+    )
     assert rc == 0
     out = capsys.readouterr().out
     assert "BFS optimum 22 (optimal)" in out
     (run_dir,) = list(tmp_path.iterdir())
     assert run_dir.name.startswith("q_table__AFTIR-Tank-v0__230_140_90__3__")
     assert sorted(p.name for p in run_dir.iterdir() if not p.name.startswith("events")) == [
-        "path.json", "progress.csv", "q_table.npz"]
+        "path.json",
+        "progress.csv",
+        "q_table.npz",
+    ]
     path = json.loads((run_dir / "path.json").read_text())
     assert path["target"] == [230, 140, 90]
     assert path["cells"][0] == [3, 2, 0] and path["cells"][-1] == [14, 9, 4]
@@ -36,8 +51,13 @@ def test_q_table_run_writes_everything(tmp_path, capsys):
     assert path["points_cm"][0] == [10, 0, 10]  # centre of the start cell
     acc = _events(run_dir)
     tags = acc.Tags()
-    for tag in ("rollout/ep_rew_mean", "rollout/ep_len_mean", "eval/success_rate",
-                "eval/tip_error_cm", "eval/path_length_cm"):
+    for tag in (
+        "rollout/ep_rew_mean",
+        "rollout/ep_len_mean",
+        "eval/success_rate",
+        "eval/tip_error_cm",
+        "eval/path_length_cm",
+    ):
         assert tag in tags["scalars"], tag
     assert acc.Scalars("eval/success_rate")[-1].value == 1.0
     assert acc.Scalars("eval/path_length_cm")[-1].value == pytest.approx(22 * 20)
@@ -51,20 +71,66 @@ def test_q_table_run_writes_everything(tmp_path, capsys):
 
 
 def test_resume(tmp_path, capsys):
-    assert train.main(["q_table", "--target", "-50", "72", "90", "--episodes", "300",
-                       "--logdir", str(tmp_path / "a"), "--no-progress"]) == 0
+    assert (
+        train.main(
+            [
+                "q_table",
+                "--target",
+                "-50",
+                "72",
+                "90",
+                "--episodes",
+                "300",
+                "--logdir",
+                str(tmp_path / "a"),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     (first,) = list((tmp_path / "a").iterdir())
-    assert train.main(["q_table", "--target", "-50", "72", "90", "--episodes", "1700",
-                       "--resume", str(first), "--logdir", str(tmp_path / "b"),
-                       "--no-progress"]) == 0
+    assert (
+        train.main(
+            [
+                "q_table",
+                "--target",
+                "-50",
+                "72",
+                "90",
+                "--episodes",
+                "1700",
+                "--resume",
+                str(first),
+                "--logdir",
+                str(tmp_path / "b"),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     (second,) = list((tmp_path / "b").iterdir())
     assert json.loads((second / "path.json").read_text())["episodes"] == 2000
     # Resumed 300 + 1700 is the same table as 2000 straight.
-    assert train.main(["q_table", "--target", "-50", "72", "90", "--logdir",
-                       str(tmp_path / "c"), "--no-progress"]) == 0
+    assert (
+        train.main(
+            [
+                "q_table",
+                "--target",
+                "-50",
+                "72",
+                "90",
+                "--logdir",
+                str(tmp_path / "c"),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     (straight,) = list((tmp_path / "c").iterdir())
-    np.testing.assert_array_equal(QLearning.read_checkpoint(second / "q_table.npz")[0],
-                                  QLearning.read_checkpoint(straight / "q_table.npz")[0])
+    np.testing.assert_array_equal(
+        QLearning.read_checkpoint(second / "q_table.npz")[0],
+        QLearning.read_checkpoint(straight / "q_table.npz")[0],
+    )
 
 
 @pytest.mark.parametrize(
@@ -78,9 +144,18 @@ def test_resume(tmp_path, capsys):
 )
 def test_user_errors_exit_2_without_traceback(tmp_path, args, message):
     proc = subprocess.run(
-        [sys.executable, "-m", "aftir_rl.train", "q_table", "--logdir", str(tmp_path / "runs"),
-         "--no-progress", *args],
-        capture_output=True, text=True,
+        [
+            sys.executable,
+            "-m",
+            "aftir_rl.train",
+            "q_table",
+            "--logdir",
+            str(tmp_path / "runs"),
+            "--no-progress",
+            *args,
+        ],
+        capture_output=True,
+        text=True,
     )
     assert proc.returncode == 2
     assert message in proc.stderr and "Traceback" not in proc.stderr
@@ -97,13 +172,30 @@ def test_bad_config_and_corrupt_resume(tmp_path, capsys):
     assert "episodes: expected an integer" in capsys.readouterr().err
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"\x00" * 100)
-    assert train.main(["q_table", "--target", "230", "72", "10", "--resume", str(bad),
-                       "--logdir", str(tmp_path / "runs")]) == 2
+    assert (
+        train.main(
+            [
+                "q_table",
+                "--target",
+                "230",
+                "72",
+                "10",
+                "--resume",
+                str(bad),
+                "--logdir",
+                str(tmp_path / "runs"),
+            ]
+        )
+        == 2
+    )
     assert "not a readable Q-table checkpoint" in capsys.readouterr().err
     assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
 
 
 def test_help():
-    proc = subprocess.run([sys.executable, "-m", "aftir_rl.train", "q_table", "--help"],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "aftir_rl.train", "q_table", "--help"],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 0 and "--target X Y Z" in proc.stdout and "--resume" in proc.stdout

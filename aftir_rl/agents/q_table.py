@@ -6,8 +6,9 @@ geometrically per episode from ``exploration_initial_eps`` to a floor. Truncated
 from the next state; terminated ones do not.
 
 Why the defaults of ``configs/q_table.yaml`` converge: in the tank a random walk rarely reaches a
-target 20 cells away before an exploratory step hits a wall and ends the episode, so a zero-initialised
-table never sees the +100 (measured: 0 of 4 reference targets in 4,000 episodes). An optimistic table
+target 20 cells away before an exploratory step hits a wall and ends the episode, so a
+zero-initialised table never sees the +100 (measured: 0 of 4 reference targets in 4,000 episodes).
+An optimistic table
 (``initial_q = 100``, the largest return) makes the greedy policy try every untried action, and with
 α = 1 in a deterministic env every entry stays an upper bound of Q*. With ε decaying to 0 and greedy
 ties broken by the lowest index in training exactly as in evaluation, the greedy path the agent
@@ -300,11 +301,15 @@ class QLearning:
         except FileNotFoundError:
             raise CheckpointError(f"{path}: no such Q-table file; {hint}") from None
         except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as exc:
-            raise CheckpointError(f"{path}: not a readable Q-table checkpoint ({exc}); {hint}") from None
+            raise CheckpointError(
+                f"{path}: not a readable Q-table checkpoint ({exc}); {hint}"
+            ) from None
         if not isinstance(meta, dict) or meta.get("format") != FORMAT:
             raise CheckpointError(f"{path}: not an aftir_rl Q-table checkpoint; {hint}")
         if q_table.ndim != 2 or not np.all(np.isfinite(q_table)):
-            raise CheckpointError(f"{path}: the Q-table is malformed (shape {q_table.shape}); {hint}")
+            raise CheckpointError(
+                f"{path}: the Q-table is malformed (shape {q_table.shape}); {hint}"
+            )
         return q_table, meta
 
     @classmethod

@@ -141,7 +141,9 @@ class TankGridEnv(gym.Env[int, int]):
         here = np.arange(self.raster.n_cells)[:, None]
         nxt = np.where(blocked, here, nxt)
         reached = ~blocked & (nxt == self.target_state)
-        reward = np.where(blocked, OBSTACLE_REWARD, np.where(reached, TARGET_REWARD, -self.step_penalty))
+        reward = np.where(
+            blocked, OBSTACLE_REWARD, np.where(reached, TARGET_REWARD, -self.step_penalty)
+        )
         terminated = blocked | reached
         # Absorbing states (the target, obstructed cells) loop with reward 0, as in FrozenLake.
         absorbing = self.raster.obstructed.ravel().copy()
