@@ -123,16 +123,7 @@ def train_q_table(
                     f"{list(base.target_cell)}; resume with the same --target"
                 )
         else:
-            agent = QLearning(
-                env,
-                learning_rate=config.learning_rate,
-                gamma=config.gamma,
-                exploration_initial_eps=config.exploration_initial_eps,
-                exploration_final_eps=config.exploration_final_eps,
-                exploration_decay=config.exploration_decay,
-                initial_q=config.initial_q,
-                seed=seed,
-            )
+            agent = QLearning.from_config(env, config, seed=seed)
         name = _run_name("q_table", config.env_id, target, seed)
         logdir = Path(logdir)
         partial = logdir / f".{name}.partial"

@@ -42,16 +42,7 @@ def q_learning_row(target, cfg: QLearningConfig, seed: int) -> dict:
     optimum = int(tank.reachable[env.unwrapped.target_cell])
 
     def make_agent():
-        return QLearning(
-            env,
-            learning_rate=cfg.learning_rate,
-            gamma=cfg.gamma,
-            exploration_initial_eps=cfg.exploration_initial_eps,
-            exploration_final_eps=cfg.exploration_final_eps,
-            exploration_decay=cfg.exploration_decay,
-            initial_q=cfg.initial_q,
-            seed=seed,
-        )
+        return QLearning.from_config(env, cfg, seed=seed)
 
     agent = make_agent()
     start = time.perf_counter()

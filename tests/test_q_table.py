@@ -11,16 +11,7 @@ CFG = QLearningConfig()
 
 
 def _agent(env, seed=0):
-    return QLearning(
-        env,
-        learning_rate=CFG.learning_rate,
-        gamma=CFG.gamma,
-        exploration_initial_eps=CFG.exploration_initial_eps,
-        exploration_final_eps=CFG.exploration_final_eps,
-        exploration_decay=CFG.exploration_decay,
-        initial_q=CFG.initial_q,
-        seed=seed,
-    )
+    return QLearning.from_config(env, CFG, seed=seed)
 
 
 def _random_free_points(grid, dist, n, seed):

@@ -30,7 +30,7 @@ import time
 import zipfile
 from collections import deque
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -147,6 +147,22 @@ class QLearning:
         self.num_timesteps = 0
         self._rng = random.Random(seed)
         self._seeded_env = False
+
+    @classmethod
+    def from_config(
+        cls, env: gym.Env, config: QLearningConfig, seed: int | None = None
+    ) -> QLearning:
+        """An untrained agent with the hyperparameters of ``config``."""
+        return cls(
+            env,
+            learning_rate=config.learning_rate,
+            gamma=config.gamma,
+            exploration_initial_eps=config.exploration_initial_eps,
+            exploration_final_eps=config.exploration_final_eps,
+            exploration_decay=config.exploration_decay,
+            initial_q=config.initial_q,
+            seed=seed,
+        )
 
     @property
     def exploration_rate(self) -> float:
@@ -386,8 +402,3 @@ def _state_to_json(state: tuple) -> list:
 def _state_from_json(data: list) -> tuple:
     version, internal, gauss = data
     return (version, tuple(internal), gauss)
-
-
-def config_dict(config: QLearningConfig) -> dict[str, Any]:
-    """The config as a plain dict (for metadata and logging)."""
-    return asdict(config)
