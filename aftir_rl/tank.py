@@ -692,6 +692,11 @@ def _parse_baffle(
 def _check_points(tank: Tank, src: str) -> None:
     if not tank.contains_point(tank.start_point):
         raise ConfigError(f"{src}: start_point: {tank.start_point} is outside the box")
+    if tank.cell_size is not None and tank.raster.obstructed[tank.start_cell]:
+        raise ConfigError(
+            f"{src}: start_point: {tank.start_point} lies in obstructed cell "
+            f"{list(tank.start_cell)}; the grid world must start in a free cell"
+        )
     if abs(tank.panel.center[2] - tank.box_min[2]) > 1e-9:
         raise ConfigError(
             f"{src}: panel.center: the panel must lie in the floor z = {tank.box_min[2]:g}"

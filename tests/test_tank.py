@@ -112,6 +112,7 @@ def _write(tmp_path, text):
         ("p1: [240, 20, 85]", "p1: [300, 20, 85]", r"obstacles\[0\].*reaches outside the box"),
         ("box: {min:", "box: {mn:", r"box: unknown key 'mn'"),
         ("radius: 2.5", "radius: lots", r"arm.radius: expected a number"),
+        ("start_point: [0, 0, 10]", "start_point: [0, 60, 10]", r"start_point.*obstructed cell"),
     ],
 )
 def test_malformed_yaml_names_file_and_key(tmp_path, old, new, message):
