@@ -59,6 +59,30 @@ def _hyperparameter_text(params: dict[str, Any]) -> str:
     return "|param|value|\n|-|-|\n" + rows
 
 
+def _greedy_path_summary(agent: Any, env: Any, target: Sequence[float], max_steps: int) -> dict:
+    """The greedy path of a trained agent as ``path.json`` holds it, with its BFS optimum."""
+    from aftir_rl.agents.q_table import greedy_rollout
+
+    base = env.unwrapped
+    states, success = greedy_rollout(agent, env, max_steps=max_steps)
+    cells = [base.raster.cell(s) for s in states]
+    points = np.array([base.raster.cell_center(c) for c in cells])
+    optimum = int(base.tank.reachable[base.target_cell])
+    return {
+        "target": [float(v) for v in target],
+        "target_cell": list(base.target_cell),
+        "cells": [list(c) for c in cells],
+        "points_cm": points.tolist(),
+        "success": success,
+        "length_steps": len(cells) - 1,
+        "bfs_optimal_steps": optimum,
+        "optimal": success and len(cells) - 1 == optimum,
+        "tip_error_cm": float(np.linalg.norm(points[-1] - base.target_point)),
+        "path_length_cm": float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1))),
+        "episodes": agent.episodes_done,
+    }
+
+
 def train_q_table(
     config: Any,
     targets: Sequence[Sequence[float]],
@@ -90,7 +114,7 @@ def train_q_table(
     import gymnasium as gym
     from stable_baselines3.common.logger import Image, configure
 
-    from aftir_rl.agents.q_table import QLearning, greedy_rollout
+    from aftir_rl.agents.q_table import QLearning
     from aftir_rl.plotting import render_path
 
     # Make (and so validate) every env before training anything.
@@ -141,37 +165,22 @@ def train_q_table(
                 log_interval=config.log_interval,
             )
             seconds = time.perf_counter() - start
-            states, success = greedy_rollout(agent, env, max_steps=config.max_episode_steps)
-            cells = [base.raster.cell(s) for s in states]
-            points = np.array([base.raster.cell_center(c) for c in cells])
-            tip_error = float(np.linalg.norm(points[-1] - base.target_point))
-            length_cm = float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
-            optimum = int(base.tank.reachable[base.target_cell])
-            summary: dict[str, Any] = {
-                "target": [float(v) for v in target],
-                "target_cell": list(base.target_cell),
-                "cells": [list(c) for c in cells],
-                "points_cm": points.tolist(),
-                "success": success,
-                "length_steps": len(cells) - 1,
-                "bfs_optimal_steps": optimum,
-                "optimal": success and len(cells) - 1 == optimum,
-                "tip_error_cm": tip_error,
-                "path_length_cm": length_cm,
-                "episodes": agent.episodes_done,
-                "seconds": seconds,
-            }
+            summary = _greedy_path_summary(agent, env, target, config.max_episode_steps)
+            summary["seconds"] = seconds
+            success, optimum = summary["success"], summary["bfs_optimal_steps"]
+            tip_error, length_cm = summary["tip_error_cm"], summary["path_length_cm"]
+            points, steps = np.array(summary["points_cm"]), summary["length_steps"]
             logger.record("eval/success_rate", float(success))
             logger.record("eval/tip_error_cm", tip_error)
             logger.record("eval/path_length_cm", length_cm)
-            logger.record("eval/path_length_steps", len(cells) - 1)
+            logger.record("eval/path_length_steps", steps)
             logger.record("eval/bfs_optimal_steps", optimum)
             picture = render_path(
                 base.tank,
                 points,
                 base.target_point,
                 title=f"Q-learning greedy path to {_target_tag(target)} "
-                f"({len(cells) - 1} steps, BFS {optimum})",
+                f"({steps} steps, BFS {optimum})",
             )
             logger.record(
                 f"paths/{_target_tag(target)}",
