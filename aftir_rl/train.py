@@ -140,7 +140,7 @@ def train_q_table(
         base = env.unwrapped
         if checkpoint is not None:
             agent = QLearning.load(checkpoint, env)
-            _, meta = QLearning.read_checkpoint(checkpoint)
+            meta = agent.metadata
             if meta.get("target_cell") not in (None, list(base.target_cell)):
                 raise CheckpointError(
                     f"{checkpoint}: trained for target cell {meta['target_cell']}, not "

@@ -5,12 +5,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from aftir_rl import train
-from aftir_rl.agents import QLearning
+from aftir_rl.agents import QLearning, greedy_rollout
 
 
 def _events(run_dir: Path) -> EventAccumulator:
@@ -66,67 +67,27 @@ def test_q_table_run_writes_everything(tmp_path, capsys):
     assert image.width > 100 and image.height > 100
     assert any(t.startswith("hyperparameters") for t in tags["tensors"])
     # The checkpoint loads and its greedy policy is the logged path.
-    q, meta = QLearning.read_checkpoint(run_dir / "q_table.npz")
-    assert meta["target_cell"] == [14, 9, 4] and q.shape == (750, 6)
+    env = gym.make("AFTIR-Tank-v0", target=(230, 140, 90))
+    agent = QLearning.load(run_dir / "q_table.npz", env)
+    assert agent.metadata["target_cell"] == [14, 9, 4]
+    states, reached = greedy_rollout(agent, env)
+    assert reached and [list(env.unwrapped.raster.cell(s)) for s in states] == path["cells"]
 
 
-def test_resume(tmp_path, capsys):
-    assert (
-        train.main(
-            [
-                "q_table",
-                "--target",
-                "-50",
-                "72",
-                "90",
-                "--episodes",
-                "300",
-                "--logdir",
-                str(tmp_path / "a"),
-                "--no-progress",
-            ]
-        )
-        == 0
-    )
-    (first,) = list((tmp_path / "a").iterdir())
-    assert (
-        train.main(
-            [
-                "q_table",
-                "--target",
-                "-50",
-                "72",
-                "90",
-                "--episodes",
-                "1700",
-                "--resume",
-                str(first),
-                "--logdir",
-                str(tmp_path / "b"),
-                "--no-progress",
-            ]
-        )
-        == 0
-    )
-    (second,) = list((tmp_path / "b").iterdir())
+def _train_one(logdir: Path, *args: str) -> Path:
+    """Train on (-50, 72, 90) into ``logdir`` and return the run directory."""
+    argv = ["q_table", "--target", "-50", "72", "90", "--logdir", str(logdir), "--no-progress"]
+    assert train.main([*argv, *args]) == 0
+    (run_dir,) = list(logdir.iterdir())
+    return run_dir
+
+
+def test_resume(tmp_path):
+    first = _train_one(tmp_path / "a", "--episodes", "300")
+    second = _train_one(tmp_path / "b", "--episodes", "1700", "--resume", str(first))
     assert json.loads((second / "path.json").read_text())["episodes"] == 2000
     # Resumed 300 + 1700 is the same table as 2000 straight.
-    assert (
-        train.main(
-            [
-                "q_table",
-                "--target",
-                "-50",
-                "72",
-                "90",
-                "--logdir",
-                str(tmp_path / "c"),
-                "--no-progress",
-            ]
-        )
-        == 0
-    )
-    (straight,) = list((tmp_path / "c").iterdir())
+    straight = _train_one(tmp_path / "c")
     np.testing.assert_array_equal(
         QLearning.read_checkpoint(second / "q_table.npz")[0],
         QLearning.read_checkpoint(straight / "q_table.npz")[0],

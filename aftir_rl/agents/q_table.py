@@ -147,6 +147,8 @@ class QLearning:
         self.num_timesteps = 0
         self._rng = random.Random(seed)
         self._seeded_env = False
+        #: Metadata of the checkpoint this agent was loaded from (empty for a new agent).
+        self.metadata: dict[str, Any] = {}
 
     @classmethod
     def from_config(
@@ -350,6 +352,7 @@ class QLearning:
         if "rng_state" in meta:
             agent._rng.setstate(_state_from_json(meta["rng_state"]))
         agent._seeded_env = True
+        agent.metadata = meta
         return agent
 
 
