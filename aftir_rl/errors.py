@@ -26,3 +26,7 @@ class CheckpointError(AftirError, ValueError):
 
 class InvalidActionError(AftirError, ValueError):
     """An action outside the environment's action space was passed to ``step``."""
+
+
+class PlanningError(AftirError, ValueError):
+    """A planner found no valid posture; the message starts "Cannot reach the target: "."""

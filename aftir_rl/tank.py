@@ -317,6 +317,7 @@ class Tank:
         obstacles: solid obstacles (not the baffle).
         arm: the arm used in this tank.
         targets: reference targets [cm].
+        walls: whether the box's faces are walls (False: open space, the box only bounds targets).
         description: one line for people.
         source: the file the tank was read from.
 
@@ -333,6 +334,7 @@ class Tank:
     obstacles: tuple[Solid, ...] = ()
     arm: ArmSpec = ArmSpec()
     targets: tuple[Vec3, ...] = ()
+    walls: bool = True
     description: str = ""
     source: str = ""
 
@@ -555,7 +557,7 @@ def _parse_solid(item: Any, where: str) -> Solid:
 
 _TOP_KEYS = {
     "name", "description", "box", "cell_size", "panel", "start_point", "baffle", "hatch",
-    "obstacles", "arm", "targets",
+    "obstacles", "arm", "targets", "walls",
 }  # fmt: skip
 
 
@@ -581,6 +583,10 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
     kwargs: dict[str, Any] = {"box_min": lo, "box_max": hi, "source": src}
     kwargs["name"] = str(data.get("name", Path(src).stem))
     kwargs["description"] = str(data.get("description", ""))
+    walls = data.get("walls", True)
+    if not isinstance(walls, bool):
+        raise ConfigError(f"{src}: walls: expected true or false, got {walls!r}")
+    kwargs["walls"] = walls
     if data.get("cell_size") is not None:
         cell = _positive(data["cell_size"], f"{src}: cell_size")
         for axis, (a, b) in enumerate(zip(lo, hi)):
