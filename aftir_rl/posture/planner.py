@@ -252,7 +252,7 @@ class Planner:
         for n3 in range(n3_min, min(n3_min + self.extra_sections, self.arm.max_sections - 2) + 1):
             p3 = self._search_sections(
                 math.hypot(g_m[0], g_m[1]), float(g_m[2]), frame_m, [n3], None,
-                "region_clipping", True, dis_range=(-0.5 * l, 0.0),
+                "region_clipping", True, dis_range=(-0.5 * l, 0.0), dis_limits=(-l, l),
             )  # fmt: skip
             if p3 is None:
                 reasons.append(f"no P3 posture of {n3} sections from the hatch")
@@ -350,6 +350,7 @@ class Planner:
         search: str,
         refine_tip: bool,
         dis_range: tuple[float, float] | None = None,
+        dis_limits: tuple[float, float] = (-math.inf, 0.0),
     ) -> tuple[NDArray[np.float64], float, SearchResult] | None:
         """First section count with a search result that refines and passes the exact check."""
         for n in sections:
@@ -361,6 +362,7 @@ class Planner:
                 rho, z, n, self.arm.section_length, self.arm.theta_max, zone=zone,
                 end_heading=heading,
                 dis_range=dis_range or (-n * self.arm.section_length, 0.0),
+                dis_limits=dis_limits,
                 feasible=self._feasible(frame),
             )  # fmt: skip
             if search == "blind":

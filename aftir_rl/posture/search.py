@@ -57,7 +57,9 @@ class PlanarProblem:
         theta_max: bound on ``|θ_i|`` [rad].
         zone: target zone radius ``ε`` [cm].
         end_heading: required heading of the tip [rad from the axis], or None.
-        dis_range: allowed rising distance ``(min, max)`` [cm].
+        dis_range: rising distances the search considers ``(min, max)`` [cm].
+        dis_limits: rising distances a refined posture may have ``(min, max)`` [cm]; refinement
+            may move ``dis`` a little past ``dis_range``, but never past these.
         feasible: ``feasible(theta (B, N), dis (B,)) -> mask (B,)``: collision, panel rule...
         mds_points: body points per section for the MDS.
 
@@ -71,6 +73,7 @@ class PlanarProblem:
     zone: float = 0.5
     end_heading: float | None = None
     dis_range: tuple[float, float] = (-math.inf, 0.0)
+    dis_limits: tuple[float, float] = (-math.inf, 0.0)
     feasible: Feasible | None = None
     mds_points: int = 8
 
@@ -343,6 +346,6 @@ def refine(
     if not ok[0] or abs(rho[0] - problem.rho) >= tol:
         return None
     dis = float(problem.z - z[0])
-    if not problem.dis_range[0] - 1e-9 <= dis <= problem.dis_range[1] + 1e-9:
+    if not problem.dis_limits[0] - 1e-9 <= dis <= problem.dis_limits[1] + 1e-9:
         return None
     return full[0], dis
