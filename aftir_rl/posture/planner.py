@@ -250,10 +250,16 @@ class Planner:
         best: tuple | None = None
         n3_min = max(1, math.ceil(np.linalg.norm(g_m) / l - 1e-9) - 1)
         for n3 in range(n3_min, min(n3_min + self.extra_sections, self.arm.max_sections - 2) + 1):
-            p3 = self._search_sections(
-                math.hypot(g_m[0], g_m[1]), float(g_m[2]), frame_m, [n3], None,
-                "region_clipping", True, dis_range=(-0.5 * l, 0.0), dis_limits=(-l, l),
-            )  # fmt: skip
+            # P3's base A: within half a section before the hatch first (room for P2 in bay 1),
+            # then past the hatch (near targets), then deeper in bay 1.
+            for dis_range in ((-0.5 * l, 0.0), (0.0, 0.5 * l), (-1.5 * l, -0.5 * l)):
+                p3 = self._search_sections(
+                    math.hypot(g_m[0], g_m[1]), float(g_m[2]), frame_m, [n3], None,
+                    "region_clipping", True, dis_range=dis_range,
+                    dis_limits=(dis_range[0] - l / 2, dis_range[1] + l / 2),
+                )  # fmt: skip
+                if p3 is not None:
+                    break
             if p3 is None:
                 reasons.append(f"no P3 posture of {n3} sections from the hatch")
                 continue

@@ -1,0 +1,125 @@
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from aftir_rl.collision import CollisionScene, panel_violation, point_clearance, points_clear
+from aftir_rl.robot import Posture
+
+
+@pytest.fixture(scope="module")
+def scene(tank):
+    return CollisionScene(tank)
+
+
+def test_straight_arm_through_the_panel_is_free(scene):
+    report = scene.check(Posture(-40, (0.0, 0.0), (0.0, 0.0)))
+    assert not report.collides and report.panel_ok
+    # Nearest surface: the edge of the floor opening, 12 cm from the axis, minus the radius.
+    assert report.clearance_cm == pytest.approx(12 - 2.5, abs=1e-6)
+
+
+@pytest.mark.parametrize("dis, collides", [(-3.0, False), (-2.0, True)])
+def test_touching_the_ceiling(scene, dis, collides):
+    # Two straight sections: the tip at z = dis + 100, the body 2.5 cm beyond it.
+    report = scene.check(Posture(dis, (0.0, 0.0), (0.0, 0.0)))
+    assert report.collides is collides
+    if not collides:
+        assert report.clearance_cm == pytest.approx(0.5, abs=1e-6)
+    else:
+        assert report.hit == "wall"
+
+
+def test_into_the_baffle_below_the_hatch(scene):
+    # Bend 90 deg towards +y at z = 11.8, then straight on through y = 58..62 below the hatch.
+    report = scene.check(Posture(-20, (math.pi / 2, 0.0), (math.pi / 2, math.pi / 2)))
+    assert report.collides and report.hit == "baffle_below_hatch"
+
+
+@pytest.mark.parametrize("aim_x, hit", [(100.0, ""), (40.0, "baffle_left_of_hatch")])
+def test_through_the_hatch(scene, aim_x, hit):
+    # In the vertical plane through the panel and (aim_x, 60): bend 90 deg to level off at z = 50,
+    # then three straight sections across y = 60: through the hatch centre, or into the baffle.
+    psi = math.atan2(60.0, aim_x)
+    r = 50 / (math.pi / 2)
+    posture = Posture(50 - r, (math.pi / 2, 0.0, 0.0, 0.0), (psi,) * 4)
+    pts = posture.points(50, 20)
+    crossing = pts[(pts[:, 1] > 57) & (pts[:, 1] < 63)]
+    np.testing.assert_allclose(crossing[:, 2], 50, atol=1e-9)
+    assert np.all(np.abs(crossing[:, 0] - aim_x) < 6)
+    report = scene.check(posture)
+    assert report.collides is bool(hit) and report.hit == hit
+    if not hit:
+        # Nearest: the vertical edge of the opening at (80, 58), whose distance to the arm's
+        # straight line through the z axis at bearing psi is |80 sin psi - 58 cos psi|.
+        edge = abs(80 * math.sin(psi) - 58 * math.cos(psi))
+        assert report.clearance_cm == pytest.approx(edge - 2.5, abs=0.01)
+
+
+def test_inside_a_pipe(scene):
+    # One section bent towards +y whose tip lies on the axis of the bay-1 pipe (y = 20, z = 85).
+    lo, hi = 0.1, 1.5
+    for _ in range(100):  # bisection for (l/θ)(1 − cos θ) = 20
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if 50 / mid * (1 - math.cos(mid)) < 20 else (lo, mid)
+    theta = (lo + hi) / 2
+    dis = 85 - 50 / theta * math.sin(theta)
+    posture = Posture(dis, (theta,), (math.pi / 2,))
+    np.testing.assert_allclose(posture.tip(50), [0, 20, 85], atol=1e-9)
+    report = scene.check(posture)
+    assert report.collides and report.hit == "fuel_pipe_bay1"
+
+
+def test_bent_section_under_the_floor(scene):
+    posture = Posture(-40, (1.2, 0.0), (0.0, 0.0))
+    assert posture.points(50, 10)[3, 2] < 0  # still below the floor, already off the axis
+    report = scene.check(posture)
+    assert report.collides and not report.panel_ok
+
+
+def test_agrees_with_point_sampling(tank, scene):
+    """fcl capsules against an independent dense check on backbone points."""
+    rng = np.random.default_rng(0)
+    agree, both = 0, {True: 0, False: 0}
+    for _ in range(300):
+        n = int(rng.integers(1, 4))
+        posture = Posture(
+            rng.uniform(5, 40), rng.uniform(-1.5, 1.5, n), rng.uniform(-math.pi, math.pi, n)
+        )
+        clearance = point_clearance(tank, posture.points(50, 200)).min() - tank.arm.radius
+        if abs(clearance) < 0.15:  # within the chord sagitta of the capsule chain: undecided
+            continue
+        fcl_says = scene.collides(posture)
+        assert fcl_says == (clearance < 0), (posture, clearance)
+        both[fcl_says] += 1
+        agree += 1
+    assert agree > 250 and both[True] > 30 and both[False] > 30
+
+
+def test_clearance_matches_sampling_when_free(tank, scene):
+    rng = np.random.default_rng(1)
+    checked = 0
+    while checked < 20:
+        posture = Posture(rng.uniform(5, 30), rng.uniform(-1, 1, 2), rng.uniform(-3, 3, 2))
+        sampled = point_clearance(tank, posture.points(50, 200)).min() - tank.arm.radius
+        if sampled < 0.5:
+            continue
+        assert scene.clearance(posture) == pytest.approx(sampled, abs=0.15)
+        checked += 1
+
+
+def test_batch_and_vectorised_helpers(tank, scene):
+    dis = np.array([-40.0, -2.0, -40.0])
+    theta = np.array([[0.0, 0.0], [0.0, 0.0], [1.2, 0.0]])
+    phi = np.zeros((3, 2))
+    np.testing.assert_array_equal(scene.collides_batch(dis, theta, phi), [False, True, True])
+    rng = np.random.default_rng(2)
+    pts = rng.uniform([-70, -60, -20], [250, 160, 110], (500, 6, 3))
+    for limit in (0.0, 2.5):
+        np.testing.assert_array_equal(
+            points_clear(tank, pts, limit), np.all(point_clearance(tank, pts) > limit, axis=1)
+        )
+    below = np.array([[[0, 0, -5.0], [5, 0, -1.0]], [[0, 0, -5.0], [13, 0, -1.0]]])
+    np.testing.assert_array_equal(panel_violation(tank, below), [False, True])
