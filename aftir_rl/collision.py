@@ -25,6 +25,7 @@ once before the exact fcl check of the one they return.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -194,7 +195,7 @@ class CollisionScene:
         """Smallest distance between the arm's body and any solid or wall [cm] (≤ 0 on contact)."""
         data = fcl.DistanceData()
         self._scene.distance(self._place(posture), data, fcl.defaultDistanceCallback)
-        return float(data.result.min_distance)
+        return _finite_or_inf(data.result.min_distance)
 
     def check(self, posture: Posture) -> CollisionReport:
         """Collision, clearance and panel rule of one posture, and what it hits."""
@@ -207,7 +208,7 @@ class CollisionScene:
             hit = self._hit_name(manager)
         dist = fcl.DistanceData()
         self._scene.distance(manager, dist, fcl.defaultDistanceCallback)
-        clearance = float(dist.result.min_distance)
+        clearance = _finite_or_inf(dist.result.min_distance)
         if data.result.is_collision:
             clearance = min(clearance, 0.0)
         return CollisionReport(bool(data.result.is_collision) or not panel, clearance, panel, hit)
@@ -226,6 +227,11 @@ class CollisionScene:
         return np.array(
             [self.collides(Posture(d, t, p)) for d, t, p in zip(dis, theta, phi)], dtype=bool
         )
+
+
+def _finite_or_inf(distance: float) -> float:
+    """Distance from python-fcl, which reports the largest double when nothing is there."""
+    return math.inf if distance >= 1e300 else float(distance)
 
 
 def panel_violation(tank: Tank, points: NDArray[np.float64]) -> NDArray[np.bool_]:

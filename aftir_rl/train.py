@@ -4,6 +4,8 @@ One run directory per target under ``--logdir``, named
 ``{algo}__{env}__{target}__{seed}__{time}`` (design.md §8), holding:
 
 - ``q_table.npz``: the table and its metadata (resume with ``--resume``);
+- ``trajectory.json``: a checked arm posture for every cell of that path and the exact target
+  (:mod:`aftir_rl.posture.trajectory`), unless ``--no-postures``;
 - ``path.json``: the greedy tip path, ``{"target", "target_cell", "cells", "points_cm", ...}``,
   start cell first, target cell last;
 - ``progress.csv`` and a TensorBoard event file with ``rollout/ep_rew_mean``,
@@ -90,6 +92,7 @@ def train_q_table(
     logdir: str | Path = "runs",
     resume: str | Path | None = None,
     progress_bar: bool = True,
+    postures: bool = True,
 ) -> list[dict[str, Any]]:
     """Train one Q-table per target and write a run directory for each.
 
@@ -101,6 +104,8 @@ def train_q_table(
         resume: a ``q_table.npz`` (or a run directory holding one) to continue training from;
             only with a single target, which must be the checkpoint's.
         progress_bar: show a tqdm bar per target.
+        postures: turn the greedy path into joint variables (``trajectory.json``, a picture of
+            the arm under ``paths/<target>_arm``).
 
     Returns:
         One summary dict per target (what ``path.json`` holds, plus ``run_dir`` and ``seconds``).
@@ -187,6 +192,9 @@ def train_q_table(
                 Image(picture, "HWC"),
                 exclude=("stdout", "log", "json", "csv"),
             )
+            trajectory = None
+            if postures:
+                trajectory = _log_trajectory(logger, base, points, target, summary)
             logger.dump(step=agent.num_timesteps)
             logger.close()
             agent.save(
@@ -200,6 +208,8 @@ def train_q_table(
                 },
             )
             write_json(partial / "path.json", summary)
+            if trajectory is not None:
+                write_json(partial / "trajectory.json", trajectory.to_json())
             run_dir = logdir / name
             partial.rename(run_dir)
         except BaseException:
@@ -208,6 +218,45 @@ def train_q_table(
         summary["run_dir"] = str(run_dir)
         summaries.append(summary)
     return summaries
+
+
+def _log_trajectory(
+    logger: Any, env: Any, points: np.ndarray, target: Sequence[float], summary: dict[str, Any]
+) -> Any:
+    """Postures along the greedy path: logged, pictured and summarised into ``summary``."""
+    from stable_baselines3.common.logger import Image
+
+    from aftir_rl.plotting import render_path
+    from aftir_rl.posture import Planner
+    from aftir_rl.posture.trajectory import plan_trajectory
+
+    trajectory = plan_trajectory(Planner(env.tank), points, target)
+    found = [p for p in trajectory.postures if p is not None]
+    summary["trajectory"] = {
+        "postures": len(found),
+        "waypoints": len(trajectory.waypoints),
+        "failures": [f"waypoint {i} {pt}: {why}" for i, pt, why in trajectory.failures],
+        "blocked_moves": len(trajectory.blocked_moves),
+        "max_joint_step_deg": trajectory.max_joint_step_deg,
+    }
+    logger.record("eval/postures_found", len(found) / len(trajectory.waypoints))
+    logger.record("eval/blocked_moves", len(trajectory.blocked_moves))
+    if found:
+        last = found[-1]
+        logger.record("eval/posture_tip_error_cm", last.error_cm)
+        logger.record("eval/clearance_cm", min(p.clearance_cm for p in found))
+        shown = found[:: max(1, len(found) // 5)] + [last]
+        arms = [p.posture.points(p.section_length, 10) for p in shown]
+        picture = render_path(
+            env.tank, points, env.target_point, arms=arms,
+            title=f"arm postures along the path to {_target_tag(target)}",
+        )  # fmt: skip
+        logger.record(
+            f"paths/{_target_tag(target)}_arm",
+            Image(picture, "HWC"),
+            exclude=("stdout", "log", "json", "csv"),
+        )
+    return trajectory
 
 
 def _print_summary(s: dict[str, Any]) -> None:
@@ -219,6 +268,14 @@ def _print_summary(s: dict[str, Any]) -> None:
         f"{s['bfs_optimal_steps']} ({verdict}); {s['path_length_cm']:.0f} cm"
     )
     print("  cells: " + " ".join("(" + ",".join(map(str, c)) + ")" for c in s["cells"]))
+    if "trajectory" in s:
+        t = s["trajectory"]
+        print(
+            f"  postures: {t['postures']}/{t['waypoints']} waypoints, {t['blocked_moves']} "
+            f"interpolated moves collide, largest joint step {t['max_joint_step_deg']:.0f} deg"
+        )
+        for failure in t["failures"]:
+            print(f"  no posture at {failure}")
     print(f"  run dir: {s['run_dir']}")
 
 
@@ -251,6 +308,11 @@ def _parser() -> argparse.ArgumentParser:
     q.add_argument("--logdir", default="runs", help="parent of the run directories (default runs/)")
     q.add_argument("--resume", help="q_table.npz or run directory to continue training from")
     q.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    q.add_argument(
+        "--no-postures",
+        action="store_true",
+        help="skip turning the greedy path into arm postures (trajectory.json)",
+    )
     return parser
 
 
@@ -275,6 +337,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             logdir=args.logdir,
             resume=args.resume,
             progress_bar=not args.no_progress,
+            postures=not args.no_postures,
         )
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)

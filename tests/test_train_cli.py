@@ -12,6 +12,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from aftir_rl import train
 from aftir_rl.agents import QLearning, greedy_rollout
+from aftir_rl.robot import tip_position
 
 
 def _events(run_dir: Path) -> EventAccumulator:
@@ -44,6 +45,7 @@ def test_q_table_run_writes_everything(tmp_path, capsys):
         "path.json",
         "progress.csv",
         "q_table.npz",
+        "trajectory.json",
     ]
     path = json.loads((run_dir / "path.json").read_text())
     assert path["target"] == [230, 140, 90]
@@ -66,6 +68,21 @@ def test_q_table_run_writes_everything(tmp_path, capsys):
     image = acc.Images("paths/230_140_90")[-1]
     assert image.width > 100 and image.height > 100
     assert any(t.startswith("hyperparameters") for t in tags["tensors"])
+    assert "paths/230_140_90_arm" in tags["images"]
+    # Every posture of the trajectory reaches its waypoint by forward kinematics.
+    trajectory = json.loads((run_dir / "trajectory.json").read_text())
+    assert len(trajectory["postures"]) == len(trajectory["waypoints_cm"]) == 24
+    assert trajectory["waypoints_cm"][-1] == [230, 140, 90]
+    failed = {f["index"] for f in trajectory["failures"]}
+    for i, (posture, waypoint) in enumerate(
+        zip(trajectory["postures"], trajectory["waypoints_cm"])
+    ):
+        if posture is None:
+            assert i in failed  # a waypoint without posture is reported, with its reason
+            continue
+        tip = tip_position(posture["dis"], posture["theta"], posture["phi"], 50.0)
+        assert np.linalg.norm(tip - np.array(waypoint)) < 0.01
+        assert posture["tip"] == pytest.approx(list(tip), abs=1e-9)
     # The checkpoint loads and its greedy policy is the logged path.
     env = gym.make("AFTIR-Tank-v0", target=(230, 140, 90))
     agent = QLearning.load(run_dir / "q_table.npz", env)
@@ -76,7 +93,17 @@ def test_q_table_run_writes_everything(tmp_path, capsys):
 
 def _train_one(logdir: Path, *args: str) -> Path:
     """Train on (-50, 72, 90) into ``logdir`` and return the run directory."""
-    argv = ["q_table", "--target", "-50", "72", "90", "--logdir", str(logdir), "--no-progress"]
+    argv = [
+        "q_table",
+        "--target",
+        "-50",
+        "72",
+        "90",
+        "--logdir",
+        str(logdir),
+        "--no-progress",
+        "--no-postures",
+    ]
     assert train.main([*argv, *args]) == 0
     (run_dir,) = list(logdir.iterdir())
     return run_dir

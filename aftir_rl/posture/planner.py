@@ -101,7 +101,8 @@ class PlannedPosture:
             "tip": [float(v) for v in self.tip],
             "target": [float(v) for v in self.target],
             "error_cm": self.error_cm,
-            "clearance_cm": self.clearance_cm,
+            # No solid at all (open space without obstacles): no finite clearance.
+            "clearance_cm": self.clearance_cm if math.isfinite(self.clearance_cm) else None,
             "method": self.method,
             "seconds": self.seconds,
         }
@@ -469,6 +470,16 @@ class Planner:
             "evaluations_p1": res1.evaluations,
         }  # fmt: skip
         return posture, report, details
+
+    def checked(self, posture: Posture, target: ArrayLike, method: str) -> PlannedPosture:
+        """Check a posture found elsewhere (limits, tip, collision) like a planned one.
+
+        Raises:
+            PlanningError: it fails a check.
+
+        """
+        return self._finalize(posture, np.asarray(target, float), method, time.perf_counter(),
+                              self.tolerance, {})  # fmt: skip
 
     def _finalize(
         self,
