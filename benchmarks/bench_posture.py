@@ -1,0 +1,175 @@
+"""Posture generation measured against the papers' tables (seeds 004 and 002).
+
+Run: ``python benchmarks/bench_posture.py``. Prints markdown tables measured in this one run:
+
+1. Seed 004 Table II: blind search against region clipping for 2, 3 and 4 sections (l = 25 cm,
+   Δθ = 1°, target zone 0.5 cm, open space), our speed-up beside the paper's. The 4-section blind
+   search (181⁴ = 1.07e9 combinations) runs on an evenly strided sample and its time is
+   extrapolated to the whole grid; the table says so.
+2. Seed 002 Table 2 analogues: TSM to the four bay-2 corner targets of the reference tank.
+3. Planner timing against the goals (TGA with 4 sections under 50 ms, TSM under 100 ms) and
+   success on 50 random free targets (25 in bay 1, 25 beyond the hatch, seed 7).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import time
+
+import numpy as np
+
+from aftir_rl.collision import point_clearance
+from aftir_rl.errors import PlanningError
+from aftir_rl.posture import PlanarProblem, Planner, blind_search, region_clipping
+
+SEED004 = [  # N, target, paper A (blind) and B (region clipping): theta, d, loops, seconds
+    (2, (11, 31, 31), ((1.27, -0.82), -3.51, 8.8e3, 0.58), ((1.22, -0.64), -3.58, 3.0e2, 0.09)),
+    (3, (30, 19, 50), ((0.53, 0.17, -0.12), -14.18, 3.3e5, 26.62),
+     ((0.53, 0.21, -0.25), -14.39, 6.0e3, 0.96)),
+    (4, (30, 29, 67), ((0.24, 0.54, -0.42, 0.40), -20.91, 1.7e7, 31 * 60),
+     ((0.21, 0.66, -0.55, 0.46), -20.61, 4.0e4, 6.88)),
+]  # fmt: skip
+SEED002 = {  # target: N, error cm, seconds (paper Table 2, targets 5 cm from the corners)
+    (230, 140, 90): (8, 1.33, 2.441),
+    (-50, 140, 10): (9, 2.45, 3.452),
+    (-50, 72, 90): (8, 1.11, 2.427),
+    (230, 72, 10): (7, 0.82, 1.853),
+}
+
+
+def best_time(fn, repeats):
+    best, out = math.inf, None
+    for _ in range(repeats):
+        start = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - start)
+    return best, out
+
+
+def fmt_theta(theta):
+    return "{" + ", ".join(f"{t:.2f}" for t in theta) + "}"
+
+
+def seed004_table(blind_sample: int, repeats: int) -> None:
+    print("Seed 004 Table II: blind search (A) against region clipping (B), l = 25 cm, "
+          "dtheta = 1 deg, zone 0.5 cm, open space")  # fmt: skip
+    print()
+    print("| N | target | T | theta (rad), ours | d (cm) | loops | time, ours | theta, paper | "
+          "d, paper | loops, paper | time, paper |")  # fmt: skip
+    print("|---|---|---|---|---:|---:|---:|---|---:|---:|---:|")
+    ratios = []
+    for n, target, paper_a, paper_b in SEED004:
+        problem = PlanarProblem(math.hypot(target[0], target[1]), target[2], n, 25.0,
+                                math.pi / 2, zone=0.5, dis_range=(-n * 25.0, 0.0))  # fmt: skip
+        sample = None if n < 4 else blind_sample
+        t_a, a = best_time(lambda p=problem, s=sample: blind_search(p, math.radians(1), s), 1)
+        if a is not None and a.sampled:
+            t_a = t_a * a.grid_size / a.evaluations
+        t_b, b = best_time(lambda p=problem: region_clipping(p), repeats)
+        ratios.append((t_a / t_b, paper_a[3] / paper_b[3]))
+        for label, res, t, paper in (("A", a, t_a, paper_a), ("B", b, t_b, paper_b)):
+            if res is None:
+                theta, d, loops = "no solution in the sample", "-", f"{blind_sample:.1e}"
+            else:
+                theta, d = fmt_theta(res.theta), f"{res.dis:.2f}"
+                loops = f"{res.evaluations:.1e}"
+                if res.sampled:
+                    loops = f"{res.grid_size:.1e} (sampled {res.evaluations:.1e})"
+            when = f"{t:.4f} s" + (" (extrapolated)" if res is not None and res.sampled else "")
+            ours = f"| {n} | {list(target)} | {label} | {theta} | {d} | {loops} | {when} | "
+            print(ours + f"{fmt_theta(paper[0])} | {paper[1]} | {paper[2]:.1e} | {paper[3]:g} s |")
+    print()
+    print("| N | speed-up A/B, ours | speed-up A/B, paper |")
+    print("|---|---:|---:|")
+    for (n, *_), (ours, paper) in zip(SEED004, ratios):
+        print(f"| {n} | {ours:.0f}x | {paper:.1f}x |")
+    print()
+
+
+def seed002_table(planner: Planner, repeats: int) -> None:
+    print("Seed 002 Table 2 analogues: TSM to the bay-2 corner targets of b737_center (l = 50 cm)")
+    print()
+    print("| target (cm) | N | tip error (cm) | seconds | clearance (cm) | N, paper | "
+          "error, paper (cm) | seconds, paper |")  # fmt: skip
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    for target, (pn, perr, psec) in SEED002.items():
+        t, r = best_time(lambda t=target: planner.plan(t), repeats)
+        print(f"| {target} | {r.posture.n_sections} | {r.error_cm:.1e} | {t:.3f} | "
+              f"{r.clearance_cm:.2f} | {pn} | {perr} | {psec} |")  # fmt: skip
+    print()
+
+
+def random_targets(planner: Planner, n_each: int, seed: int) -> None:
+    tank, rng = planner.tank, np.random.default_rng(seed)
+    bays = {"bay 1 (TGA)": [], "beyond the hatch (TSM)": []}
+    while min(len(v) for v in bays.values()) < n_each:
+        x = rng.uniform(tank.box_min, tank.box_max)
+        if point_clearance(tank, x[None])[0] <= 5.0:
+            continue
+        key = "beyond the hatch (TSM)" if planner.beyond_baffle(x) else "bay 1 (TGA)"
+        if len(bays[key]) < n_each:
+            bays[key].append(x)
+    print(f"Random free targets (seed {seed}, at least 5 cm from any surface):")
+    print()
+    print("| targets | reached | tip error, max (cm) | seconds, median | seconds, max | "
+          "sections, median |")  # fmt: skip
+    print("|---|---:|---:|---:|---:|---:|")
+    for key, points in bays.items():
+        times, errors, sections, ok = [], [], [], 0
+        for x in points:
+            start = time.perf_counter()
+            try:
+                r = planner.plan(x)
+                ok += 1
+                errors.append(r.error_cm)
+                sections.append(r.posture.n_sections)
+            except PlanningError:
+                pass
+            times.append(time.perf_counter() - start)
+        print(f"| {key} | {ok}/{len(points)} | {max(errors):.1e} | {np.median(times):.3f} | "
+              f"{max(times):.3f} | {np.median(sections):.0f} |")  # fmt: skip
+    print()
+
+
+def goals(planner: Planner, open_planner: Planner, repeats: int) -> None:
+    print("Goals: TGA with 4 sections under 50 ms, TSM under 100 ms per target, error < 0.01 cm")
+    print()
+    print("| case | sections | best of runs (ms) | tip error (cm) |")
+    print("|---|---:|---:|---:|")
+    for name, p, target in (
+        ("TGA, seed 004 [30, 29, 67], open space", open_planner, (30, 29, 67)),
+        ("TGA, tank (118, 18, 39)", planner, (118, 18, 39)),
+        ("TGA, tank (179, -4, 5)", planner, (179, -4, 5)),
+    ):
+        t, r = best_time(lambda p=p, x=target: p.plan(x), repeats)
+        print(f"| {name} | {r.posture.n_sections} | {t * 1e3:.1f} | {r.error_cm:.1e} |")
+    for target in SEED002:
+        t, r = best_time(lambda x=target: planner.plan(x), repeats)
+        print(f"| TSM, tank {target} | {r.posture.n_sections} | {t * 1e3:.1f} | {r.error_cm:.1e} |")
+    print()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--blind-sample", type=int, default=20_000_000,
+        help="combinations of the 4-section blind search actually evaluated",
+    )  # fmt: skip
+    parser.add_argument("--repeats", type=int, default=3, help="best of this many runs")
+    parser.add_argument("--random", type=int, default=25, help="random targets per bay")
+    args = parser.parse_args()
+    print(f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python "
+          f"{platform.python_version()}, numpy {np.__version__}")  # fmt: skip
+    print()
+    planner, open_planner = Planner("b737_center"), Planner("open_space")
+    seed004_table(args.blind_sample, args.repeats)
+    seed002_table(planner, args.repeats)
+    goals(planner, open_planner, args.repeats)
+    random_targets(planner, args.random, seed=7)
+
+
+if __name__ == "__main__":
+    main()
