@@ -92,7 +92,7 @@ class Cylinder:
     radius: float
     name: str = ""
 
-    @property
+    @cached_property
     def axis(self) -> int:
         """Index of the coordinate axis the cylinder runs along."""
         return int(np.flatnonzero(np.array(self.p1) != np.array(self.p0))[0])

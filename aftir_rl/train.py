@@ -37,7 +37,7 @@ from aftir_rl.errors import AftirError, CheckpointError, ConfigError
 
 __all__ = ["main", "train_q_table", "load_q_table_config"]
 
-ALGOS = ("q_table",)
+ALGOS = ("q_table", "ppo", "sac", "td3")
 
 
 def load_q_table_config(path: str | Path) -> Any:
@@ -51,9 +51,10 @@ def _target_tag(target: Sequence[float]) -> str:
     return "_".join(f"{float(v):g}" for v in target)
 
 
-def _run_name(algo: str, env_id: str, target: Sequence[float], seed: int) -> str:
+def _run_name(algo: str, env_id: str, target: Sequence[float] | str, seed: int) -> str:
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
-    return f"{algo}__{env_id}__{_target_tag(target)}__{seed}__{stamp}"
+    tag = target if isinstance(target, str) else _target_tag(target)
+    return f"{algo}__{env_id}__{tag}__{seed}__{stamp}"
 
 
 def _hyperparameter_text(params: dict[str, Any]) -> str:
@@ -259,6 +260,72 @@ def _log_trajectory(
     return trajectory
 
 
+def train_sb3(
+    algo: str,
+    config: Any,
+    seed: int = 0,
+    logdir: str | Path = "runs",
+    resume: str | Path | None = None,
+    progress_bar: bool = True,
+) -> dict[str, Any]:
+    """Train PPO, SAC or TD3 on an arm env; one run directory with the model and its logs.
+
+    The run directory holds ``model.zip`` (atomic), ``checkpoints/``, ``config.json``,
+    ``progress.csv`` and the TensorBoard events (``rollout/*``, ``train/*``, ``eval/*``,
+    ``paths/eval``, the hyperparameters as text).
+
+    Raises:
+        CheckpointError: ``resume`` is unreadable.
+
+    """
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.logger import configure
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    from aftir_rl.agents.sb3 import (
+        ALGORITHMS,
+        ArmEvalCallback,
+        AtomicCheckpoint,
+        evaluation_targets,
+        load_model,
+        save_model,
+    )  # fmt: skip
+
+    env_id = config.env_id if ":" in config.env_id else f"aftir_rl:{config.env_id}"
+    targets = evaluation_targets(env_id, config.eval_targets)  # also validates the env id
+    vec_cls = SubprocVecEnv if config.n_envs > 1 else DummyVecEnv
+    venv = make_vec_env(env_id, n_envs=config.n_envs, seed=seed, vec_env_cls=vec_cls)
+    try:
+        if resume is not None:
+            model = load_model(algo, resume, env=venv)
+        else:
+            model = ALGORITHMS[algo](config.policy, venv, seed=seed, verbose=0,
+                                     **config.hyperparameters)  # fmt: skip
+        name = _run_name(algo, config.env_id.split(":")[-1], "random", seed)
+        run_dir = Path(logdir) / name
+        run_dir.mkdir(parents=True, exist_ok=False)
+        logger = configure(str(run_dir), ["csv", "tensorboard"])
+        model.set_logger(logger)
+        params = {**dataclasses.asdict(config), "algo": algo, "seed": seed,
+                  "resume": str(resume) if resume else None}  # fmt: skip
+        write_json(run_dir / "config.json", params)
+        logger.record("hyperparameters", _hyperparameter_text(params), exclude=("csv",))
+        evaluator = ArmEvalCallback(env_id, targets, config.eval_freq)
+        callbacks = [evaluator, AtomicCheckpoint(run_dir / "checkpoints", config.checkpoint_freq)]
+        start = time.perf_counter()
+        model.learn(config.total_timesteps, callback=callbacks, progress_bar=progress_bar,
+                    reset_num_timesteps=resume is None)  # fmt: skip
+        seconds = time.perf_counter() - start
+        save_model(model, run_dir / "model.zip")
+        logger.close()
+    finally:
+        venv.close()
+    summary = {"algo": algo, "env_id": config.env_id, "timesteps": int(model.num_timesteps),
+               "seconds": seconds, "run_dir": str(run_dir), **evaluator.last_metrics}  # fmt: skip
+    write_json(run_dir / "summary.json", summary)
+    return summary
+
+
 def _print_summary(s: dict[str, Any]) -> None:
     verdict = "optimal" if s["optimal"] else ("reached, not optimal" if s["success"] else "FAILED")
     target = ", ".join(f"{v:g}" for v in s["target"])
@@ -313,12 +380,55 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="skip turning the greedy path into arm postures (trajectory.json)",
     )
+    for algo in ("ppo", "sac", "td3"):
+        p = sub.add_parser(
+            algo,
+            help=f"{algo.upper()} (Stable-Baselines3) on an arm env",
+            description=f"{algo.upper()} on a continuous AFTIR arm env, one run directory.",
+        )
+        p.add_argument("--config", default=str(CONFIG_DIR / f"{algo}.yaml"),
+                       help=f"YAML of SB3Config fields (default: configs/{algo}.yaml)")  # fmt: skip
+        p.add_argument("--env", help="environment id (overrides config), e.g. AFTIR-ArmReach-v0")
+        p.add_argument("--total-timesteps", type=int, help="training steps (overrides config)")
+        p.add_argument("--n-envs", type=int, help="parallel subprocess envs (overrides config)")
+        p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+        p.add_argument("--logdir", default="runs", help="parent of the run directory")
+        p.add_argument("--resume", help="model.zip or run directory to continue training from")
+        p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return parser
+
+
+def _main_sb3(args: argparse.Namespace) -> int:
+    from aftir_rl.agents.sb3 import load_sb3_config
+
+    config = load_sb3_config(args.config, args.algo)
+    overrides = {"env_id": args.env, "total_timesteps": args.total_timesteps,
+                 "n_envs": args.n_envs}  # fmt: skip
+    for key, value in overrides.items():
+        if value is not None:
+            if isinstance(value, int) and value < 1:
+                raise ConfigError(f"--{key.replace('_', '-')} must be at least 1, got {value}")
+            config = dataclasses.replace(config, **{key: value})
+    s = train_sb3(args.algo, config, seed=args.seed, logdir=args.logdir, resume=args.resume,
+                  progress_bar=not args.no_progress)  # fmt: skip
+    print(
+        f"{args.algo.upper()} on {s['env_id']}: {s['timesteps']} steps in {s['seconds']:.0f} s; "
+        f"evaluation: success {s['success_rate']:.0%}, tip error {s['tip_error_cm']:.1f} cm, "
+        f"path {s['path_length_cm']:.0f} cm, collisions {s['collision_rate']:.0%}"
+    )
+    print(f"  run dir: {s['run_dir']}")
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.train``."""
     args = _parser().parse_args(argv)
+    if args.algo != "q_table":
+        try:
+            return _main_sb3(args)
+        except AftirError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
     try:
         config = load_q_table_config(args.config)
         if args.episodes is not None:

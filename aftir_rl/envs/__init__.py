@@ -9,7 +9,10 @@ from aftir_rl.envs.tank_grid import Action, TankGridEnv
 __all__ = ["Action", "TankGridEnv", "ENV_IDS", "register_envs"]
 
 #: Every environment id registered by :func:`register_envs`.
-ENV_IDS: tuple[str, ...] = ("AFTIR-Tank-v0",)
+ENV_IDS: tuple[str, ...] = ("AFTIR-Tank-v0", "AFTIR-Arm-v0", "AFTIR-ArmReach-v0")
+
+#: Bay-1 reach task: targets in front of the panel that 2 sections reach, drawn per episode.
+REACH_REGION = ((-40.0, -40.0, 20.0), (60.0, 40.0, 90.0))
 
 
 def register_envs() -> None:
@@ -24,4 +27,18 @@ def register_envs() -> None:
             id="AFTIR-Tank-v0",
             entry_point="aftir_rl.envs.tank_grid:TankGridEnv",
             max_episode_steps=500,
+        )
+    if "AFTIR-Arm-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-Arm-v0",
+            entry_point="aftir_rl.envs.arm:ArmEnv",
+            max_episode_steps=300,
+            kwargs={"n_sections": 4},
+        )
+    if "AFTIR-ArmReach-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-ArmReach-v0",
+            entry_point="aftir_rl.envs.arm:ArmEnv",
+            max_episode_steps=100,
+            kwargs={"n_sections": 2, "target_region": REACH_REGION},
         )
