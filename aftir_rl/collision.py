@@ -152,6 +152,14 @@ class CollisionScene:
             int, tuple[list[fcl.CollisionObject], fcl.DynamicAABBTreeCollisionManager]
         ] = {}
 
+    def __getstate__(self) -> dict[str, object]:
+        # fcl objects do not pickle; a copy rebuilds them (envs are pickled by vector wrappers).
+        return {"tank": self.tank, "arm": self.arm, "links": self.links_per_section,
+                "walls": self.walls}  # fmt: skip
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__init__(state["tank"], state["arm"], state["links"], state["walls"])  # type: ignore[misc]
+
     def _arm_links(self, n_sections: int) -> tuple[list[fcl.CollisionObject], object]:
         if n_sections not in self._arms:
             length = self.arm.section_length / self.links_per_section

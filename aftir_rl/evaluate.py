@@ -1,0 +1,163 @@
+"""``python -m aftir_rl.evaluate RUN_DIR [RUN_DIR ...]``: compare trained agents in one table.
+
+A Q-learning run (``q_table.npz``) is evaluated on the target it was trained for: its greedy cell
+path is replayed in ``AFTIR-Tank-v0`` and turned into arm postures
+(:func:`aftir_rl.posture.trajectory.plan_trajectory`); success means every waypoint got a posture
+and the last reaches the target. An SB3 run (``model.zip``) is evaluated on its env's fixed
+evaluation targets (or ``--target``), one deterministic episode each. For both the table gives
+success rate, tip error, tip path length, the smallest clearance to the tank along the motion and
+seconds per target; the same numbers go to TensorBoard under ``compare/<run>/...`` in a new
+``evaluate__<time>`` directory of ``--logdir``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aftir_rl.errors import AftirError, CheckpointError
+
+__all__ = ["main", "evaluate_run"]
+
+
+def _q_table_run(run_dir: Path) -> dict[str, Any]:
+    import gymnasium as gym
+
+    from aftir_rl.agents.q_table import QLearning, greedy_rollout
+    from aftir_rl.posture import Planner
+    from aftir_rl.posture.trajectory import plan_trajectory
+
+    _, meta = QLearning.read_checkpoint(run_dir / "q_table.npz")
+    target = meta.get("target")
+    if target is None:
+        raise CheckpointError(f"{run_dir}: the Q-table has no target in its metadata")
+    env = gym.make(meta.get("env_id", "AFTIR-Tank-v0"), tank=meta.get("tank", "b737_center"),
+                   target=tuple(target))  # fmt: skip
+    agent = QLearning.load(run_dir / "q_table.npz", env)
+    start = time.perf_counter()
+    states, reached = greedy_rollout(agent, env)
+    raster = env.unwrapped.raster
+    points = [raster.cell_center(raster.cell(s)) for s in states]
+    trajectory = plan_trajectory(Planner(env.unwrapped.tank), points, target)
+    seconds = time.perf_counter() - start
+    found = [p for p in trajectory.postures if p is not None]
+    tips = np.array([p.tip for p in found]) if found else np.zeros((1, 3))
+    last = trajectory.postures[-1]
+    return {
+        "agent": "q_table + TGA/TSM",
+        "targets": 1,
+        "success_rate": float(reached and last is not None and not trajectory.failures),
+        "tip_error_cm": last.error_cm if last is not None else float("nan"),
+        "path_length_cm": float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1))),
+        "min_clearance_cm": min((p.clearance_cm for p in found), default=float("nan")),
+        "seconds_per_target": seconds,
+        "note": f"{len(trajectory.blocked_moves)} interpolated moves collide",
+    }
+
+
+def _sb3_run(run_dir: Path, targets: list[np.ndarray] | None) -> dict[str, Any]:
+    import gymnasium as gym
+
+    from aftir_rl.agents.sb3 import evaluation_targets, load_model
+
+    config = json.loads((run_dir / "config.json").read_text())
+    algo, env_id = config["algo"], config["env_id"]
+    env_id = env_id if ":" in env_id else f"aftir_rl:{env_id}"
+    model = load_model(algo, run_dir / "model.zip")
+    targets = targets or evaluation_targets(env_id, int(config.get("eval_targets", 20)))
+    env = gym.make(env_id)
+    scene = env.unwrapped.scene
+    rows = []
+    for target in targets:
+        start = time.perf_counter()
+        obs, _ = env.reset(options={"target": target})
+        tips, clearance, done, info = [env.unwrapped._tip.copy()], np.inf, False, {}
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, terminated, truncated, info = env.step(action)
+            tips.append(env.unwrapped._tip.copy())
+            clearance = min(clearance, scene.check(env.unwrapped.posture).clearance_cm)
+            done = terminated or truncated
+        tips_arr = np.array(tips)
+        rows.append((float(info["is_success"]), info["distance_cm"],
+                     float(np.sum(np.linalg.norm(np.diff(tips_arr, axis=0), axis=1))),
+                     clearance, time.perf_counter() - start))  # fmt: skip
+    mean = np.mean(np.array(rows), axis=0)
+    return {
+        "agent": f"{algo} ({config['env_id']})",
+        "targets": len(targets),
+        "success_rate": mean[0],
+        "tip_error_cm": mean[1],
+        "path_length_cm": mean[2],
+        "min_clearance_cm": float(np.min(np.array(rows)[:, 3])),
+        "seconds_per_target": mean[4],
+        "note": "",
+    }
+
+
+def evaluate_run(run_dir: str | Path, targets: list[np.ndarray] | None = None) -> dict[str, Any]:
+    """Evaluate one run directory (Q-table or SB3).
+
+    Raises:
+        CheckpointError: not a run directory this knows, or unreadable files.
+
+    """
+    run_dir = Path(run_dir)
+    if (run_dir / "q_table.npz").exists():
+        return _q_table_run(run_dir)
+    if (run_dir / "model.zip").exists() and (run_dir / "config.json").exists():
+        return _sb3_run(run_dir, targets)
+    raise CheckpointError(
+        f"{run_dir}: not a run directory (no q_table.npz, nor model.zip with config.json)"
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m aftir_rl.evaluate``."""
+    parser = argparse.ArgumentParser(
+        prog="python -m aftir_rl.evaluate",
+        description="Evaluate trained runs (Q-table or SB3) and print one comparison table.",
+    )
+    parser.add_argument("runs", nargs="+", metavar="RUN_DIR", help="run directories")
+    parser.add_argument("--target", nargs=3, type=float, action="append", metavar=("X", "Y", "Z"),
+                        help="evaluation target for SB3 runs (repeatable)")  # fmt: skip
+    parser.add_argument("--logdir", default="runs", help="where the evaluate__<time> logs go")
+    args = parser.parse_args(argv)
+    targets = [np.array(t) for t in args.target] if args.target else None
+    try:
+        results = {Path(r).name: evaluate_run(r, targets) for r in args.runs}
+    except AftirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print("| run | agent | targets | success | tip error (cm) | path (cm) | min clearance (cm) | "
+          "s / target | note |")  # fmt: skip
+    print("|---|---|---:|---:|---:|---:|---:|---:|---|")
+    for name, r in results.items():
+        head = f"| {name} | {r['agent']} | {r['targets']} | {r['success_rate']:.0%} | "
+        body = f"{r['tip_error_cm']:.3g} | {r['path_length_cm']:.0f} | "
+        tail = f"{r['min_clearance_cm']:.2f} | {r['seconds_per_target']:.2f} | {r['note']} |"
+        print(head + body + tail)
+    from stable_baselines3.common.logger import configure
+
+    out = Path(args.logdir) / f"evaluate__{datetime.now().strftime('%Y%m%d-%H%M%S-%f')}"
+    logger = configure(str(out), ["tensorboard", "csv"])
+    for name, r in results.items():
+        for key in ("success_rate", "tip_error_cm", "path_length_cm", "min_clearance_cm",
+                    "seconds_per_target"):  # fmt: skip
+            logger.record(f"compare/{name}/{key}", float(r[key]))
+    logger.dump(0)
+    logger.close()
+    print(f"logged to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,116 @@
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from aftir_rl import train
+from aftir_rl.collision import CollisionScene
+from aftir_rl.errors import InvalidActionError, TargetError
+
+ARM_IDS = ["AFTIR-ArmReach-v0", "AFTIR-Arm-v0"]
+
+
+@pytest.mark.parametrize("env_id", ARM_IDS)
+def test_long_random_rollout_stays_in_space(env_id):
+    env = gym.make(env_id)
+    env.reset(seed=1)
+    env.action_space.seed(1)
+    episodes = 0
+    for _ in range(1500):
+        obs, reward, term, trunc, info = env.step(env.action_space.sample())
+        assert env.observation_space.contains(obs) and np.all(np.isfinite(obs))
+        assert np.isfinite(reward)
+        if term or trunc:
+            episodes += 1
+            obs, _ = env.reset()
+            assert env.observation_space.contains(obs)
+    assert episodes > 5
+
+
+def test_collisions_agree_with_the_collision_module():
+    env = gym.make("AFTIR-Arm-v0").unwrapped
+    scene = CollisionScene(env.tank, links_per_section=5)
+    rng = np.random.default_rng(0)
+    seen = {True: 0, False: 0}
+    env.reset(seed=0)
+    for _ in range(600):
+        _, _, term, _, info = env.step(rng.uniform(-1, 1, env.action_space.shape))
+        assert info["collision"] == scene.check(env.posture).collides
+        seen[info["collision"]] += 1
+        if term:
+            env.reset()
+    # Pushing the straight arm up runs it into the ceiling.
+    env.reset(seed=1)
+    push = np.zeros(env.action_space.shape, dtype=np.float32)
+    push[0] = 1.0
+    for _ in range(60):
+        _, reward, term, _, info = env.step(push)
+        assert info["collision"] == scene.check(env.posture).collides
+        if term:
+            break
+    assert info["collision"] and reward < -9
+    assert seen[True] >= 1 and seen[False] > 100
+
+
+def test_target_options_success_and_errors():
+    env = gym.make("AFTIR-ArmReach-v0").unwrapped
+    obs, info = env.reset(seed=0, options={"target": (0.0, 0.0, 12.0)})
+    np.testing.assert_allclose(info["target"], [0, 0, 12])
+    # The straight arm starts with its tip at (0, 0, 10): raising it 2 cm reaches the target.
+    _, reward, term, _, info = env.step(np.r_[1.0, np.zeros(4)].astype(np.float32) * (2 / 3))
+    assert term and info["is_success"] and reward > 10
+    with pytest.raises(TargetError):
+        env.reset(options={"target": (0.0, 20.0, 85.0)})  # inside a pipe
+    with pytest.raises(InvalidActionError):
+        env.step(np.zeros(3, dtype=np.float32))
+    with pytest.raises(InvalidActionError):
+        env.step(np.full(5, np.nan, dtype=np.float32))
+
+
+def test_render():
+    env = gym.make("AFTIR-ArmReach-v0", render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.std() > 10
+
+
+@pytest.mark.parametrize("algo, steps", [("ppo", 256), ("sac", 200), ("td3", 200)])
+def test_smoke_training_writes_tensorboard(tmp_path, algo, steps, capsys):
+    config = tmp_path / f"{algo}.yaml"
+    hyper = "  n_steps: 128\n  batch_size: 64\n" if algo == "ppo" else "  learning_starts: 50\n"
+    config.write_text(
+        "env_id: AFTIR-ArmReach-v0\neval_freq: 100000\neval_targets: 2\ncheckpoint_freq: 100\n"
+        f"hyperparameters:\n{hyper}"
+    )
+    rc = train.main([algo, "--config", str(config), "--total-timesteps", str(steps),
+                     "--logdir", str(tmp_path / "runs"), "--no-progress"])  # fmt: skip
+    assert rc == 0
+    (run_dir,) = list((tmp_path / "runs").iterdir())
+    assert (run_dir / "model.zip").exists() and any((run_dir / "checkpoints").iterdir())
+    acc = EventAccumulator(str(run_dir), size_guidance={"images": 0, "tensors": 0})
+    acc.Reload()
+    tags = acc.Tags()
+    for tag in ("eval/success_rate", "eval/tip_error_cm", "eval/path_length_cm",
+                "eval/collision_rate"):  # fmt: skip
+        assert tag in tags["scalars"], tag
+    assert "paths/eval" in tags["images"]
+    # Resume from the saved model, and a corrupt model is a clean error.
+    again = [algo, "--config", str(config), "--total-timesteps", "64", "--resume", str(run_dir)]
+    rc = train.main([*again, "--logdir", str(tmp_path / "again"), "--no-progress"])
+    assert rc == 0
+    bad = tmp_path / "bad.zip"
+    bad.write_bytes(b"not a zip")
+    capsys.readouterr()
+    rc = train.main([algo, "--config", str(config), "--resume", str(bad),
+                     "--logdir", str(tmp_path / "x"), "--no-progress"])  # fmt: skip
+    assert rc == 2 and "not a readable" in capsys.readouterr().err
+
+
+def test_bad_sb3_config(tmp_path, capsys):
+    config = tmp_path / "ppo.yaml"
+    config.write_text("env_id: AFTIR-ArmReach-v0\nhyperparameters:\n  learnin_rate: 0.1\n")
+    assert train.main(["ppo", "--config", str(config), "--logdir", str(tmp_path)]) == 2
+    assert "unknown key 'learnin_rate' for PPO" in capsys.readouterr().err
