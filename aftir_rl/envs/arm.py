@@ -34,9 +34,11 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     that end below the floor are inside the panel's guide and stay straight.
 
     ## Observation Space
-    ``Box(-20, 20, (6N + 12,), float32)``: ``dis/l``, ``θ/θ_max``, ``sin φ``, ``cos φ``, the tip,
+    ``Box(-20, 20, (6N + 15,), float32)``: ``dis/l``, ``θ/θ_max``, ``sin φ``, ``cos φ``, the tip,
     the target and their difference (cm / 100), the body clearance (cm / 10, capped at 1) and the
-    distance to the target (cm / 100), then ``sin θ``, ``cos θ`` and the section ends' heights.
+    distance to the target (cm / 100), then ``sin θ``, ``cos θ``, the section ends' heights
+    (cm / 100) and the difference again at a finer scale (cm / 10, clipped to ±3) for the last
+    centimetres.
 
     ## Starting State
     The arm straight along the panel axis, its tip ``start_height`` [cm] above the floor.
@@ -99,7 +101,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             else (np.array(target_region[0], float), np.array(target_region[1], float))
         )
         self.action_space = spaces.Box(-1.0, 1.0, (1 + 2 * self.n,), np.float32)
-        self.observation_space = spaces.Box(-20.0, 20.0, (6 * self.n + 12,), np.float32)
+        self.observation_space = spaces.Box(-20.0, 20.0, (6 * self.n + 15,), np.float32)
         # A sparse point set for the fast clearance pre-check (see _collides).
         self._margin = 2.0
         self._state = np.zeros(1 + 2 * self.n)
@@ -175,7 +177,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
                 [s[0] / self.l], theta / self.arm.theta_max, np.sin(phi), np.cos(phi),
                 tip / 100, self.target / 100, diff / 100,
                 [min(clearance, 10.0) / 10, np.linalg.norm(diff) / 100],
-                np.sin(theta), np.cos(theta), frames_z / 100,
+                np.sin(theta), np.cos(theta), frames_z / 100, np.clip(diff / 10, -3, 3),
             ]
         ).astype(np.float32)  # fmt: skip
 

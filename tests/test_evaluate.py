@@ -1,0 +1,33 @@
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from aftir_rl import evaluate, train
+
+
+def test_compare_q_table_and_ppo_runs(tmp_path, capsys):
+    runs = tmp_path / "runs"
+    assert train.main(["q_table", "--target", "230", "72", "10", "--logdir", str(runs),
+                       "--no-progress"]) == 0  # fmt: skip
+    config = tmp_path / "ppo.yaml"
+    config.write_text(
+        "env_id: AFTIR-ArmReach-v0\neval_freq: 100000\neval_targets: 2\ncheckpoint_freq: 1000\n"
+        "hyperparameters:\n  n_steps: 128\n  batch_size: 64\n"
+    )
+    assert train.main(["ppo", "--config", str(config), "--total-timesteps", "128", "--logdir",
+                       str(runs), "--no-progress"]) == 0  # fmt: skip
+    capsys.readouterr()
+    dirs = sorted(str(p) for p in runs.iterdir())
+    assert evaluate.main([*dirs, "--logdir", str(tmp_path / "eval")]) == 0
+    out = capsys.readouterr().out
+    assert "q_table + TGA/TSM" in out and "ppo (AFTIR-ArmReach-v0)" in out
+    assert "| 1 | 100% |" in out  # the Q-table run reaches its target with postures
+    assert any(p.name.startswith("evaluate__") for p in (tmp_path / "eval").iterdir())
+
+
+def test_not_a_run_dir_exits_2(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "aftir_rl.evaluate", str(tmp_path)],
+                          capture_output=True, text=True)  # fmt: skip
+    assert proc.returncode == 2 and "not a run directory" in proc.stderr
+    assert "Traceback" not in proc.stderr
