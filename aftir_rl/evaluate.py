@@ -79,11 +79,11 @@ def _sb3_run(run_dir: Path, targets: list[np.ndarray] | None) -> dict[str, Any]:
     for target in targets:
         start = time.perf_counter()
         obs, _ = env.reset(options={"target": target})
-        tips, clearance, done, info = [env.unwrapped._tip.copy()], np.inf, False, {}
+        tips, clearance, done, info = [env.unwrapped.tip], np.inf, False, {}
         while not done:
             action, _ = model.predict(obs, deterministic=True)
             obs, _, terminated, truncated, info = env.step(action)
-            tips.append(env.unwrapped._tip.copy())
+            tips.append(env.unwrapped.tip)
             clearance = min(clearance, scene.check(env.unwrapped.posture).clearance_cm)
             done = terminated or truncated
         tips_arr = np.array(tips)

@@ -80,7 +80,11 @@ def test_render():
 @pytest.mark.parametrize("algo, steps", [("ppo", 256), ("sac", 200), ("td3", 200)])
 def test_smoke_training_writes_tensorboard(tmp_path, algo, steps, capsys):
     config = tmp_path / f"{algo}.yaml"
-    hyper = "  n_steps: 128\n  batch_size: 64\n" if algo == "ppo" else "  learning_starts: 50\n"
+    hyper = (
+        "  n_steps: 128\n  batch_size: 64\n"
+        if algo == "ppo"
+        else "  learning_starts: 50\n  batch_size: 32\n  buffer_size: 1000\n"
+    )
     config.write_text(
         "env_id: AFTIR-ArmReach-v0\neval_freq: 100000\neval_targets: 2\ncheckpoint_freq: 100\n"
         f"hyperparameters:\n{hyper}"

@@ -114,12 +114,12 @@ def evaluate_policy_on_targets(
     results, first = [], {}
     for i, target in enumerate(targets):
         obs, info = env.reset(options={"target": target})
-        tips = [env.unwrapped._tip.copy()]
+        tips = [env.unwrapped.tip]
         done, info = False, {}
         while not done:
             action, _ = model.predict(obs, deterministic=True)
             obs, _, terminated, truncated, info = env.step(action)
-            tips.append(env.unwrapped._tip.copy())
+            tips.append(env.unwrapped.tip)
             done = terminated or truncated
         tips_arr = np.array(tips)
         results.append((
@@ -130,7 +130,7 @@ def evaluate_policy_on_targets(
         if i == 0:
             arm = env.unwrapped
             first = {"tips": tips_arr, "target": target,
-                     "arm": arm._points(arm._state, 10), "tank": arm.tank}  # fmt: skip
+                     "arm": arm.body(), "tank": arm.tank}  # fmt: skip
     env.close()
     mean = np.mean(np.array(results), axis=0)
     metrics = {"success_rate": mean[0], "tip_error_cm": mean[1], "path_length_cm": mean[2],

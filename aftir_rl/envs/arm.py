@@ -116,6 +116,15 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return t
 
     @property
+    def tip(self) -> NDArray[np.float64]:
+        """The tip's position [cm]."""
+        return self._tip.copy()
+
+    def body(self, points_per_section: int = 10) -> NDArray[np.float64]:
+        """Backbone points of the current posture [cm]."""
+        return self._points(self._state, points_per_section)
+
+    @property
     def posture(self) -> Posture:
         """The current joint variables."""
         s = self._state
