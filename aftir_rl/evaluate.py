@@ -64,43 +64,17 @@ def _q_table_run(run_dir: Path) -> dict[str, Any]:
 
 
 def _sb3_run(run_dir: Path, targets: list[np.ndarray] | None) -> dict[str, Any]:
-    import gymnasium as gym
-
-    from aftir_rl.agents.sb3 import evaluation_targets, load_model
+    from aftir_rl.agents.sb3 import evaluate_policy_on_targets, evaluation_targets, load_model
 
     config = json.loads((run_dir / "config.json").read_text())
     algo, env_id = config["algo"], config["env_id"]
     env_id = env_id if ":" in env_id else f"aftir_rl:{env_id}"
     model = load_model(algo, run_dir / "model.zip")
     targets = targets or evaluation_targets(env_id, int(config.get("eval_targets", 20)))
-    env = gym.make(env_id)
-    scene = env.unwrapped.scene
-    rows = []
-    for target in targets:
-        start = time.perf_counter()
-        obs, _ = env.reset(options={"target": target})
-        tips, clearance, done, info = [env.unwrapped.tip], np.inf, False, {}
-        while not done:
-            action, _ = model.predict(obs, deterministic=True)
-            obs, _, terminated, truncated, info = env.step(action)
-            tips.append(env.unwrapped.tip)
-            clearance = min(clearance, scene.check(env.unwrapped.posture).clearance_cm)
-            done = terminated or truncated
-        tips_arr = np.array(tips)
-        rows.append((float(info["is_success"]), info["distance_cm"],
-                     float(np.sum(np.linalg.norm(np.diff(tips_arr, axis=0), axis=1))),
-                     clearance, time.perf_counter() - start))  # fmt: skip
-    mean = np.mean(np.array(rows), axis=0)
-    return {
-        "agent": f"{algo} ({config['env_id']})",
-        "targets": len(targets),
-        "success_rate": mean[0],
-        "tip_error_cm": mean[1],
-        "path_length_cm": mean[2],
-        "min_clearance_cm": float(np.min(np.array(rows)[:, 3])),
-        "seconds_per_target": mean[4],
-        "note": "",
-    }
+    metrics, _ = evaluate_policy_on_targets(model, env_id, targets, clearance=True)
+    note = f"{metrics['collision_rate']:.0%} collided" if metrics["collision_rate"] else ""
+    return {"agent": f"{algo} ({config['env_id']})", "targets": len(targets), **metrics,
+            "note": note}  # fmt: skip
 
 
 def evaluate_run(run_dir: str | Path, targets: list[np.ndarray] | None = None) -> dict[str, Any]:

@@ -21,9 +21,9 @@ import time
 
 import numpy as np
 
-from aftir_rl.collision import point_clearance
 from aftir_rl.errors import PlanningError
 from aftir_rl.posture import PlanarProblem, Planner, blind_search, region_clipping
+from aftir_rl.posture.planner import random_free_targets
 
 SEED004 = [  # N, target, paper A (blind) and B (region clipping): theta, d, loops, seconds
     (2, (11, 31, 31), ((1.27, -0.82), -3.51, 8.8e3, 0.58), ((1.22, -0.64), -3.58, 3.0e2, 0.09)),
@@ -103,15 +103,8 @@ def seed002_table(planner: Planner, repeats: int) -> None:
 
 
 def random_targets(planner: Planner, n_each: int, seed: int) -> None:
-    tank, rng = planner.tank, np.random.default_rng(seed)
-    bays = {"bay 1 (TGA)": [], "beyond the hatch (TSM)": []}
-    while min(len(v) for v in bays.values()) < n_each:
-        x = rng.uniform(tank.box_min, tank.box_max)
-        if point_clearance(tank, x[None])[0] <= 5.0:
-            continue
-        key = "beyond the hatch (TSM)" if planner.beyond_baffle(x) else "bay 1 (TGA)"
-        if len(bays[key]) < n_each:
-            bays[key].append(x)
+    drawn = random_free_targets(planner, n_each, seed)
+    bays = {"bay 1 (TGA)": drawn["bay1"], "beyond the hatch (TSM)": drawn["bay2"]}
     print(f"Random free targets (seed {seed}, at least 5 cm from any surface):")
     print()
     print("| targets | reached | tip error, max (cm) | seconds, median | seconds, max | "

@@ -58,7 +58,7 @@ from aftir_rl.posture.search import (
 from aftir_rl.robot import Posture, forward_kinematics, section_transforms
 from aftir_rl.tank import Tank, load_tank
 
-__all__ = ["PlannedPosture", "Planner", "METHODS"]
+__all__ = ["PlannedPosture", "Planner", "METHODS", "random_free_targets"]
 
 METHODS = ("auto", "tga", "tsm", "region_clipping", "blind")
 _CHUNK = 4096
@@ -513,3 +513,23 @@ class Planner:
 
 def _fmt(v: ArrayLike) -> str:
     return "(" + ", ".join(f"{float(x):g}" for x in np.asarray(v).ravel()) + ")"
+
+
+def random_free_targets(
+    planner: Planner, n_each: int, seed: int, clearance: float = 5.0
+) -> dict[str, list[NDArray[np.float64]]]:
+    """Uniform random points of the tank at least ``clearance`` [cm] from any surface.
+
+    Returns ``n_each`` points on each side of the baffle: ``{"bay1": [...], "bay2": [...]}``
+    (``bay2`` beyond the baffle, planned with TSM by ``auto``).
+    """
+    tank, rng = planner.tank, np.random.default_rng(seed)
+    out: dict[str, list[NDArray[np.float64]]] = {"bay1": [], "bay2": []}
+    while min(len(v) for v in out.values()) < n_each:
+        x = rng.uniform(tank.box_min, tank.box_max)
+        if point_clearance(tank, x[None])[0] <= clearance:
+            continue
+        bay = "bay2" if planner.beyond_baffle(x) else "bay1"
+        if len(out[bay]) < n_each:
+            out[bay].append(x)
+    return out
