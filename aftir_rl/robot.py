@@ -190,10 +190,14 @@ def forward_kinematics(
 
     """
     dis, theta, phi = _as_batch(dis, theta, phi)
-    n = theta.shape[-1]
-    local = section_transforms(theta, phi, section_length)
-    frames = np.empty(theta.shape[:-1] + (n + 1, 4, 4))
-    base = np.broadcast_to(np.eye(4), theta.shape[:-1] + (4, 4)).copy()
+    return _chain(dis, section_transforms(theta, phi, section_length))
+
+
+def _chain(dis: NDArray[np.float64], local: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Frames ``(..., N + 1, 4, 4)`` from the base at ``(0, 0, dis)`` and section transforms."""
+    n = local.shape[-3]
+    frames = np.empty(local.shape[:-3] + (n + 1, 4, 4))
+    base = np.broadcast_to(np.eye(4), local.shape[:-3] + (4, 4)).copy()
     base[..., 2, 3] = dis
     frames[..., 0, :, :] = base
     for i in range(n):
@@ -224,15 +228,16 @@ def body_points(
     if points_per_section < 1:
         raise ValueError(f"points_per_section must be at least 1, got {points_per_section}")
     dis, theta, phi = _as_batch(dis, theta, phi)
-    frames = forward_kinematics(dis, theta, phi, section_length)
     k = points_per_section
     frac = np.arange(1, k + 1, dtype=np.float64) / k
-    # Local position of each sample in its section's base frame: shape (..., N, K, 3).
+    # Local transforms of every sample in its section's base frame: shape (..., N, K, 4, 4). The
+    # last sample of a section is its end, so the section frames chain from those (one call).
     local = section_transforms(theta[..., None] * frac, phi[..., None], section_length * frac)
+    frames = _chain(dis, local[..., -1, :, :])
     local_pos = local[..., :3, 3]
     rot = frames[..., :-1, None, :3, :3]
     origin = frames[..., :-1, None, :3, 3]
-    world = np.einsum("...ij,...j->...i", rot, local_pos) + origin
+    world = (rot @ local_pos[..., None])[..., 0] + origin
     lead = theta.shape[:-1]
     world = world.reshape(lead + (-1, 3))
     return np.concatenate([frames[..., 0:1, :3, 3], world], axis=-2)

@@ -11,7 +11,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from aftir_rl.collision import CollisionScene, panel_violation, points_clear
+from aftir_rl.collision import CollisionScene, panel_violation
 from aftir_rl.errors import InvalidActionError, TargetError
 from aftir_rl.robot import Posture, body_points
 from aftir_rl.tank import Tank, load_tank
@@ -102,8 +102,20 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         )
         self.action_space = spaces.Box(-1.0, 1.0, (1 + 2 * self.n,), np.float32)
         self.observation_space = spaces.Box(-20.0, 20.0, (6 * self.n + 15,), np.float32)
-        # A sparse point set for the fast clearance pre-check (see _collides).
-        self._margin = 2.0
+        # Fast pre-check (see _collides): solids' bounds and the walls, grown by radius + margin.
+        # Backbone samples ``l/K`` apart: a point of the arc between two samples is within half
+        # that (plus a sagitta under 0.1 cm) of one of them, so a margin above it keeps the
+        # pre-check conservative, and fcl decides everything closer.
+        self._k = 8
+        self._margin = self.l / (2 * self._k) + 0.25
+        grow = self.arm.radius + self._margin
+        bounds = [s.aabb() for s in self.tank.solids]
+        self._grown_lo = np.array([b[0] for b in bounds]).reshape(-1, 3) - grow
+        self._grown_hi = np.array([b[1] for b in bounds]).reshape(-1, 3) + grow
+        inner_lo = np.array(self.tank.box_min, float) + grow
+        inner_hi = np.array(self.tank.box_max, float) - grow
+        inner_lo[2] = -np.inf  # the floor is handled with the panel opening below
+        self._inner = (inner_lo, inner_hi) if self.tank.walls else None
         self._state = np.zeros(1 + 2 * self.n)
         self.target = np.zeros(3) if self.fixed_target is None else self.fixed_target
         self._tips: list[NDArray[np.float64]] = []
@@ -138,26 +150,42 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
         Args:
             state: joint variables.
-            pts: its body points, 5 per section.
+            pts: its body points, ``self._k`` per section.
 
         Returns:
             The verdict and a clearance estimate [cm] for the observation.
 
         """
         clear = self.arm.radius + self._margin
-        if points_clear(self.tank, pts[None], clear)[0]:
-            # The backbone is more than radius + margin from every solid at points 10 cm apart;
-            # the panel rule still needs checking (it is not a distance).
+        if self._far_from_everything(pts, clear):
+            # Every backbone sample is more than radius + margin from every solid's bounds and the
+            # walls; the panel rule still needs checking (it is not a distance).
             return bool(panel_violation(self.tank, pts[None])[0]), clear
         report = self.scene.check(Posture(state[0], state[1 : self.n + 1], state[self.n + 1 :]))
         return report.collides, max(report.clearance_cm, 0.0)
+
+    def _far_from_everything(self, pts: NDArray[np.float64], clear: float) -> bool:
+        """A conservative test, cheaper than :func:`points_clear` on one posture."""
+        near_solid = (pts[:, None, :] > self._grown_lo) & (pts[:, None, :] < self._grown_hi)
+        if near_solid.all(axis=-1).any():
+            return False
+        if self._inner is None:
+            return True
+        if ((pts < self._inner[0]) | (pts > self._inner[1])).any():
+            return False
+        # Floor: points over the opening clear its rim, the others clear the floor itself.
+        c, r = self.tank.panel.center, self.tank.panel.radius
+        radial = np.hypot(pts[:, 0] - c[0], pts[:, 1] - c[1])
+        height = pts[:, 2] - self.tank.box_min[2]
+        rim = np.where(height >= 0, np.hypot(r - radial, height), r - radial)
+        return bool(np.all(np.where(radial > r, height, rim) > clear))
 
     def _draw_target(self) -> NDArray[np.float64]:
         lo, hi = self.target_region
         for _ in range(10_000):
             state = self._random_state()
             tip = self._points(state, 1)[-1]
-            pts = self._points(state, 5)
+            pts = self._points(state, self._k)
             if np.all(tip >= lo) and np.all(tip <= hi) and not self._collides(state, pts)[0]:
                 return tip
         raise TargetError("no reachable target found in target_region; widen it")
@@ -178,7 +206,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     def _obs(self, clearance: float, pts: NDArray[np.float64]) -> NDArray[np.float32]:
         s = self._state
         theta, phi = s[1 : self.n + 1], s[self.n + 1 :]
-        frames_z = pts[5::5, 2]
+        frames_z = pts[self._k :: self._k, 2]
         tip = self._tip
         diff = self.target - tip
         return np.concatenate(
@@ -208,7 +236,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             self.target = self._draw_target()
         self._state = np.zeros(1 + 2 * self.n)
         self._state[0] = self.start_height - self.n * self.l
-        pts = self._points(self._state, 5)
+        pts = self._points(self._state, self._k)
         self._tip = pts[-1]
         self._distance = float(np.linalg.norm(self.target - self._tip))
         self._tips = [self._tip.copy()]
@@ -238,7 +266,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             2 * math.pi
         ) - math.pi
         s = self._guide(s)
-        pts = self._points(s, 5)
+        pts = self._points(s, self._k)
         collided, clearance = self._collides(s, pts)
         self._state = s
         self._tip = pts[-1]
