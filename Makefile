@@ -28,8 +28,10 @@ lint: $(STAMP)
 	$(PY) -m ruff check aftir_rl tests benchmarks
 	$(PY) -m ruff format --check aftir_rl tests benchmarks
 
-bench: $(STAMP)
+bench: $(STAMP)  ## every benchmark table of the README (about 5 minutes)
 	$(PY) benchmarks/bench_tank.py
+	$(PY) benchmarks/bench_posture.py
+	$(PY) benchmarks/bench_arm.py
 
 tensorboard: $(STAMP)
 	$(VENV)/bin/tensorboard --logdir runs

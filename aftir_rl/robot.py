@@ -27,7 +27,6 @@ Python loop over the batch (only over the N ≤ 12 sections). Units: cm and rad.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -248,13 +247,3 @@ def tip_position(
 ) -> NDArray[np.float64]:
     """Tip position [cm], shape ``(..., 3)``."""
     return forward_kinematics(dis, theta, phi, section_length)[..., -1, :3, 3]
-
-
-def postures_to_arrays(
-    postures: Sequence[Posture],
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Stack postures with the same number of sections into ``(dis, theta, phi)`` arrays."""
-    dis = np.array([p.dis for p in postures])
-    theta = np.array([p.theta for p in postures])
-    phi = np.array([p.phi for p in postures])
-    return dis, theta, phi
