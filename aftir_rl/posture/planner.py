@@ -248,7 +248,7 @@ class Planner:
         psi_m = math.atan2(g_m[1], g_m[0])
         frame_m = _Frame(psi_m, rot_m, o_m, panel=False)
         reasons: list[str] = []
-        best: tuple | None = None
+        best: tuple[Posture, dict[str, Any]] | None = None
         n3_min = max(1, math.ceil(np.linalg.norm(g_m) / l - 1e-9) - 1)
         for n3 in range(n3_min, min(n3_min + self.extra_sections, self.arm.max_sections - 2) + 1):
             # P3's base A: within half a section before the hatch first (room for P2 in bay 1),
@@ -277,7 +277,7 @@ class Planner:
                     continue
                 posture, _, details = out
                 details.update(loops_p3=res3.loops, evaluations_p3=res3.evaluations)
-                best = (None, posture, details)
+                best = (posture, details)
                 break
             if best is not None:
                 break
@@ -287,7 +287,7 @@ class Planner:
             raise PlanningError(
                 f"Cannot reach the target: TSM found no posture to {_fmt(target)} cm ({why})"
             )
-        return self._finalize(best[1], target, "tsm", start, self.tolerance, best[2])
+        return self._finalize(best[0], target, "tsm", start, self.tolerance, best[1])
 
     def hatch_frame(self, target: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Rotation (columns ``x_M, y_M, z_M`` in S) and origin of the hatch frame M."""

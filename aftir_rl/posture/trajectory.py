@@ -192,11 +192,8 @@ def plan_trajectory(
         if chosen is None:
             postures.append(None)
             continue
-        method = (
-            "continued"
-            if own is None or i not in fallbacks and previous is not None
-            else (own.method)
-        )
+        continued = previous is not None and i not in fallbacks
+        method = "continued" if continued or own is None else own.method
         postures.append(planner.checked(chosen, np.array(point), method))
         previous = chosen
     joint_step, dis_step = _steps(postures)
