@@ -57,6 +57,13 @@ def _run_name(algo: str, env_id: str, target: Sequence[float] | str, seed: int) 
     return f"{algo}__{env_id}__{tag}__{seed}__{stamp}"
 
 
+def _check_env_id(env_id: str, allowed: Sequence[str], algo: str) -> None:
+    if env_id.split(":")[-1] not in allowed:
+        raise ConfigError(
+            f"{algo} cannot train on {env_id!r}; use one of {', '.join(allowed)} (--env or env_id)"
+        )
+
+
 def _hyperparameter_text(params: dict[str, Any]) -> str:
     rows = "\n".join(f"|{k}|{v}|" for k, v in params.items())
     return "|param|value|\n|-|-|\n" + rows
@@ -123,6 +130,7 @@ def train_q_table(
     from aftir_rl.agents.q_table import QLearning
     from aftir_rl.plotting import render_path
 
+    _check_env_id(config.env_id, ("AFTIR-Tank-v0",), "q_table")
     # Make (and so validate) every env before training anything.
     envs = [
         gym.make(
@@ -291,8 +299,9 @@ def train_sb3(
         save_model,
     )  # fmt: skip
 
+    _check_env_id(config.env_id, ("AFTIR-ArmReach-v0", "AFTIR-Arm-v0"), algo)
     env_id = config.env_id if ":" in config.env_id else f"aftir_rl:{config.env_id}"
-    targets = evaluation_targets(env_id, config.eval_targets)  # also validates the env id
+    targets = evaluation_targets(env_id, config.eval_targets)
     vec_cls = SubprocVecEnv if config.n_envs > 1 else DummyVecEnv
     venv = make_vec_env(env_id, n_envs=config.n_envs, seed=seed, vec_env_cls=vec_cls)
     try:

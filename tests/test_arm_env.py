@@ -113,6 +113,12 @@ def test_smoke_training_writes_tensorboard(tmp_path, algo, steps, capsys):
     assert rc == 2 and "not a readable" in capsys.readouterr().err
 
 
+def test_unknown_env_id_is_a_clean_error(tmp_path, capsys):
+    assert train.main(["ppo", "--env", "Nope-v0", "--logdir", str(tmp_path)]) == 2
+    assert "use one of AFTIR-ArmReach-v0, AFTIR-Arm-v0" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
+
+
 def test_bad_sb3_config(tmp_path, capsys):
     config = tmp_path / "ppo.yaml"
     config.write_text("env_id: AFTIR-ArmReach-v0\nhyperparameters:\n  learnin_rate: 0.1\n")
