@@ -59,7 +59,7 @@ def _q_table_run(run_dir: Path) -> dict[str, Any]:
         "path_length_cm": float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1))),
         "min_clearance_cm": min((p.clearance_cm for p in found), default=float("nan")),
         "seconds_per_target": seconds,
-        "note": f"{len(trajectory.blocked_moves)} interpolated moves collide",
+        "note": f"{len(trajectory.blocked_moves)} of {len(trajectory.moves)} moves collide",
     }
 
 

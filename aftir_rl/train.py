@@ -101,6 +101,7 @@ def train_q_table(
     resume: str | Path | None = None,
     progress_bar: bool = True,
     postures: bool = True,
+    bridge_seconds: float = 0.0,
 ) -> list[dict[str, Any]]:
     """Train one Q-table per target and write a run directory for each.
 
@@ -114,6 +115,8 @@ def train_q_table(
         progress_bar: show a tqdm bar per target.
         postures: turn the greedy path into joint variables (``trajectory.json``, a picture of
             the arm under ``paths/<target>_arm``).
+        bridge_seconds: RRT-Connect's budget for each move of that trajectory that collides
+            (0: none).
 
     Returns:
         One summary dict per target (what ``path.json`` holds, plus ``run_dir`` and ``seconds``).
@@ -203,7 +206,9 @@ def train_q_table(
             )
             trajectory = None
             if postures:
-                trajectory = _log_trajectory(logger, base, points, target, summary)
+                trajectory = _log_trajectory(
+                    logger, base, points, target, summary, bridge_seconds, seed
+                )
             logger.dump(step=agent.num_timesteps)
             logger.close()
             agent.save(
@@ -230,7 +235,13 @@ def train_q_table(
 
 
 def _log_trajectory(
-    logger: Any, env: Any, points: np.ndarray, target: Sequence[float], summary: dict[str, Any]
+    logger: Any,
+    env: Any,
+    points: np.ndarray,
+    target: Sequence[float],
+    summary: dict[str, Any],
+    bridge_seconds: float,
+    seed: int,
 ) -> Any:
     """Postures along the greedy path: logged, pictured and summarised into ``summary``."""
     from stable_baselines3.common.logger import Image
@@ -239,12 +250,15 @@ def _log_trajectory(
     from aftir_rl.posture import Planner
     from aftir_rl.posture.trajectory import plan_trajectory
 
-    trajectory = plan_trajectory(Planner(env.tank), points, target)
+    trajectory = plan_trajectory(
+        Planner(env.tank), points, target, bridge_seconds=bridge_seconds, seed=seed
+    )
     found = [p for p in trajectory.postures if p is not None]
     summary["trajectory"] = {
         "postures": len(found),
         "waypoints": len(trajectory.waypoints),
         "failures": [f"waypoint {i} {pt}: {why}" for i, pt, why in trajectory.failures],
+        "moves": len(trajectory.moves),
         "blocked_moves": len(trajectory.blocked_moves),
         "max_joint_step_deg": trajectory.max_joint_step_deg,
     }
@@ -347,8 +361,8 @@ def _print_summary(s: dict[str, Any]) -> None:
     if "trajectory" in s:
         t = s["trajectory"]
         print(
-            f"  postures: {t['postures']}/{t['waypoints']} waypoints, {t['blocked_moves']} "
-            f"interpolated moves collide, largest joint step {t['max_joint_step_deg']:.0f} deg"
+            f"  postures: {t['postures']}/{t['waypoints']} waypoints; {t['blocked_moves']} of "
+            f"{t['moves']} moves collide; largest joint step {t['max_joint_step_deg']:.0f} deg"
         )
         for failure in t["failures"]:
             print(f"  no posture at {failure}")
@@ -388,6 +402,13 @@ def _parser() -> argparse.ArgumentParser:
         "--no-postures",
         action="store_true",
         help="skip turning the greedy path into arm postures (trajectory.json)",
+    )
+    q.add_argument(
+        "--bridge-seconds",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="let RRT-Connect try S seconds on each colliding move of the postures (default 0)",
     )
     for algo in ("ppo", "sac", "td3"):
         p = sub.add_parser(
@@ -457,6 +478,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             resume=args.resume,
             progress_bar=not args.no_progress,
             postures=not args.no_postures,
+            bridge_seconds=args.bridge_seconds,
         )
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)

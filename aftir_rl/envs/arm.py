@@ -102,20 +102,11 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         )
         self.action_space = spaces.Box(-1.0, 1.0, (1 + 2 * self.n,), np.float32)
         self.observation_space = spaces.Box(-20.0, 20.0, (6 * self.n + 15,), np.float32)
-        # Fast pre-check (see _collides): solids' bounds and the walls, grown by radius + margin.
-        # Backbone samples ``l/K`` apart: a point of the arc between two samples is within half
-        # that (plus a sagitta under 0.1 cm) of one of them, so a margin above it keeps the
-        # pre-check conservative, and fcl decides everything closer.
+        # Fast pre-check (see _collides): backbone samples ``l/K`` apart; a point of the arc
+        # between two samples is within half that (plus a sagitta under 0.1 cm) of one of them,
+        # so a margin above it keeps the pre-check conservative, and fcl decides everything closer.
         self._k = 8
         self._margin = self.l / (2 * self._k) + 0.25
-        grow = self.arm.radius + self._margin
-        bounds = [s.aabb() for s in self.tank.solids]
-        self._grown_lo = np.array([b[0] for b in bounds]).reshape(-1, 3) - grow
-        self._grown_hi = np.array([b[1] for b in bounds]).reshape(-1, 3) + grow
-        inner_lo = np.array(self.tank.box_min, float) + grow
-        inner_hi = np.array(self.tank.box_max, float) - grow
-        inner_lo[2] = -np.inf  # the floor is handled with the panel opening below
-        self._inner = (inner_lo, inner_hi) if self.tank.walls else None
         self._state = np.zeros(1 + 2 * self.n)
         self.target = np.zeros(3) if self.fixed_target is None else self.fixed_target
         self._tips: list[NDArray[np.float64]] = []
@@ -157,28 +148,12 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
         """
         clear = self.arm.radius + self._margin
-        if self._far_from_everything(pts, clear):
+        if self.scene.far_from_everything(pts, clear):
             # Every backbone sample is more than radius + margin from every solid's bounds and the
             # walls; the panel rule still needs checking (it is not a distance).
             return bool(panel_violation(self.tank, pts[None])[0]), clear
         report = self.scene.check(Posture(state[0], state[1 : self.n + 1], state[self.n + 1 :]))
         return report.collides, max(report.clearance_cm, 0.0)
-
-    def _far_from_everything(self, pts: NDArray[np.float64], clear: float) -> bool:
-        """A conservative test, cheaper than :func:`points_clear` on one posture."""
-        near_solid = (pts[:, None, :] > self._grown_lo) & (pts[:, None, :] < self._grown_hi)
-        if near_solid.all(axis=-1).any():
-            return False
-        if self._inner is None:
-            return True
-        if ((pts < self._inner[0]) | (pts > self._inner[1])).any():
-            return False
-        # Floor: points over the opening clear its rim, the others clear the floor itself.
-        c, r = self.tank.panel.center, self.tank.panel.radius
-        radial = np.hypot(pts[:, 0] - c[0], pts[:, 1] - c[1])
-        height = pts[:, 2] - self.tank.box_min[2]
-        rim = np.where(height >= 0, np.hypot(r - radial, height), r - radial)
-        return bool(np.all(np.where(radial > r, height, rim) > clear))
 
     def _draw_target(self) -> NDArray[np.float64]:
         lo, hi = self.target_region

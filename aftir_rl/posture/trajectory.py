@@ -3,18 +3,27 @@
 Every cell centre of the greedy path gets a posture, and the last posture reaches the exact
 target. The paper plans each one with TGA (bay 1) or TSM (beyond the hatch) and relies on similar
 targets giving similar postures. Measured here, that does not hold across the hatch: TGA and TSM
-postures of neighbouring cells differ by up to 180 deg in a joint and 4 sections. So each posture
-is *continued* from the previous one: damped least squares on ``(dis, θ, φ)`` moves the tip to the
-next waypoint in a few sub-steps, every sub-step checked (limits, panel rule, python-fcl), with
-the number of sections held fixed (the most any waypoint's planned posture needs). Where the
-continuation fails, the planner's own posture for that waypoint is used and the move to it is
-checked like any other; the result says which waypoints needed that and which moves collide.
+postures of neighbouring cells differ by up to 180° in a joint and 4 sections. So each posture is
+*continued* from the previous one, with the number of sections held fixed (the most any
+waypoint's planned posture needs):
 
-Between two neighbouring postures the arm moves by linear interpolation of ``(dis, θ, φ)`` (``φ``
-the short way round). A posture with fewer sections is first written with straight sections
-added at its base and ``dis`` lowered by their length, which is the same arm: the linear module
-pushes a new section out. Every interpolated posture is collision-checked; a cell with no posture
-or a colliding move is reported with the reason, not hidden.
+- damped least squares on ``(dis, θ, φ)`` moves the tip to the next waypoint in a few sub-steps;
+- a sub-step posture that collides is *repaired*: it moves in the null space of the tip's
+  Jacobian (the tip stays put) down the gradient of its penetration into a band around the tank
+  (:func:`repair_posture`);
+- a sub-step whose move collides is split in two, down to 1/16 of a sub-step.
+
+Where continuation still fails, the planner's own posture for that waypoint is used (a
+*fallback*). Every move between neighbouring postures, through its sub-steps, is then checked
+densely (:func:`~aftir_rl.posture.motion.densify`: no joint changes by more than 0.1° and
+``dis`` by no more than 0.5 cm between checked postures). A move that collides can be bridged by
+OMPL's RRT-Connect in joint space (``bridge_seconds``); one that still collides is reported in
+``blocked_moves``, and a cell with no posture in ``failures``, with the reason, not hidden.
+
+Postures are compared and interpolated after :func:`~aftir_rl.posture.motion.align`: a section
+bent by ``θ`` in the plane ``φ`` is the same as one bent by ``−θ`` in ``φ + π``. A posture with
+fewer sections is first written with straight sections added at its base and ``dis`` lowered by
+their length, which is the same arm: the linear module pushes a new section out.
 """
 
 from __future__ import annotations
@@ -27,11 +36,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from aftir_rl.collision import point_clearance
 from aftir_rl.errors import PlanningError
+from aftir_rl.posture.motion import align, densify, first_collision, rrt_connect
 from aftir_rl.posture.planner import PlannedPosture, Planner
-from aftir_rl.robot import Posture, tip_position
+from aftir_rl.robot import Posture, body_points, tip_position
 
-__all__ = ["Trajectory", "plan_trajectory", "continue_posture", "pad_sections", "interpolate"]
+__all__ = [
+    "Trajectory",
+    "plan_trajectory",
+    "continue_posture",
+    "repair_posture",
+    "pad_sections",
+]
 
 
 @dataclass
@@ -42,12 +59,15 @@ class Trajectory:
         waypoints: the points planned for [cm]: the path's cell centres, then the exact target.
         postures: one per waypoint, None where none was found.
         failures: ``(index, point, reason)`` for waypoints without a posture.
-        blocked_moves: ``(index, fraction)``: interpolated postures between waypoint ``index``
-            and the next that collide.
+        blocked_moves: ``(index, fraction)``: the move from waypoint ``index`` to the next
+            collides, first at ``fraction`` of the way, and RRT-Connect found no bridge.
         max_joint_step_deg: largest change of any ``θ_i`` or ``φ_i`` (of a bent section) between
             neighbouring postures, after padding [deg].
         max_dis_step_cm: largest change of ``dis`` between neighbouring postures [cm].
         fallbacks: waypoints where continuation failed and the planner's posture was used.
+        moves: ``(index, via)``: the postures the arm passes between waypoint ``index`` and the
+            next (continuation sub-steps or an RRT-Connect bridge), endpoints excluded.
+        bridged: moves whose straight interpolation collided and RRT-Connect replaced.
 
     """
 
@@ -58,10 +78,12 @@ class Trajectory:
     max_joint_step_deg: float = 0.0
     max_dis_step_cm: float = 0.0
     fallbacks: list[int] = field(default_factory=list)
+    moves: list[tuple[int, list[Posture]]] = field(default_factory=list)
+    bridged: list[int] = field(default_factory=list)
 
     @property
     def complete(self) -> bool:
-        """Every waypoint has a posture and every interpolated move is collision-free."""
+        """Every waypoint has a posture and every move between them is collision-free."""
         return not self.failures and not self.blocked_moves
 
     def to_json(self) -> dict[str, Any]:
@@ -77,7 +99,13 @@ class Trajectory:
             "max_joint_step_deg": self.max_joint_step_deg,
             "max_dis_step_cm": self.max_dis_step_cm,
             "fallbacks": self.fallbacks,
+            "bridged_moves": self.bridged,
+            "moves": [{"from": i, "via": [_posture_json(p) for p in via]} for i, via in self.moves],
         }
+
+
+def _posture_json(p: Posture) -> dict[str, Any]:
+    return {"dis": p.dis, "theta": list(p.theta), "phi": list(p.phi)}
 
 
 def pad_sections(posture: Posture, n_sections: int, section_length: float) -> Posture:
@@ -93,14 +121,21 @@ def pad_sections(posture: Posture, n_sections: int, section_length: float) -> Po
     )
 
 
-def interpolate(a: Posture, b: Posture, fraction: float) -> Posture:
-    """Linear interpolation of two postures with the same number of sections (φ the short way)."""
-    dphi = (np.subtract(b.phi, a.phi) + math.pi) % (2 * math.pi) - math.pi
-    return Posture(
-        a.dis + fraction * (b.dis - a.dis),
-        tuple(np.add(a.theta, fraction * np.subtract(b.theta, a.theta))),
-        tuple(np.add(a.phi, fraction * dphi)),
-    )
+def _tip_jacobian(
+    x: np.ndarray, n: int, l: float, h: float = 1e-6
+) -> tuple[np.ndarray, np.ndarray]:
+    """Tip [cm] and its Jacobian ``(3, 1 + 2N)`` by central differences.
+
+    Sections still inside the guide (ending below the floor) are frozen straight.
+    """
+    probe = np.repeat(x[None], 2 * len(x) + 1, axis=0)
+    probe[1 : len(x) + 1] += np.eye(len(x)) * h
+    probe[len(x) + 1 :] -= np.eye(len(x)) * h
+    tips = tip_position(probe[:, 0], probe[:, 1 : n + 1], probe[:, n + 1 :], l)
+    jac = ((tips[1 : len(x) + 1] - tips[len(x) + 1 :]) / (2 * h)).T
+    ends = x[0] + l * np.arange(1, n + 1)
+    jac[:, np.concatenate([[False], ends <= 0.0, ends <= 0.0])] = 0.0
+    return tips[0], jac
 
 
 def continue_posture(
@@ -117,32 +152,110 @@ def continue_posture(
     floor (inside the guide, when the ones below them are straight) are not bent. Returns None if
     the tip does not get within ``tolerance`` [cm].
     """
-    l, tmax = planner.arm.section_length, planner.arm.theta_max
-    n = start.n_sections
-    x = np.concatenate([[start.dis], start.theta, start.phi])
-    goal = np.asarray(target, dtype=np.float64)
-    h = 1e-6
-    for _ in range(iterations):
-        probe = np.repeat(x[None], 2 * len(x) + 1, axis=0)
-        probe[1 : len(x) + 1] += np.eye(len(x)) * h
-        probe[len(x) + 1 :] -= np.eye(len(x)) * h
-        tips = tip_position(probe[:, 0], probe[:, 1 : n + 1], probe[:, n + 1 :], l)
-        error = tips[0] - goal
-        if np.linalg.norm(error) < tolerance * 0.1:
-            break
-        jac = ((tips[1 : len(x) + 1] - tips[len(x) + 1 :]) / (2 * h)).T  # (3, 1 + 2N)
-        # Sections still wholly inside the guide (ending below the floor) must stay straight.
-        ends = x[0] + l * np.arange(1, n + 1)
-        frozen = np.concatenate([[False], ends <= 0.0, ends <= 0.0])
-        jac[:, frozen] = 0.0
-        step = -jac.T @ np.linalg.solve(jac @ jac.T + damping**2 * np.eye(3), error)
-        x = x + step
-        x[1 : n + 1] = np.clip(x[1 : n + 1], -tmax, tmax)
-        x[0] = min(x[0], 0.0)
-    posture = Posture(x[0], x[1 : n + 1], x[n + 1 :])
-    if np.linalg.norm(posture.tip(l) - goal) >= tolerance:
+    x = _solve_tip(planner, _as_x(start), np.asarray(target, dtype=np.float64), tolerance * 0.1,
+                   iterations, damping)  # fmt: skip
+    posture = _as_posture(x)
+    if np.linalg.norm(posture.tip(planner.arm.section_length) - target) >= tolerance:
         return None
     return posture
+
+
+def _as_x(posture: Posture) -> np.ndarray:
+    return np.concatenate([[posture.dis], posture.theta, posture.phi])
+
+
+def _as_posture(x: np.ndarray) -> Posture:
+    n = (len(x) - 1) // 2
+    return Posture(x[0], x[1 : n + 1], x[n + 1 :])
+
+
+def _solve_tip(
+    planner: Planner, x: np.ndarray, goal: np.ndarray, tol: float, iterations: int, damping: float
+) -> np.ndarray:
+    l, tmax = planner.arm.section_length, planner.arm.theta_max
+    n = (len(x) - 1) // 2
+    for _ in range(iterations):
+        tip, jac = _tip_jacobian(x, n, l)
+        error = tip - goal
+        if np.linalg.norm(error) < tol:
+            break
+        x = x - jac.T @ np.linalg.solve(jac @ jac.T + damping**2 * np.eye(3), error)
+        x[1 : n + 1] = np.clip(x[1 : n + 1], -tmax, tmax)
+        x[0] = min(x[0], 0.0)
+    return x
+
+
+class _Penalty:
+    """Penetration of a posture's backbone into the band ``r + margin`` around the tank.
+
+    ``Σ max(0, r + margin − d_j)²`` over backbone samples ``j``, batched over postures.
+    """
+
+    def __init__(self, planner: Planner, margin: float) -> None:
+        self.tank, self.l = planner.tank, planner.arm.section_length
+        self.limit = planner.arm.radius + margin
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        n = (x.shape[1] - 1) // 2
+        pts = body_points(x[:, 0], x[:, 1 : n + 1], x[:, n + 1 :], self.l, 10)
+        depth = np.maximum(0.0, self.limit - point_clearance(self.tank, pts))
+        return np.sum(depth**2, axis=1)
+
+
+def _null_space_step(
+    planner: Planner, x: np.ndarray, objective: _Penalty, max_step: float, h: float = 1e-4
+) -> np.ndarray | None:
+    """One descent step on ``objective`` that leaves the tip where it is (to first order)."""
+    n = (len(x) - 1) // 2
+    probe = np.repeat(x[None], 2 * len(x), axis=0)
+    probe[: len(x)] += np.eye(len(x)) * h
+    probe[len(x) :] -= np.eye(len(x)) * h
+    value = objective(probe)
+    grad = (value[: len(x)] - value[len(x) :]) / (2 * h)
+    _, jac = _tip_jacobian(x, n, planner.arm.section_length)
+    step = -(grad - np.linalg.pinv(jac) @ (jac @ grad))
+    size = np.max(np.abs(step))
+    if size < 1e-12:
+        return None
+    x = x + step * min(1.0, max_step / size)
+    x[1 : n + 1] = np.clip(x[1 : n + 1], -planner.arm.theta_max, planner.arm.theta_max)
+    x[0] = min(x[0], 0.0)
+    return x
+
+
+def repair_posture(
+    planner: Planner,
+    posture: Posture,
+    target: ArrayLike,
+    margin: float = 1.0,
+    iterations: int = 60,
+    max_step: float = 0.05,
+    tolerance: float = 0.01,
+) -> Posture | None:
+    """Push a colliding posture clear of the tank while its tip stays on ``target``.
+
+    Redundancy resolution: the arm has ``1 + 2N`` joints for a 3D tip, so it can move in the
+    null space of the tip's Jacobian without moving the tip. Each iteration descends the penalty
+    ``Σ max(0, r + margin − d_j)²`` over backbone samples ``j`` (``d_j`` their signed distance to
+    the tank, :func:`~aftir_rl.collision.point_clearance`, with the guide below the panel),
+    projected onto that null space, then puts the tip back by damped least squares. Returns the
+    first posture python-fcl clears, or None.
+    """
+    l = planner.arm.section_length
+    goal = np.asarray(target, dtype=np.float64)
+    x = _as_x(posture)
+    objective = _Penalty(planner, margin)
+    for _ in range(iterations):
+        candidate = _as_posture(x)
+        if np.linalg.norm(candidate.tip(l) - goal) < tolerance and not planner.scene.collides(
+            candidate
+        ):
+            return candidate
+        stepped = _null_space_step(planner, x, objective, max_step)
+        if stepped is None:
+            return None
+        x = _solve_tip(planner, stepped, goal, tolerance * 0.1, 10, 1.0)
+    return None
 
 
 def plan_trajectory(
@@ -150,6 +263,8 @@ def plan_trajectory(
     points: Sequence[ArrayLike],
     target: ArrayLike,
     interpolation_steps: int = 4,
+    bridge_seconds: float = 0.0,
+    seed: int = 0,
 ) -> Trajectory:
     """Postures for every point of a tip path and the exact target, and checked moves between.
 
@@ -157,7 +272,10 @@ def plan_trajectory(
         planner: the planner of the tank.
         points: the path's cell centres [cm], start first.
         target: the exact target [cm], planned last.
-        interpolation_steps: sub-steps of each move, each one checked.
+        interpolation_steps: checked sub-steps of a continuation (damped least squares) move.
+        bridge_seconds: RRT-Connect's budget for a move whose straight interpolation collides
+            (0: no bridging, the move is reported as blocked).
+        seed: OMPL's seed for the bridges.
 
     """
     waypoints = [list(map(float, p)) for p in points] + [list(map(float, target))]
@@ -171,48 +289,118 @@ def plan_trajectory(
             planned.append(None)
             failures.append((i, point, str(exc)))
     n = max((p.posture.n_sections for p in planned if p is not None), default=1)
-    postures: list[PlannedPosture | None] = []
-    fallbacks: list[int] = []
-    blocked: list[tuple[int, float]] = []
-    previous: Posture | None = None
-    for i, point in enumerate(waypoints):
+    out = Trajectory(waypoints, [], failures)
+    points_arr = np.array(waypoints)
+    chain: list[Posture | None] = [None] * len(waypoints)
+    vias: dict[int, list[Posture]] = {}  # the move from waypoint i to the next one
+    methods: list[str] = ["continued"] * len(waypoints)
+    prev: int | None = None
+    for i in range(len(waypoints)):
         own = planned[i]
-        chosen: Posture | None = None
-        if previous is not None:
-            chosen, moves = _continue(planner, previous, np.array(point), interpolation_steps)
-            if chosen is None and own is not None:
-                fallbacks.append(i)
-                chosen = pad_sections(own.posture, n, l)
-                for k in range(1, interpolation_steps + 1):
-                    fraction = k / (interpolation_steps + 1)
-                    if planner.scene.collides(interpolate(previous, chosen, fraction)):
-                        blocked.append((i - 1, fraction))
-        elif own is not None:
-            chosen = pad_sections(own.posture, n, l)
-        if chosen is None:
-            postures.append(None)
+        if prev is not None:
+            chosen, via = _continue(planner, chain[prev], points_arr[i], interpolation_steps)
+            if chosen is not None:
+                chain[i], vias[prev], prev = chosen, via, i
+                continue
+        if own is None:
             continue
-        continued = previous is not None and i not in fallbacks
-        method = "continued" if continued or own is None else own.method
-        postures.append(planner.checked(chosen, np.array(point), method))
-        previous = chosen
-    joint_step, dis_step = _steps(postures)
-    return Trajectory(waypoints, postures, failures, blocked, joint_step, dis_step, fallbacks)
+        methods[i] = own.method
+        chain[i] = pad_sections(own.posture, n, l)
+        if prev is not None:
+            out.fallbacks.append(i)
+            chain[i] = align(chain[i], chain[prev])
+            vias[prev] = []
+        prev = i
+    previous: int | None = None
+    for i, posture in enumerate(chain):
+        if posture is None:
+            out.postures.append(None)
+            continue
+        if previous is not None:
+            via = _checked_move(planner, chain[previous], vias.get(previous, []), posture,
+                                previous, bridge_seconds, seed, out)  # fmt: skip
+            out.moves.append((previous, via))
+        out.postures.append(planner.checked(posture, points_arr[i], methods[i]))
+        previous = i
+    out.max_joint_step_deg, out.max_dis_step_cm = _steps(out.postures)
+    return out
+
+
+def _checked_move(
+    planner: Planner,
+    previous: Posture,
+    via: list[Posture],
+    chosen: Posture,
+    index: int,
+    bridge_seconds: float,
+    seed: int,
+    out: Trajectory,
+) -> list[Posture]:
+    """The via postures of a collision-free move, bridged by RRT-Connect where needed.
+
+    A move that still collides is recorded in ``out.blocked_moves`` with the fraction of the
+    densified move where it first does.
+    """
+    dense = densify([previous, *via, chosen])
+    hit = first_collision(planner.scene, dense)
+    if hit is None:
+        return via
+    if bridge_seconds > 0:
+        bridge = rrt_connect(planner.scene, previous, chosen, bridge_seconds, seed=seed + index)
+        if bridge.solved:
+            out.bridged.append(index)
+            return bridge.postures[1:-1]
+    out.blocked_moves.append((index, hit / (len(dense) - 1)))
+    return via
 
 
 def _continue(
-    planner: Planner, previous: Posture, point: np.ndarray, steps: int
-) -> tuple[Posture | None, int]:
-    """Continue ``previous`` to ``point`` in ``steps + 1`` checked sub-steps."""
+    planner: Planner, previous: Posture, point: np.ndarray, steps: int, depth: int = 4
+) -> tuple[Posture | None, list[Posture]]:
+    """Continue ``previous`` to ``point`` in ``steps + 1`` checked sub-steps.
+
+    A sub-step whose posture collides is repaired (:func:`repair_posture`); one whose
+    interpolated move collides is split in two, down to ``depth`` halvings. Returns the final
+    posture (None on failure) and the sub-step postures before it.
+    """
     start_tip = previous.tip(planner.arm.section_length)
-    current = previous
+    current, via = previous, []
     for k in range(1, steps + 2):
-        goal = start_tip + (point - start_tip) * k / (steps + 1)
-        nxt = continue_posture(planner, current, goal)
-        if nxt is None or planner.scene.collides(nxt):
-            return None, k
-        current = nxt
-    return current, steps + 1
+        part = _sub_step(planner, current, start_tip + (point - start_tip) * (k - 1) / (steps + 1),
+                         start_tip + (point - start_tip) * k / (steps + 1), depth)  # fmt: skip
+        if part is None:
+            return None, []
+        via += part
+        current = via[-1]
+    return current, via[:-1]
+
+
+def _sub_step(
+    planner: Planner,
+    current: Posture,
+    tip_from: np.ndarray,
+    tip_to: np.ndarray,
+    depth: int,
+) -> list[Posture] | None:
+    """Postures from ``current`` (tip at ``tip_from``) to the tip at ``tip_to``, or None.
+
+    Each move between consecutive postures is collision-free.
+    """
+    nxt = continue_posture(planner, current, tip_to)
+    if nxt is not None and planner.scene.collides(nxt):
+        nxt = repair_posture(planner, nxt, tip_to)
+    if nxt is not None:
+        nxt = align(nxt, current)
+        if first_collision(planner.scene, densify([current, nxt])) is None:
+            return [nxt]
+    if depth == 0:
+        return None
+    mid = (tip_from + tip_to) / 2
+    first = _sub_step(planner, current, tip_from, mid, depth - 1)
+    if first is None:
+        return None
+    second = _sub_step(planner, first[-1], mid, tip_to, depth - 1)
+    return None if second is None else first + second
 
 
 def _steps(postures: Sequence[PlannedPosture | None]) -> tuple[float, float]:

@@ -1,0 +1,256 @@
+"""Joint-space motion between two postures: checked interpolation and OMPL's RRT-Connect.
+
+A posture is the joint vector ``x = (dis, θ_1..θ_N, φ_1..φ_N)`` of an arm with a fixed number of
+sections. Two facts shape how we move between postures:
+
+- A section's shape is the same for ``(θ, φ)`` and ``(−θ, φ + π)``, and a straight section's
+  ``φ`` is arbitrary. :func:`align` rewrites a posture, without changing the arm, into the
+  representation nearest to a reference, so that interpolating joint values does not swing a
+  section round by 180° when it could simply bend the other way.
+- A move is collision-free only if every posture along it is. :func:`densify` interpolates a
+  sequence of postures so that no joint changes by more than ``max_angle`` [rad] and ``dis`` by
+  no more than ``max_dis`` [cm] between neighbours, and :func:`first_collision` checks them all.
+  The arm's body moves by at most about ``N·l·max_angle`` between two checked postures (2 cm
+  for 4 sections of 50 cm at the default 0.1°), so with the default step the check is dense.
+
+:func:`rrt_connect` is the sampling-based baseline a robotics user would reach for: OMPL's
+RRT-Connect (the ``ompl`` wheel) in the joint space, with our forward kinematics and python-fcl
+scene as its validity checker. Its path is shortcut by OMPL's simplifier, then densified and
+checked by :func:`first_collision` independently of OMPL's own edge checks, so a path is only
+reported solved if our check agrees. ``dis`` enters OMPL's distance divided by ``l`` so that
+one section length of travel weighs about one radian.
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aftir_rl.collision import CollisionScene
+from aftir_rl.robot import Posture, tip_position
+
+__all__ = [
+    "MotionPlan",
+    "align",
+    "densify",
+    "first_collision",
+    "joint_distance",
+    "tip_path_length",
+    "rrt_connect",
+]
+
+_SEEDED = False
+_ANGLE_STEP = math.radians(0.1)
+_DIS_STEP = 0.5
+
+
+def _wrap(angle: NDArray[np.float64]) -> NDArray[np.float64]:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def align(posture: Posture, reference: Posture, straight: float = 1e-9) -> Posture:
+    """The same arm as ``posture``, written with the joint values nearest to ``reference``.
+
+    Per section, ``(θ, φ)`` or ``(−θ, φ + π)``, whichever has ``φ`` nearer the reference's (and
+    then ``φ`` unwrapped to within π of it); a straight section takes the reference's ``φ``.
+    """
+    if posture.n_sections != reference.n_sections:
+        raise ValueError(
+            f"cannot align {posture.n_sections} sections to {reference.n_sections} sections"
+        )
+    theta, phi = np.array(posture.theta), np.array(posture.phi)
+    ref_phi = np.array(reference.phi)
+    flip = np.abs(_wrap(phi - ref_phi)) > math.pi / 2
+    theta = np.where(flip, -theta, theta)
+    phi = np.where(flip, phi + math.pi, phi)
+    phi = ref_phi + _wrap(phi - ref_phi)
+    phi = np.where(np.abs(theta) <= straight, ref_phi, phi)
+    return Posture(posture.dis, theta, phi)
+
+
+def _as_array(posture: Posture) -> NDArray[np.float64]:
+    return np.concatenate([[posture.dis], posture.theta, posture.phi])
+
+
+def _from_array(x: NDArray[np.float64]) -> Posture:
+    n = (len(x) - 1) // 2
+    return Posture(x[0], x[1 : n + 1], x[n + 1 :])
+
+
+def joint_distance(a: Posture, b: Posture, section_length: float) -> float:
+    """Euclidean distance of two joint vectors, ``dis`` in section lengths, angles in rad."""
+    d = _as_array(b) - _as_array(a)
+    d[0] /= section_length
+    return float(np.linalg.norm(d))
+
+
+def densify(
+    postures: Sequence[Posture], max_angle: float = _ANGLE_STEP, max_dis: float = _DIS_STEP
+) -> list[Posture]:
+    """Linear interpolation between consecutive postures, in small enough steps.
+
+    No joint moves by more than ``max_angle`` [rad], nor ``dis`` by more than ``max_dis`` [cm],
+    from one posture to the next. The postures are taken as written (no wrapping of ``φ``):
+    :func:`align` them first.
+    """
+    if not postures:
+        return []
+    out = [postures[0]]
+    for a, b in zip(postures, postures[1:]):
+        xa, xb = _as_array(a), _as_array(b)
+        delta = xb - xa
+        steps = max(
+            1, math.ceil(max(abs(delta[0]) / max_dis, np.max(np.abs(delta[1:])) / max_angle))
+        )
+        for k in range(1, steps + 1):
+            out.append(_from_array(xa + delta * (k / steps)))
+    return out
+
+
+def first_collision(scene: CollisionScene, postures: Sequence[Posture]) -> int | None:
+    """Index of the first posture that collides (or breaks a joint limit), None if none does."""
+    tmax = scene.arm.theta_max + 1e-9
+    for i, p in enumerate(postures):
+        if max((abs(t) for t in p.theta), default=0.0) > tmax or scene.collides_fast(p):
+            return i
+    return None
+
+
+def tip_path_length(postures: Sequence[Posture], section_length: float) -> float:
+    """Length of the tip's path [cm] through the postures (densify them first)."""
+    if len(postures) < 2:
+        return 0.0
+    n = postures[0].n_sections
+    x = np.array([_as_array(p) for p in postures])
+    tips = tip_position(x[:, 0], x[:, 1 : n + 1], x[:, n + 1 :], section_length)
+    return float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1)))
+
+
+@dataclass
+class MotionPlan:
+    """A joint-space motion from a start to a goal posture.
+
+    Attributes:
+        postures: the path's postures, start first and goal last (OMPL's vertices after
+            shortcutting); empty when unsolved.
+        solved: an exact path was found and every densified posture along it passed our check.
+        seconds: planning wall time, simplification and our check included.
+        checks: validity checks OMPL asked for.
+        reason: why it is unsolved ("" when solved).
+
+    """
+
+    postures: list[Posture] = field(default_factory=list)
+    solved: bool = False
+    seconds: float = 0.0
+    checks: int = 0
+    reason: str = ""
+
+    def joint_length(self, section_length: float) -> float:
+        """Joint-space length of the path (``dis`` in section lengths, angles in rad)."""
+        return sum(joint_distance(a, b, section_length)
+                   for a, b in zip(self.postures, self.postures[1:]))  # fmt: skip
+
+
+def rrt_connect(
+    scene: CollisionScene,
+    start: Posture,
+    goal: Posture,
+    time_limit: float = 10.0,
+    seed: int = 0,
+    simplify: bool = True,
+    resolution: float = 0.002,
+) -> MotionPlan:
+    """OMPL's RRT-Connect from ``start`` to ``goal`` in the joint space of the arm.
+
+    Args:
+        scene: the collision scene (tank and arm); its ``collides_fast`` is the validity check.
+        start: the start posture; ``goal`` must have as many sections.
+        goal: the goal posture (aligned to ``start`` here, see :func:`align`).
+        time_limit: planning time budget [s].
+        seed: OMPL's random seed. OMPL seeds its generators once per process, so this takes
+            effect at the first call only; a process making the same calls repeats its results.
+        simplify: shortcut the path with OMPL's simplifier.
+        resolution: OMPL's edge-check resolution, a fraction of the space's extent.
+
+    Returns:
+        The plan; ``solved`` is False with a reason when no path was found in time or our dense
+        check of the path disagrees with OMPL's.
+
+    """
+    from ompl import base as ob
+    from ompl import geometric as og
+    from ompl import util as ou
+
+    began = time.perf_counter()
+    n, l, tmax = start.n_sections, scene.arm.section_length, scene.arm.theta_max
+    goal = align(goal, start)
+    for name, p in (("start", start), ("goal", goal)):
+        if first_collision(scene, [p]) is not None:
+            return MotionPlan(seconds=time.perf_counter() - began,
+                              reason=f"the {name} posture collides")  # fmt: skip
+    ou.setLogLevel(ou.LOG_WARN)
+    global _SEEDED
+    if not _SEEDED:
+        ou.RNG.setSeed(int(seed) + 1)  # OMPL takes 0 for "pick one"
+        _SEEDED = True
+    x0, x1 = _as_array(start), _as_array(goal)
+    low = np.concatenate([[min(x0[0], x1[0], -n * l) / l], np.full(n, -tmax),
+                          np.minimum(x0[n + 1 :], x1[n + 1 :]) - math.pi])  # fmt: skip
+    high = np.concatenate([[min(max(x0[0], x1[0], 0.0), 0.0) / l], np.full(n, tmax),
+                           np.maximum(x0[n + 1 :], x1[n + 1 :]) + math.pi])  # fmt: skip
+    space = ob.RealVectorStateSpace(1 + 2 * n)
+    bounds = ob.RealVectorBounds(1 + 2 * n)
+    for i, (lo, hi) in enumerate(zip(low, high)):
+        bounds.setLow(i, float(lo))
+        bounds.setHigh(i, float(hi))
+    space.setBounds(bounds)
+    setup = og.SimpleSetup(space)
+    checks = [0]
+
+    def to_posture(state: object) -> Posture:
+        x = np.array([state[i] for i in range(1 + 2 * n)])  # type: ignore[index]
+        x[0] *= l
+        return _from_array(x)
+
+    def valid(state: object) -> bool:
+        checks[0] += 1
+        return not scene.collides_fast(to_posture(state))
+
+    setup.setStateValidityChecker(valid)
+    states = []
+    for x in (x0, x1):
+        state = space.allocState()
+        for i, v in enumerate(x):
+            state[i] = float(v / l if i == 0 else v)
+        states.append(state)
+    setup.setStartAndGoalStates(states[0], states[1])
+    setup.getSpaceInformation().setStateValidityCheckingResolution(resolution)
+    setup.setPlanner(og.RRTConnect(setup.getSpaceInformation()))
+    status = setup.solve(float(time_limit))
+    plan = MotionPlan(checks=0)
+    if setup.haveExactSolutionPath():
+        if simplify:
+            setup.simplifySolution(max(0.1, time_limit / 10))
+        path = setup.getSolutionPath()
+        postures = [to_posture(path.getState(i)) for i in range(path.getStateCount())]
+        postures[0], postures[-1] = start, goal
+        hit = first_collision(scene, densify(postures))
+        if hit is None:
+            plan.postures, plan.solved = postures, True
+        else:
+            plan.reason = "OMPL's path collides between its edge checks"
+    else:
+        plan.reason = f"RRT-Connect found no path in {time_limit:g} s ({status})"
+    plan.checks = checks[0]
+    # Drop OMPL's objects (and the callback's reference cycle) now, not at interpreter exit.
+    del setup, states, space, bounds, valid
+    gc.collect()
+    plan.seconds = time.perf_counter() - began
+    return plan
