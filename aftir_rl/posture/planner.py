@@ -60,7 +60,15 @@ from aftir_rl.tank import Tank, load_tank
 
 __all__ = ["PlannedPosture", "Planner", "METHODS", "random_free_targets"]
 
-METHODS = ("auto", "tga", "tsm", "region_clipping", "blind")
+METHODS = (
+    "auto",
+    "tga",
+    "tsm",
+    "region_clipping",
+    "blind",
+    "obstacle_clipping",
+    "region_division",
+)
 _CHUNK = 4096
 
 
@@ -156,7 +164,9 @@ class Planner:
     def plan(self, target: ArrayLike, method: str = "auto") -> PlannedPosture:
         """Plan a posture reaching ``target`` [cm].
 
-        ``auto`` uses TSM for a target beyond the baffle and TGA otherwise.
+        ``auto`` uses TSM for a target beyond the baffle and TGA otherwise;
+        ``obstacle_clipping`` is seed 000 (:mod:`aftir_rl.posture.obstacle_clipping`) and
+        ``region_division`` seed 001 (:mod:`aftir_rl.posture.region_division`).
 
         Raises:
             PlanningError: "Cannot reach the target: <why>".
@@ -164,11 +174,19 @@ class Planner:
         """
         if method not in METHODS:
             raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-        target = self._check_target(target)
+        target = self.check_target(target)
         if method == "auto":
             method = "tsm" if self.beyond_baffle(target) else "tga"
         if method == "tsm":
             return self.tsm(target)
+        if method == "obstacle_clipping":
+            from aftir_rl.posture.obstacle_clipping import obstacle_clipping
+
+            return obstacle_clipping(self, target)
+        if method == "region_division":
+            from aftir_rl.posture.region_division import region_division
+
+            return region_division(self, target)
         return self.tga(target, search=("blind" if method == "blind" else "region_clipping"),
                         refine_tip=method != "blind" and method != "region_clipping",
                         method=method)  # fmt: skip
@@ -200,7 +218,7 @@ class Planner:
 
         """
         start = time.perf_counter()
-        target = self._check_target(target)
+        target = self.check_target(target)
         psi = math.atan2(target[1], target[0]) if math.hypot(target[0], target[1]) > 1e-9 else 0.0
         rho = math.hypot(target[0], target[1])
         heading = None
@@ -234,7 +252,7 @@ class Planner:
     def tsm(self, target: ArrayLike) -> PlannedPosture:
         """Three-segment posture through the hatch to a target beyond the baffle."""
         start = time.perf_counter()
-        target = self._check_target(target)
+        target = self.check_target(target)
         tank, l = self.tank, self.arm.section_length
         if tank.baffle is None or tank.hatch is None:
             raise PlanningError("Cannot reach the target: TSM needs a tank with a baffle and hatch")
@@ -299,7 +317,14 @@ class Planner:
         return np.column_stack([x_m, np.cross(z_m, x_m), z_m]), np.array(h.center, dtype=float)
 
     # ------------------------------------------------------------------ internals
-    def _check_target(self, target: ArrayLike) -> NDArray[np.float64]:
+    def check_target(self, target: ArrayLike) -> NDArray[np.float64]:
+        """The target as an array, checked to be a free point of the tank.
+
+        Raises:
+            PlanningError: not three finite numbers, outside the box, inside a solid, or closer
+                to a surface than the arm's radius.
+
+        """
         t = np.asarray(target, dtype=np.float64)
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise PlanningError(f"Cannot reach the target: expected x y z in cm, got {target!r}")
@@ -471,15 +496,34 @@ class Planner:
         }  # fmt: skip
         return posture, report, details
 
-    def checked(self, posture: Posture, target: ArrayLike, method: str) -> PlannedPosture:
+    def checked(
+        self,
+        posture: Posture,
+        target: ArrayLike,
+        method: str,
+        tolerance: float | None = None,
+        details: dict[str, Any] | None = None,
+        started: float | None = None,
+    ) -> PlannedPosture:
         """Check a posture found elsewhere (limits, tip, collision) like a planned one.
+
+        Args:
+            posture: the posture.
+            target: the point its tip must reach [cm].
+            method: name recorded in the result.
+            tolerance: largest tip error [cm] (default: the planner's).
+            details: recorded in the result.
+            started: ``time.perf_counter()`` when planning began (the result's ``seconds``).
 
         Raises:
             PlanningError: it fails a check.
 
         """
-        return self._finalize(posture, np.asarray(target, float), method, time.perf_counter(),
-                              self.tolerance, {})  # fmt: skip
+        return self._finalize(
+            posture, np.asarray(target, float), method,
+            time.perf_counter() if started is None else started,
+            self.tolerance if tolerance is None else tolerance, details or {},
+        )  # fmt: skip
 
     def _finalize(
         self,
