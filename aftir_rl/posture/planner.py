@@ -70,6 +70,7 @@ METHODS = (
     "region_division",
 )
 _CHUNK = 4096
+_MAX_GRID = 2e6  # region clipping grids larger than this (13+ searched angles) are not tried
 
 
 @dataclass
@@ -408,6 +409,8 @@ class Planner:
                     if problem.n_free <= 5
                     else max(2, int(1e5 ** (1 / problem.n_free)) - 1)
                 )
+                if (num + 1) ** problem.n_free > _MAX_GRID:
+                    continue  # even NUM = 2 is too large a grid (3^14 = 4.8e6 combinations)
                 result = region_clipping(problem, num=num, dtheta=self.dtheta)
             if result is None:
                 continue

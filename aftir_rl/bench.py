@@ -1,0 +1,402 @@
+"""``python -m aftir_rl.bench``: every method measured on the same fixed target sets in one run.
+
+The planners of the papers, the learning agents and RRT-Connect.
+
+Target sets (each target in its own tank):
+
+- ``seed004``: seed 004 Table II's three targets, open space, ``l = 25`` cm.
+- ``seed000``: seed 000 Table II's target ``[30, 18, 51]`` with 0, 1, 2 and 3 of its spherical
+  obstacles (``configs/tanks/open_space*.yaml``).
+- ``seed001``: seed 001 Tables 1 and 2 in the single cabin (Table 2's vertices 3 cm inside).
+- ``seed002``: the four bay-2 corner targets of the reference tank (seed 002 Table 2 analogues).
+- ``bay1``, ``bay2``: random free targets at least 5 cm from any surface on each side of the
+  baffle of the reference tank, drawn with a fixed seed.
+
+Methods:
+- the posture planners ``blind``, ``region_clipping``, ``tga``, ``tsm``, ``obstacle_clipping``,
+  ``region_division`` (:class:`~aftir_rl.posture.planner.Planner`); success is a posture that
+  passes the planner's checks (forward kinematics within 0.01 cm, or within the search zone for
+  ``blind`` and ``region_clipping``, which stop at the search step as in the papers; python-fcl;
+  the panel rule). Blind search is not run where its grid would exceed 5·10⁷ combinations.
+- ``q_table+postures`` (seed 002's pipeline): tabular Q-learning on ``AFTIR-Tank-v0``
+  (``configs/q_table.yaml``), its greedy cell path, and a posture for every cell
+  (:func:`~aftir_rl.posture.trajectory.plan_trajectory`); success is a complete trajectory
+  (every waypoint a posture, every move collision-free when checked densely).
+- ``rrt_connect``: OMPL's RRT-Connect in joint space from the start posture (the arm straight,
+  its tip at the tank's start point) to the planner's posture for the target, with our forward
+  kinematics and python-fcl scene as its validity checker
+  (:func:`~aftir_rl.posture.motion.rrt_connect`); success is a path that passes our dense check.
+- SB3 agents, when run directories are given (``--model``): their deterministic policy in their
+  own arm env, one episode per target of the sets their env covers.
+
+Columns: success rate, median tip error [cm], smallest clearance to the tank [cm], median tip
+path length [cm] (for the motions: Q-learning's cell path through its postures, RRT-Connect's
+densified path, the SB3 episode), median seconds per target.
+
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import platform
+import sys
+import time
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from aftir_rl.atomic import write_json
+from aftir_rl.errors import AftirError, PlanningError
+
+__all__ = ["Outcome", "Row", "target_sets", "run_benchmark", "format_table", "main"]
+
+POSTURE_METHODS = (
+    "blind", "region_clipping", "tga", "tsm", "obstacle_clipping", "region_division",
+)  # fmt: skip
+SETS = ("seed004", "seed000", "seed001", "seed002", "bay1", "bay2")
+_BLIND_LIMIT = 5e7
+
+
+@dataclass
+class Outcome:
+    """One method on one target.
+
+    Attributes:
+        success: reached, by the method's own definition (module docstring).
+        tip_error_cm: tip to target [cm] (nan when nothing was produced).
+        clearance_cm: smallest distance of the body to the tank [cm] (nan if unknown).
+        path_cm: tip path length [cm] of a motion (nan for a single posture).
+        seconds: wall time.
+        ran: False when the method was not run on this target (the note says why).
+        note: what went wrong, or a remark.
+
+    """
+
+    success: bool
+    tip_error_cm: float = math.nan
+    clearance_cm: float = math.nan
+    path_cm: float = math.nan
+    seconds: float = 0.0
+    ran: bool = True
+    note: str = ""
+
+
+@dataclass
+class Row:
+    """A method on a target set: its outcomes and their summary."""
+
+    target_set: str
+    method: str
+    outcomes: list[Outcome] = field(default_factory=list)
+
+    def summary(self) -> dict[str, Any]:
+        """Success rate and medians over the targets it ran on."""
+        ran = [o for o in self.outcomes if o.ran]
+        ok = [o for o in ran if o.success]
+
+        def median(values: list[float]) -> float:
+            values = [v for v in values if not math.isnan(v)]
+            return float(np.median(values)) if values else math.nan
+
+        counts = Counter(o.note for o in self.outcomes if o.note)
+        notes = [f"{n} ({k}x)" if k > 1 else n for n, k in counts.most_common(2)]
+        return {
+            "set": self.target_set, "method": self.method, "targets": len(ran),
+            "not_run": len(self.outcomes) - len(ran),
+            "success_rate": len(ok) / len(ran) if ran else math.nan,
+            "tip_error_cm": median([o.tip_error_cm for o in ok]),
+            "min_clearance_cm": min((o.clearance_cm for o in ok if not math.isnan(o.clearance_cm)),
+                                    default=math.nan),
+            "path_cm": median([o.path_cm for o in ok]),
+            "seconds": median([o.seconds for o in ran]),
+            "notes": "; ".join(notes) + ("; ..." if len(counts) > 2 else ""),
+        }  # fmt: skip
+
+
+def target_sets(n_random: int = 10, seed: int = 7) -> dict[str, list[tuple[str, np.ndarray]]]:
+    """The fixed target sets: ``{name: [(tank, target), ...]}``."""
+    from aftir_rl.posture.planner import Planner, random_free_targets
+    from aftir_rl.posture.region_division import SEED001_TABLE1, SEED001_TABLE2
+
+    obstacle_tanks = ["open_space"] + [
+        f"configs/tanks/open_space_obstacles{k}.yaml" for k in (1, 2, 3)
+    ]
+    sets: dict[str, list[tuple[str, np.ndarray]]] = {
+        "seed004": [("open_space", np.array(t, float)) for t in
+                    ((11, 31, 31), (30, 19, 50), (30, 29, 67))],
+        "seed000": [(tank, np.array([30.0, 18.0, 51.0])) for tank in obstacle_tanks],
+        "seed001": [("single_cabin", np.array(t, float)) for t, _, _ in SEED001_TABLE1]
+        + [("single_cabin", np.array(r.target, float)) for r in SEED001_TABLE2],
+        "seed002": [("b737_center", np.array(t, float)) for t in
+                    ((230, 140, 90), (-50, 140, 10), (-50, 72, 90), (230, 72, 10))],
+    }  # fmt: skip
+    drawn = random_free_targets(Planner("b737_center"), n_random, seed)
+    sets["bay1"] = [("b737_center", t) for t in drawn["bay1"]]
+    sets["bay2"] = [("b737_center", t) for t in drawn["bay2"]]
+    return sets
+
+
+METHODS_FOR = {
+    "seed004": ("blind", "region_clipping", "tga", "obstacle_clipping"),
+    "seed000": ("obstacle_clipping", "tga"),
+    "seed001": ("region_division", "blind", "tga"),
+    "seed002": ("tsm", "q_table+postures", "rrt_connect"),
+    "bay1": ("tga", "region_clipping", "blind", "obstacle_clipping", "q_table+postures",
+             "rrt_connect"),
+    "bay2": ("tsm", "q_table+postures", "rrt_connect"),
+}  # fmt: skip
+
+
+class _Planners:
+    """One planner per tank, built once."""
+
+    def __init__(self) -> None:
+        self._cache: dict[str, Any] = {}
+
+    def __call__(self, tank: str) -> Any:
+        if tank not in self._cache:
+            from aftir_rl.posture.planner import Planner
+
+            self._cache[tank] = Planner(tank)
+        return self._cache[tank]
+
+
+def posture_outcome(planner: Any, target: ArrayLike, method: str) -> Outcome:
+    """A posture planner on one target."""
+    target = np.asarray(target, dtype=float)
+    if method == "blind":
+        n = math.ceil(float(np.linalg.norm(target)) / planner.arm.section_length - 1e-9)
+        size = len(np.arange(-planner.arm.theta_max, planner.arm.theta_max + 1e-12,
+                             planner.dtheta)) ** n  # fmt: skip
+        if size > _BLIND_LIMIT:
+            return Outcome(False, ran=False, note=f"blind: {n} sections, grid above 5e7")
+    start = time.perf_counter()
+    try:
+        result = planner.plan(target, method=method)
+    except PlanningError as exc:
+        return Outcome(False, seconds=time.perf_counter() - start, note=_short(exc))
+    return Outcome(True, result.error_cm, result.clearance_cm, math.nan,
+                   time.perf_counter() - start)  # fmt: skip
+
+
+def q_table_outcome(
+    planner: Any, target: ArrayLike, seed: int = 0, bridge_seconds: float = 0.0
+) -> Outcome:
+    """Seed 002's pipeline on one target: Q-learning, greedy path, postures along it."""
+    import gymnasium as gym
+
+    from aftir_rl.agents.q_table import QLearning, greedy_rollout
+    from aftir_rl.config import CONFIG_DIR
+    from aftir_rl.posture.motion import densify, tip_path_length
+    from aftir_rl.posture.trajectory import plan_trajectory
+    from aftir_rl.train import load_q_table_config
+
+    config = load_q_table_config(CONFIG_DIR / "q_table.yaml")
+    start = time.perf_counter()
+    try:
+        env = gym.make("AFTIR-Tank-v0", tank=planner.tank, target=tuple(target))
+    except AftirError as exc:
+        return Outcome(False, ran=False, note=_short(exc))
+    agent = QLearning.from_config(env, config, seed=seed)
+    agent.learn(config.episodes)
+    states, reached = greedy_rollout(agent, env)
+    raster = env.unwrapped.raster
+    points = [raster.cell_center(raster.cell(s)) for s in states]
+    if not reached:
+        return Outcome(False, seconds=time.perf_counter() - start, note="greedy path fails")
+    trajectory = plan_trajectory(planner, points, target, bridge_seconds=bridge_seconds, seed=seed)
+    seconds = time.perf_counter() - start
+    found = [p for p in trajectory.postures if p is not None]
+    last = trajectory.postures[-1]
+    chain = [p.posture for p in trajectory.postures if p is not None]
+    moves = dict(trajectory.moves)
+    motion = [chain[0]]
+    for i, posture in enumerate(chain[1:]):
+        motion += moves.get(i, []) + [posture]
+    note = f"{len(trajectory.blocked_moves)} of {len(trajectory.moves)} moves collide"
+    return Outcome(
+        trajectory.complete,
+        last.error_cm if last is not None else math.nan,
+        min((p.clearance_cm for p in found), default=math.nan),
+        tip_path_length(densify(motion), planner.arm.section_length),
+        seconds,
+        note=note if trajectory.blocked_moves else "",
+    )
+
+
+def rrt_outcome(planner: Any, target: ArrayLike, seconds: float = 10.0, seed: int = 0) -> Outcome:
+    """RRT-Connect from the start posture to the planner's posture for ``target``."""
+    from aftir_rl.posture.motion import densify, rrt_connect, tip_path_length
+    from aftir_rl.posture.trajectory import pad_sections
+    from aftir_rl.robot import Posture
+
+    try:
+        goal = planner.plan(target)
+    except PlanningError as exc:
+        return Outcome(False, ran=False, note="no goal posture: " + _short(exc))
+    l, n = planner.arm.section_length, goal.posture.n_sections
+    height = planner.tank.start_point[2] - planner.tank.panel.center[2]
+    start = Posture(height - n * l, (0.0,) * n, (goal.posture.phi[0],) * n)
+    plan = rrt_connect(planner.scene, start, pad_sections(goal.posture, n, l), seconds, seed=seed)
+    if not plan.solved:
+        return Outcome(False, seconds=plan.seconds, note=plan.reason)
+    dense = densify(plan.postures)
+    clearance = min(planner.scene.clearance(p) for p in dense[:: max(1, len(dense) // 50)])
+    return Outcome(True, goal.error_cm, clearance, tip_path_length(dense, l), plan.seconds)
+
+
+def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray]]]) -> list[Row]:
+    """An SB3 run's deterministic policy on the targets of the sets its env covers."""
+    import json
+
+    from aftir_rl.agents.sb3 import evaluate_policy_on_targets, load_model
+
+    run_dir = Path(run_dir)
+    config = json.loads((run_dir / "config.json").read_text())
+    algo, env_id = config["algo"], config["env_id"]
+    env_id = env_id if ":" in env_id else f"aftir_rl:{env_id}"
+    model = load_model(algo, run_dir / "model.zip")
+    covered = ("bay1",) if "Reach" in env_id else ("bay1", "bay2", "seed002")
+    rows = []
+    for name in covered:
+        targets = [t for tank, t in sets.get(name, []) if tank == "b737_center"]
+        if not targets:
+            continue
+        row = Row(name, f"{algo} ({config['env_id']})")
+        for target in targets:
+            metrics, _ = evaluate_policy_on_targets(model, env_id, [target], clearance=True)
+            row.outcomes.append(Outcome(
+                bool(metrics["success_rate"]), metrics["tip_error_cm"],
+                metrics["min_clearance_cm"], metrics["path_length_cm"],
+                metrics["seconds_per_target"],
+                note="collided" if metrics["collision_rate"] else "",
+            ))  # fmt: skip
+        rows.append(row)
+    return rows
+
+
+def run_benchmark(
+    sets: dict[str, list[tuple[str, np.ndarray]]],
+    methods: dict[str, Sequence[str]] | None = None,
+    rrt_seconds: float = 10.0,
+    seed: int = 0,
+    models: Sequence[str | Path] = (),
+    progress: Callable[[str], None] | None = None,
+) -> list[Row]:
+    """Run every method of ``methods`` (default :data:`METHODS_FOR`) on its target sets."""
+    methods = methods or METHODS_FOR
+    planners = _Planners()
+    rows = []
+    for name, items in sets.items():
+        for method in methods.get(name, ()):
+            row = Row(name, method)
+            for tank, target in items:
+                planner = planners(tank)
+                if progress:
+                    progress(f"{name} {method} {tuple(np.round(target, 1))}")
+                if method == "q_table+postures":
+                    row.outcomes.append(q_table_outcome(planner, target, seed))
+                elif method == "rrt_connect":
+                    row.outcomes.append(rrt_outcome(planner, target, rrt_seconds, seed))
+                else:
+                    row.outcomes.append(posture_outcome(planner, target, method))
+            rows.append(row)
+    for run_dir in models:
+        rows += sb3_outcomes(run_dir, sets)
+    return rows
+
+
+def _short(exc: BaseException, limit: int = 70) -> str:
+    text = str(exc).replace("Cannot reach the target: ", "")
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _fmt(value: float, digits: str = ".2f") -> str:
+    if isinstance(value, float) and not math.isfinite(value):
+        return "–"
+    return format(value, digits)
+
+
+def format_table(rows: Sequence[Row]) -> str:
+    """The markdown table of the README."""
+    lines = [
+        "| set | method | targets | success | tip error (cm) | min clearance (cm) | "
+        "path (cm) | s / target | note |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for row in rows:
+        s = row.summary()
+        targets = f"{s['targets']}" + (f" (+{s['not_run']} not run)" if s["not_run"] else "")
+        lines.append(
+            f"| {s['set']} | {s['method']} | {targets} | {_fmt(100 * s['success_rate'], '.0f')}% "
+            f"| {_fmt(s['tip_error_cm'], '.2g')} | {_fmt(s['min_clearance_cm'])} | "
+            f"{_fmt(s['path_cm'], '.0f')} | {_fmt(s['seconds'], '.3f')} | {s['notes']} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m aftir_rl.bench``."""
+    parser = argparse.ArgumentParser(
+        prog="python -m aftir_rl.bench",
+        description="Measure every planner, Q-learning + postures, RRT-Connect and trained SB3 "
+        "agents on the same fixed target sets; print one markdown table.",
+    )
+    parser.add_argument("--sets", nargs="+", choices=SETS, default=list(SETS),
+                        help="target sets to run (default: all)")  # fmt: skip
+    parser.add_argument("--n-random", type=int, default=10, metavar="N",
+                        help="random targets per bay (default 10)")  # fmt: skip
+    parser.add_argument("--seed", type=int, default=7, help="seed of the random targets")
+    parser.add_argument("--rrt-seconds", type=float, default=10.0, metavar="S",
+                        help="RRT-Connect's budget per target (default 10)")  # fmt: skip
+    parser.add_argument(
+        "--model",
+        action="append",
+        default=[],
+        metavar="RUN_DIR",
+        help="an SB3 run directory (python -m aftir_rl.train ppo|sac|td3)",
+    )
+    parser.add_argument("--json", metavar="PATH", help="also write every outcome as JSON")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    args = parser.parse_args(argv)
+    if args.n_random < 1 or args.rrt_seconds <= 0:
+        parser.error("--n-random must be at least 1 and --rrt-seconds positive")
+    for run_dir in args.model:
+        if not (Path(run_dir) / "model.zip").exists():
+            print(f"error: {run_dir}: no model.zip; give a run directory of "
+                  "python -m aftir_rl.train ppo|sac|td3", file=sys.stderr)  # fmt: skip
+            return 2
+    start = time.perf_counter()
+    try:
+        sets = {k: v for k, v in target_sets(args.n_random, args.seed).items() if k in args.sets}
+        progress = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
+        rows = run_benchmark(sets, rrt_seconds=args.rrt_seconds, models=args.model,
+                             progress=progress)  # fmt: skip
+    except AftirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    seconds = time.perf_counter() - start
+    print(f"machine: {platform.machine()}, {platform.system()}, {_cores()} cores, "
+          f"Python {platform.python_version()}; {seconds:.0f} s in all")  # fmt: skip
+    print()
+    print(format_table(rows))
+    if args.json:
+        write_json(args.json, [{**r.summary(), "outcomes": [asdict(o) for o in r.outcomes]}
+                               for r in rows])  # fmt: skip
+    return 0
+
+
+def _cores() -> int:
+    import os
+
+    return os.cpu_count() or 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

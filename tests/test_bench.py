@@ -1,0 +1,92 @@
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from aftir_rl.bench import Outcome, Row, format_table, run_benchmark, target_sets
+from aftir_rl.collision import CollisionScene
+from aftir_rl.posture import Planner
+from aftir_rl.robot import tip_position
+
+
+def test_summary_counts_only_what_ran():
+    row = Row("s", "m", [
+        Outcome(True, 0.1, 2.0, 100.0, 1.0),
+        Outcome(True, 0.3, 1.0, 300.0, 3.0),
+        Outcome(False, seconds=5.0, note="no posture"),
+        Outcome(False, ran=False, note="not run"),
+    ])  # fmt: skip
+    s = row.summary()
+    assert s["targets"] == 3 and s["not_run"] == 1
+    assert s["success_rate"] == pytest.approx(2 / 3)
+    assert s["tip_error_cm"] == pytest.approx(0.2) and s["path_cm"] == pytest.approx(200.0)
+    assert s["min_clearance_cm"] == 1.0 and s["seconds"] == 3.0
+    assert "no posture" in s["notes"] and "not run" in s["notes"]
+    table = format_table([row])
+    assert table.splitlines()[2].startswith("| s | m | 3 (+1 not run) | 67% | 0.2 | 1.00 | 200 |")
+
+
+def test_target_sets_are_fixed_and_free():
+    a, b = target_sets(3, seed=7), target_sets(3, seed=7)
+    assert a.keys() == {"seed004", "seed000", "seed001", "seed002", "bay1", "bay2"}
+    for name in a:
+        assert all(ta == tb and np.array_equal(xa, xb) for (ta, xa), (tb, xb) in
+                   zip(a[name], b[name]))  # fmt: skip
+    planner = Planner("b737_center")
+    assert all(not planner.beyond_baffle(t) for _, t in a["bay1"])
+    assert all(planner.beyond_baffle(t) for _, t in a["bay2"])
+    assert len(a["seed001"]) == 12 and len(a["seed000"]) == 4
+
+
+def test_benchmark_outcomes_check_out(tank):
+    sets = {"bay1": [("b737_center", np.array([20.0, 10.0, 60.0]))]}
+    methods = {"bay1": ("tga", "rrt_connect", "q_table+postures")}
+    rows = run_benchmark(sets, methods, rrt_seconds=20)
+    by_method = {r.method: r for r in rows}
+    target = sets["bay1"][0][1]
+    tga = by_method["tga"].outcomes[0]
+    assert tga.success and tga.tip_error_cm < 0.01 and math.isnan(tga.path_cm)
+    rrt = by_method["rrt_connect"].outcomes[0]
+    assert rrt.success, rrt.note
+    # The RRT path goes at least as far as the straight line from the start point to the target.
+    assert rrt.path_cm >= np.linalg.norm(target - np.array(tank.start_point)) - 1e-6
+    q = by_method["q_table+postures"].outcomes[0]
+    assert q.ran and q.seconds > 0
+    assert q.success == (q.note == "")  # a complete trajectory, or the note says what collides
+
+
+def test_bench_cli(tmp_path):
+    out = tmp_path / "bench.json"
+    run = subprocess.run(
+        [sys.executable, "-m", "aftir_rl.bench", "--sets", "seed004", "--quiet", "--json",
+         str(out)], capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    lines = [line for line in run.stdout.splitlines() if line.startswith("| seed004")]
+    assert [line.split("|")[2].strip() for line in lines] == [
+        "blind", "region_clipping", "tga", "obstacle_clipping",
+    ]  # fmt: skip
+    data = json.loads(out.read_text())
+    tga = next(r for r in data if r["method"] == "tga")
+    assert tga["success_rate"] == 1.0 and len(tga["outcomes"]) == 3
+    # Every TGA posture of the run is re-checked here, independently of the bench.
+    planner = Planner("open_space")
+    for t in ((11, 31, 31), (30, 19, 50), (30, 29, 67)):
+        p = planner.plan(t).posture
+        assert np.linalg.norm(tip_position(p.dis, p.theta, p.phi, 25) - t) < 0.01
+        assert not CollisionScene(planner.tank).collides(p)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--model", "nowhere"], "no model.zip"),
+    (["--n-random", "0"], "--n-random must be at least 1"),
+])  # fmt: skip
+def test_bench_cli_rejects_bad_input(args, message):
+    run = subprocess.run([sys.executable, "-m", "aftir_rl.bench", *args], capture_output=True,
+                         text=True)  # fmt: skip
+    assert run.returncode == 2 and message in run.stderr
+    assert "Traceback" not in run.stderr
