@@ -125,7 +125,7 @@ def target_sets(n_random: int = 10, seed: int = 7) -> dict[str, list[tuple[str, 
     from aftir_rl.posture.region_division import SEED001_TABLE1, SEED001_TABLE2
 
     obstacle_tanks = ["open_space"] + [
-        f"configs/tanks/open_space_obstacles{k}.yaml" for k in (1, 2, 3)
+        f"open_space_obstacles{k}" for k in (1, 2, 3)
     ]
     sets: dict[str, list[tuple[str, np.ndarray]]] = {
         "seed004": [("open_space", np.array(t, float)) for t in

@@ -18,7 +18,7 @@ from aftir_rl.tank import Sphere, load_tank
 
 TARGET = np.array([30.0, 18.0, 51.0])
 OBSTACLES = [(3.90, 2.25, 5.45), (6.15, 10.67, 23.86), (21.34, 14.93, 43.35)]  # seed 000 §IV
-ROWS = ["open_space", *(f"configs/tanks/open_space_obstacles{k}.yaml" for k in (1, 2, 3))]
+ROWS = ["open_space", *(f"open_space_obstacles{k}" for k in (1, 2, 3))]
 
 
 def zone_distance(posture, obstacles):
