@@ -28,10 +28,13 @@ lint: $(STAMP)
 	$(PY) -m ruff check aftir_rl tests benchmarks
 	$(PY) -m ruff format --check aftir_rl tests benchmarks
 
-bench: $(STAMP)  ## every benchmark table of the README (about 5 minutes)
+bench: $(STAMP)  ## every benchmark table of the README (about 20 minutes)
 	$(PY) benchmarks/bench_tank.py
 	$(PY) benchmarks/bench_posture.py
+	$(PY) benchmarks/bench_seed000.py
+	$(PY) benchmarks/bench_seed001.py
 	$(PY) benchmarks/bench_arm.py
+	$(PY) -m aftir_rl.bench
 
 tensorboard: $(STAMP)
 	$(VENV)/bin/tensorboard --logdir runs

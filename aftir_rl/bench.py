@@ -124,9 +124,7 @@ def target_sets(n_random: int = 10, seed: int = 7) -> dict[str, list[tuple[str, 
     from aftir_rl.posture.planner import Planner, random_free_targets
     from aftir_rl.posture.region_division import SEED001_TABLE1, SEED001_TABLE2
 
-    obstacle_tanks = ["open_space"] + [
-        f"open_space_obstacles{k}" for k in (1, 2, 3)
-    ]
+    obstacle_tanks = ["open_space"] + [f"open_space_obstacles{k}" for k in (1, 2, 3)]
     sets: dict[str, list[tuple[str, np.ndarray]]] = {
         "seed004": [("open_space", np.array(t, float)) for t in
                     ((11, 31, 31), (30, 19, 50), (30, 29, 67))],
