@@ -101,9 +101,10 @@ def test_smoke_training_writes_tensorboard(tmp_path, algo, steps, capsys):
                 "eval/collision_rate"):  # fmt: skip
         assert tag in tags["scalars"], tag
     assert "paths/eval" in tags["images"]
-    # Resume from the saved model, and a corrupt model is a clean error.
+    # Resume from the saved model (with the default progress bar, which needs tqdm and rich),
+    # and a corrupt model is a clean error.
     again = [algo, "--config", str(config), "--total-timesteps", "64", "--resume", str(run_dir)]
-    rc = train.main([*again, "--logdir", str(tmp_path / "again"), "--no-progress"])
+    rc = train.main([*again, "--logdir", str(tmp_path / "again")])
     assert rc == 0
     bad = tmp_path / "bad.zip"
     bad.write_bytes(b"not a zip")
