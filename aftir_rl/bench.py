@@ -27,7 +27,8 @@ Methods:
   kinematics and python-fcl scene as its validity checker
   (:func:`~aftir_rl.posture.motion.rrt_connect`); success is a path that passes our dense check.
 - SB3 agents, when run directories are given (``--model``): their deterministic policy in their
-  own arm env, one episode per target of the sets their env covers.
+  own arm env, one episode per target of the reference tank's sets that lies in the region their
+  env draws targets from (``AFTIR-ArmReach-v0``: in front of the panel in bay 1).
 
 Columns: success rate, median tip error [cm], smallest clearance to the tank [cm], median tip
 path length [cm] (for the motions: Q-learning's cell path through its postures, RRT-Connect's
@@ -105,7 +106,7 @@ class Row:
             return float(np.median(values)) if values else math.nan
 
         counts = Counter(o.note for o in self.outcomes if o.note)
-        notes = [f"{n} ({k}x)" if k > 1 else n for n, k in counts.most_common(2)]
+        notes = [f"{n} ({k}x)" if k > 1 else n for n, k in counts.most_common(1)]
         return {
             "set": self.target_set, "method": self.method, "targets": len(ran),
             "not_run": len(self.outcomes) - len(ran),
@@ -115,7 +116,7 @@ class Row:
                                     default=math.nan),
             "path_cm": median([o.path_cm for o in ok]),
             "seconds": median([o.seconds for o in ran]),
-            "notes": "; ".join(notes) + ("; ..." if len(counts) > 2 else ""),
+            "notes": "; ".join(notes) + ("; ..." if len(counts) > 1 else ""),
         }  # fmt: skip
 
 
@@ -250,8 +251,13 @@ def rrt_outcome(planner: Any, target: ArrayLike, seconds: float = 10.0, seed: in
 
 
 def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray]]]) -> list[Row]:
-    """An SB3 run's deterministic policy on the targets of the sets its env covers."""
+    """An SB3 run's deterministic policy on the reference tank's targets in its env's region.
+
+    Targets outside the region the env draws its targets from (``target_region``) are not run.
+    """
     import json
+
+    import gymnasium as gym
 
     from aftir_rl.agents.sb3 import evaluate_policy_on_targets, load_model
 
@@ -260,14 +266,17 @@ def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray
     algo, env_id = config["algo"], config["env_id"]
     env_id = env_id if ":" in env_id else f"aftir_rl:{env_id}"
     model = load_model(algo, run_dir / "model.zip")
-    covered = ("bay1",) if "Reach" in env_id else ("bay1", "bay2", "seed002")
+    lo, hi = gym.make(env_id).unwrapped.target_region
     rows = []
-    for name in covered:
+    for name in ("seed002", "bay1", "bay2"):
         targets = [t for tank, t in sets.get(name, []) if tank == "b737_center"]
         if not targets:
             continue
         row = Row(name, f"{algo} ({config['env_id']})")
         for target in targets:
+            if np.any(target < lo) or np.any(target > hi):
+                row.outcomes.append(Outcome(False, ran=False, note="outside the env's targets"))
+                continue
             metrics, _ = evaluate_policy_on_targets(model, env_id, [target], clearance=True)
             row.outcomes.append(Outcome(
                 bool(metrics["success_rate"]), metrics["tip_error_cm"],
@@ -310,7 +319,7 @@ def run_benchmark(
     return rows
 
 
-def _short(exc: BaseException, limit: int = 70) -> str:
+def _short(exc: BaseException, limit: int = 60) -> str:
     text = str(exc).replace("Cannot reach the target: ", "")
     return text if len(text) <= limit else text[: limit - 3] + "..."
 

