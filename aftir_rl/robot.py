@@ -97,6 +97,19 @@ class Posture:
                 f"{len(self.phi)}"
             )
 
+    def to_vector(self) -> NDArray[np.float64]:
+        """The joint vector ``(dis, θ_1..θ_N, φ_1..φ_N)``."""
+        return np.concatenate([[self.dis], self.theta, self.phi])
+
+    @classmethod
+    def from_vector(cls, x: ArrayLike) -> Posture:
+        """The posture of a joint vector ``(dis, θ_1..θ_N, φ_1..φ_N)``."""
+        x = np.asarray(x, dtype=np.float64)
+        n = (len(x) - 1) // 2
+        if len(x) != 1 + 2 * n:
+            raise ValueError(f"a joint vector has 1 + 2N values, got {len(x)}")
+        return cls(x[0], x[1 : n + 1], x[n + 1 :])
+
     @property
     def n_sections(self) -> int:
         """Number of sections ``N``."""

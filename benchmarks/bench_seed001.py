@@ -18,9 +18,9 @@ import argparse
 import math
 import os
 import platform
-import time
 
 import numpy as np
+from bench_posture import best_time  # benchmarks/ is the script's own folder
 
 from aftir_rl.errors import PlanningError
 from aftir_rl.posture import Planner
@@ -31,15 +31,6 @@ from aftir_rl.posture.region_division import (
     geometric_solution,
     region_division,
 )
-
-
-def best_time(fn, repeats):
-    best, out = math.inf, None
-    for _ in range(repeats):
-        start = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - start)
-    return best, out
 
 
 def fmt_point(p):

@@ -74,18 +74,9 @@ def align(posture: Posture, reference: Posture, straight: float = 1e-9) -> Postu
     return Posture(posture.dis, theta, phi)
 
 
-def _as_array(posture: Posture) -> NDArray[np.float64]:
-    return np.concatenate([[posture.dis], posture.theta, posture.phi])
-
-
-def _from_array(x: NDArray[np.float64]) -> Posture:
-    n = (len(x) - 1) // 2
-    return Posture(x[0], x[1 : n + 1], x[n + 1 :])
-
-
 def joint_distance(a: Posture, b: Posture, section_length: float) -> float:
     """Euclidean distance of two joint vectors, ``dis`` in section lengths, angles in rad."""
-    d = _as_array(b) - _as_array(a)
+    d = b.to_vector() - a.to_vector()
     d[0] /= section_length
     return float(np.linalg.norm(d))
 
@@ -103,13 +94,13 @@ def densify(
         return []
     out = [postures[0]]
     for a, b in zip(postures, postures[1:]):
-        xa, xb = _as_array(a), _as_array(b)
+        xa, xb = a.to_vector(), b.to_vector()
         delta = xb - xa
         steps = max(
             1, math.ceil(max(abs(delta[0]) / max_dis, np.max(np.abs(delta[1:])) / max_angle))
         )
         for k in range(1, steps + 1):
-            out.append(_from_array(xa + delta * (k / steps)))
+            out.append(Posture.from_vector(xa + delta * (k / steps)))
     return out
 
 
@@ -127,7 +118,7 @@ def tip_path_length(postures: Sequence[Posture], section_length: float) -> float
     if len(postures) < 2:
         return 0.0
     n = postures[0].n_sections
-    x = np.array([_as_array(p) for p in postures])
+    x = np.array([p.to_vector() for p in postures])
     tips = tip_position(x[:, 0], x[:, 1 : n + 1], x[:, n + 1 :], section_length)
     return float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1)))
 
@@ -200,7 +191,7 @@ def rrt_connect(
     if not _SEEDED:
         ou.RNG.setSeed(int(seed) + 1)  # OMPL takes 0 for "pick one"
         _SEEDED = True
-    x0, x1 = _as_array(start), _as_array(goal)
+    x0, x1 = start.to_vector(), goal.to_vector()
     low = np.concatenate([[min(x0[0], x1[0], -n * l) / l], np.full(n, -tmax),
                           np.minimum(x0[n + 1 :], x1[n + 1 :]) - math.pi])  # fmt: skip
     high = np.concatenate([[min(max(x0[0], x1[0], 0.0), 0.0) / l], np.full(n, tmax),
@@ -217,7 +208,7 @@ def rrt_connect(
     def to_posture(state: object) -> Posture:
         x = np.array([state[i] for i in range(1 + 2 * n)])  # type: ignore[index]
         x[0] *= l
-        return _from_array(x)
+        return Posture.from_vector(x)
 
     def valid(state: object) -> bool:
         checks[0] += 1

@@ -152,21 +152,12 @@ def continue_posture(
     floor (inside the guide, when the ones below them are straight) are not bent. Returns None if
     the tip does not get within ``tolerance`` [cm].
     """
-    x = _solve_tip(planner, _as_x(start), np.asarray(target, dtype=np.float64), tolerance * 0.1,
-                   iterations, damping)  # fmt: skip
-    posture = _as_posture(x)
+    goal = np.asarray(target, dtype=np.float64)
+    x = _solve_tip(planner, start.to_vector(), goal, tolerance * 0.1, iterations, damping)
+    posture = Posture.from_vector(x)
     if np.linalg.norm(posture.tip(planner.arm.section_length) - target) >= tolerance:
         return None
     return posture
-
-
-def _as_x(posture: Posture) -> np.ndarray:
-    return np.concatenate([[posture.dis], posture.theta, posture.phi])
-
-
-def _as_posture(x: np.ndarray) -> Posture:
-    n = (len(x) - 1) // 2
-    return Posture(x[0], x[1 : n + 1], x[n + 1 :])
 
 
 def _solve_tip(
@@ -243,10 +234,10 @@ def repair_posture(
     """
     l = planner.arm.section_length
     goal = np.asarray(target, dtype=np.float64)
-    x = _as_x(posture)
+    x = posture.to_vector()
     objective = _Penalty(planner, margin)
     for _ in range(iterations):
-        candidate = _as_posture(x)
+        candidate = Posture.from_vector(x)
         if np.linalg.norm(candidate.tip(l) - goal) < tolerance and not planner.scene.collides(
             candidate
         ):
