@@ -30,7 +30,8 @@ Methods:
   own arm env, one episode per target of the reference tank's sets that lies in the region their
   env draws targets from (``AFTIR-ArmReach-v0``: in front of the panel in bay 1).
 
-Columns: success rate, median tip error [cm], smallest clearance to the tank [cm], median tip
+Columns: success rate, median tip error [cm], smallest clearance to the tank [cm] (for
+RRT-Connect over about 50 postures sampled along the path, so an upper bound), median tip
 path length [cm] (for the motions: Q-learning's cell path through its postures, RRT-Connect's
 densified path, the SB3 episode), median seconds per target.
 
@@ -40,6 +41,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import platform
 import sys
 import time
@@ -76,6 +78,7 @@ class Outcome:
         seconds: wall time.
         ran: False when the method was not run on this target (the note says why).
         note: what went wrong, or a remark.
+        posture: the posture found, ``{"dis", "theta", "phi"}`` (posture planners only).
 
     """
 
@@ -86,6 +89,7 @@ class Outcome:
     seconds: float = 0.0
     ran: bool = True
     note: str = ""
+    posture: dict[str, Any] | None = None
 
 
 @dataclass
@@ -180,8 +184,10 @@ def posture_outcome(planner: Any, target: ArrayLike, method: str) -> Outcome:
         result = planner.plan(target, method=method)
     except PlanningError as exc:
         return Outcome(False, seconds=time.perf_counter() - start, note=_short(exc))
+    p = result.posture
     return Outcome(True, result.error_cm, result.clearance_cm, math.nan,
-                   time.perf_counter() - start)  # fmt: skip
+                   time.perf_counter() - start,
+                   posture={"dis": p.dis, "theta": list(p.theta), "phi": list(p.phi)})  # fmt: skip
 
 
 def q_table_outcome(
@@ -213,11 +219,11 @@ def q_table_outcome(
     seconds = time.perf_counter() - start
     found = [p for p in trajectory.postures if p is not None]
     last = trajectory.postures[-1]
-    chain = [p.posture for p in trajectory.postures if p is not None]
-    moves = dict(trajectory.moves)
-    motion = [chain[0]]
-    for i, posture in enumerate(chain[1:]):
-        motion += moves.get(i, []) + [posture]
+    moves = dict(trajectory.moves)  # keyed by the waypoint each move starts from
+    motion: list[Any] = []
+    for i, planned in enumerate(trajectory.postures):
+        if planned is not None:
+            motion += [planned.posture, *moves.get(i, [])]
     note = f"{len(trajectory.blocked_moves)} of {len(trajectory.moves)} moves collide"
     return Outcome(
         trajectory.complete,
@@ -246,6 +252,7 @@ def rrt_outcome(planner: Any, target: ArrayLike, seconds: float = 10.0, seed: in
     if not plan.solved:
         return Outcome(False, seconds=plan.seconds, note=plan.reason)
     dense = densify(plan.postures)
+    # Sampled (about 50 postures of the densified path): an upper bound on the path's clearance.
     clearance = min(planner.scene.clearance(p) for p in dense[:: max(1, len(dense) // 50)])
     return Outcome(True, goal.error_cm, clearance, tip_path_length(dense, l), plan.seconds)
 
@@ -372,13 +379,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--json", metavar="PATH", help="also write every outcome as JSON")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     args = parser.parse_args(argv)
-    if args.n_random < 1 or args.rrt_seconds <= 0:
-        parser.error("--n-random must be at least 1 and --rrt-seconds positive")
-    for run_dir in args.model:
-        if not (Path(run_dir) / "model.zip").exists():
-            print(f"error: {run_dir}: no model.zip; give a run directory of "
-                  "python -m aftir_rl.train ppo|sac|td3", file=sys.stderr)  # fmt: skip
-            return 2
+    if args.n_random < 1 or not 0 < args.rrt_seconds < math.inf:
+        parser.error("--n-random must be at least 1 and --rrt-seconds positive and finite")
+    problem = _check_inputs(args.model, args.json)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
     start = time.perf_counter()
     try:
         sets = {k: v for k, v in target_sets(args.n_random, args.seed).items() if k in args.sets}
@@ -399,9 +405,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _cores() -> int:
-    import os
+def _check_inputs(models: Sequence[str], json_path: str | None) -> str:
+    """What is wrong with the run directories or the JSON path ("" if nothing), before a run."""
+    import json
 
+    for run_dir in models:
+        run = Path(run_dir)
+        if not (run / "model.zip").exists():
+            return f"{run_dir}: no model.zip; give a run directory of python -m aftir_rl.train"
+        try:
+            config = json.loads((run / "config.json").read_text())
+            config["algo"], config["env_id"]  # noqa: B018
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            return f"{run_dir}: config.json is missing or not a training run's ({exc!r})"
+    if json_path is not None:
+        folder = Path(json_path).resolve().parent
+        if not folder.is_dir() or not os.access(folder, os.W_OK):
+            return f"--json {json_path}: cannot write in {folder}"
+    return ""
+
+
+def _cores() -> int:
     return os.cpu_count() or 1
 
 

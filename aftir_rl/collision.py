@@ -253,20 +253,31 @@ class CollisionScene:
         rim = np.where(height >= 0, np.hypot(r - radial, height), r - radial)
         return bool(np.all(np.where(radial > r, height, rim) > clear))
 
+    def sample_margin(self, samples_per_section: int) -> float:
+        """How far [cm] a point of the capsules' axes can be from the nearest backbone sample.
+
+        A capsule's axis is a chord of the arc, within the link's sagitta of it (and a capsule of
+        arc length reaches past the chord's ends by less than 0.01 cm at the defaults); any
+        point of the arc is within half the sample spacing ``l/2k`` of a sample. With 0.1 cm of
+        slack for rounding.
+        """
+        bend = self.arm.theta_max / self.links_per_section
+        link = self.arm.section_length / self.links_per_section
+        sagitta = link / bend * (1 - math.cos(bend / 2)) if bend > 0 else 0.0
+        return self.arm.section_length / (2 * samples_per_section) + sagitta + 0.1
+
     def collides_fast(self, posture: Posture) -> bool:
         """:meth:`collides`, with a numpy pre-check that skips python-fcl when it can.
 
         The same verdict, several times faster away from the tank's solids. The panel rule is
-        checked on the same backbone samples as :meth:`panel_ok`, ``l/2K`` apart; any point of the
-        arc between two samples lies within half that (plus a sagitta under 0.1 cm) of one, so
-        samples farther than radius + ``l/4K`` + 0.25 cm from everything clear the whole body.
+        checked on the same backbone samples as :meth:`panel_ok`, ``l/2K`` apart, and samples
+        farther than radius + :meth:`sample_margin` from everything clear every capsule.
         """
         k = 2 * self.links_per_section
         pts = posture.points(self.arm.section_length, k)
         if panel_violation(self.tank, pts[None])[0]:
             return True
-        margin = self.arm.section_length / (2 * k) + 0.25
-        if self.far_from_everything(pts, self.arm.radius + margin):
+        if self.far_from_everything(pts, self.arm.radius + self.sample_margin(k)):
             return False
         data = fcl.CollisionData()
         self._scene.collide(self._place(posture), data, fcl.defaultCollisionCallback)

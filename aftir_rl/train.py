@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import shutil
 import sys
 import time
@@ -465,8 +466,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             if args.episodes < 1:
                 raise ConfigError(f"--episodes must be at least 1, got {args.episodes}")
             config = dataclasses.replace(config, episodes=args.episodes)
-        if not args.bridge_seconds >= 0:
-            raise ConfigError(f"--bridge-seconds must be 0 or more, got {args.bridge_seconds}")
+        if not 0 <= args.bridge_seconds < math.inf:
+            raise ConfigError(
+                f"--bridge-seconds must be a finite 0 or more, got {args.bridge_seconds}"
+            )
         targets = args.target
         if targets is None:
             from aftir_rl.tank import load_tank

@@ -11,7 +11,8 @@ import pytest
 from aftir_rl.bench import Outcome, Row, format_table, run_benchmark, target_sets
 from aftir_rl.collision import CollisionScene
 from aftir_rl.posture import Planner
-from aftir_rl.robot import tip_position
+from aftir_rl.robot import Posture, tip_position
+from aftir_rl.tank import load_tank
 
 
 def test_summary_counts_only_what_ran():
@@ -74,19 +75,27 @@ def test_bench_cli(tmp_path):
     tga = next(r for r in data if r["method"] == "tga")
     assert tga["success_rate"] == 1.0 and len(tga["outcomes"]) == 3
     # Every TGA posture of the run is re-checked here, independently of the bench.
-    planner = Planner("open_space")
-    for t in ((11, 31, 31), (30, 19, 50), (30, 29, 67)):
-        p = planner.plan(t).posture
+    scene = CollisionScene(load_tank("open_space"))
+    for t, outcome in zip(((11, 31, 31), (30, 19, 50), (30, 29, 67)), tga["outcomes"]):
+        p = Posture(**outcome["posture"])
         assert np.linalg.norm(tip_position(p.dis, p.theta, p.phi, 25) - t) < 0.01
-        assert not CollisionScene(planner.tank).collides(p)
+        assert not scene.collides(p)
 
 
 @pytest.mark.parametrize("args, message", [
     (["--model", "nowhere"], "no model.zip"),
+    (["--model", "{bad_run}"], "config.json is missing or not a training run's"),
     (["--n-random", "0"], "--n-random must be at least 1"),
+    (["--rrt-seconds", "nan"], "--rrt-seconds positive and finite"),
+    (["--json", "/nonexistent/dir/out.json"], "cannot write in"),
 ])  # fmt: skip
-def test_bench_cli_rejects_bad_input(args, message):
+def test_bench_cli_rejects_bad_input(tmp_path, args, message):
+    bad_run = tmp_path / "run"
+    bad_run.mkdir()
+    (bad_run / "model.zip").write_bytes(b"")
+    (bad_run / "config.json").write_text("{}")
+    args = [a.replace("{bad_run}", str(bad_run)) for a in args]
     run = subprocess.run([sys.executable, "-m", "aftir_rl.bench", *args], capture_output=True,
-                         text=True)  # fmt: skip
+                         text=True, timeout=60)  # fmt: skip
     assert run.returncode == 2 and message in run.stderr
     assert "Traceback" not in run.stderr

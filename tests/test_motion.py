@@ -15,8 +15,8 @@ from aftir_rl.posture.motion import (
     rrt_connect,
     tip_path_length,
 )
-from aftir_rl.posture.trajectory import pad_sections, repair_posture
-from aftir_rl.robot import Posture
+from aftir_rl.posture.trajectory import pad_sections, plan_trajectory, repair_posture
+from aftir_rl.robot import Posture, tip_position
 
 
 @pytest.fixture(scope="module")
@@ -117,4 +117,33 @@ def test_rrt_connect_reports_a_colliding_goal(planner):
 def test_pad_then_align_is_the_same_arm(planner):
     p = planner.plan((20, 10, 60)).posture
     padded = pad_sections(p, p.n_sections + 3, 50)
-    np.testing.assert_allclose(padded.tip(50), p.tip(50), atol=1e-9)
+    reference = Posture(-200.0, (0.0,) * padded.n_sections, (1.0,) * padded.n_sections)
+    aligned = align(padded, reference)
+    # The arm above the padding is the same: the last sections' backbone, point for point.
+    k = 5
+    tail = slice(-(p.n_sections * k + 1), None)
+    np.testing.assert_allclose(aligned.points(50, k)[tail], p.points(50, k), atol=1e-9)
+    np.testing.assert_allclose(padded.points(50, k)[tail], p.points(50, k), atol=1e-9)
+    assert aligned.phi[0] == 1.0  # a straight section takes the reference's phi
+
+
+def test_trajectory_moves_are_what_it_reports(planner):
+    # A bay-1 cell path: (10, 0, 10) .. (30, 20, 50) then the exact target.
+    points = [(10, 0, 10), (30, 0, 10), (30, 0, 30), (30, 0, 50), (30, 20, 50)]
+    target = (22.0, 12.0, 55.0)
+    trajectory = plan_trajectory(planner, points, target)
+    scene = CollisionScene(planner.tank)
+    assert not trajectory.failures
+    for posture, waypoint in zip(trajectory.postures, trajectory.waypoints):
+        p = posture.posture
+        assert np.linalg.norm(tip_position(p.dis, p.theta, p.phi, 50) - waypoint) < 0.01
+        assert not scene.collides(p)
+    blocked = {i for i, _ in trajectory.blocked_moves}
+    assert [i for i, _ in trajectory.moves] == list(range(len(points)))
+    for i, via in trajectory.moves:
+        a, b = trajectory.postures[i].posture, trajectory.postures[i + 1].posture
+        hit = first_collision(scene, densify([a, *via, b]))
+        assert (hit is not None) == (i in blocked), i  # checked independently here
+    assert trajectory.complete == (not blocked)
+    data = trajectory.to_json()
+    assert len(data["moves"]) == len(points) and data["complete"] == trajectory.complete

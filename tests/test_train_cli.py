@@ -128,7 +128,7 @@ def test_resume(tmp_path):
         (["--target", "999", "0", "10"], "outside the tank box"),
         (["--config", "nope.yaml"], "cannot read"),
         (["--episodes", "0"], "--episodes must be at least 1"),
-        (["--bridge-seconds", "-1"], "--bridge-seconds must be 0 or more"),
+        (["--bridge-seconds", "-1"], "--bridge-seconds must be a finite 0 or more"),
     ],
 )
 def test_user_errors_exit_2_without_traceback(tmp_path, args, message):

@@ -102,11 +102,11 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         )
         self.action_space = spaces.Box(-1.0, 1.0, (1 + 2 * self.n,), np.float32)
         self.observation_space = spaces.Box(-20.0, 20.0, (6 * self.n + 15,), np.float32)
-        # Fast pre-check (see _collides): backbone samples ``l/K`` apart; a point of the arc
-        # between two samples is within half that (plus a sagitta under 0.1 cm) of one of them,
-        # so a margin above it keeps the pre-check conservative, and fcl decides everything closer.
+        # Fast pre-check (see _collides): backbone samples farther than radius + margin from
+        # everything clear every capsule (CollisionScene.sample_margin), so the pre-check is
+        # conservative, and fcl decides everything closer.
         self._k = 8
-        self._margin = self.l / (2 * self._k) + 0.25
+        self._margin = self.scene.sample_margin(self._k)
         self._state = np.zeros(1 + 2 * self.n)
         self.target = np.zeros(3) if self.fixed_target is None else self.fixed_target
         self._tips: list[NDArray[np.float64]] = []

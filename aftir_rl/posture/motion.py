@@ -10,8 +10,10 @@ sections. Two facts shape how we move between postures:
 - A move is collision-free only if every posture along it is. :func:`densify` interpolates a
   sequence of postures so that no joint changes by more than ``max_angle`` [rad] and ``dis`` by
   no more than ``max_dis`` [cm] between neighbours, and :func:`first_collision` checks them all.
-  The arm's body moves by at most about ``N·l·max_angle`` between two checked postures (2 cm
-  for 4 sections of 50 cm at the default 0.1°), so with the default step the check is dense.
+  A joint change ``δ`` moves a body point by at most ``δ`` times its arc distance from that
+  joint, so between two checked postures of N sections of length l a point moves by at most
+  about ``N(N + 1)·l·max_angle + max_dis`` (2.2 cm for 4 sections of 50 cm at the defaults, far
+  less in practice): a dense, discrete check, not a certified sweep.
 
 :func:`rrt_connect` is the sampling-based baseline a robotics user would reach for: OMPL's
 RRT-Connect (the ``ompl`` wheel) in the joint space, with our forward kinematics and python-fcl
@@ -166,7 +168,8 @@ def rrt_connect(
         goal: the goal posture (aligned to ``start`` here, see :func:`align`).
         time_limit: planning time budget [s].
         seed: OMPL's random seed. OMPL seeds its generators once per process, so this takes
-            effect at the first call only; a process making the same calls repeats its results.
+            effect at the first call only (later seeds are ignored); a fresh process making the
+            same calls repeats its results.
         simplify: shortcut the path with OMPL's simplifier.
         resolution: OMPL's edge-check resolution, a fraction of the space's extent.
 
@@ -194,7 +197,7 @@ def rrt_connect(
     x0, x1 = start.to_vector(), goal.to_vector()
     low = np.concatenate([[min(x0[0], x1[0], -n * l) / l], np.full(n, -tmax),
                           np.minimum(x0[n + 1 :], x1[n + 1 :]) - math.pi])  # fmt: skip
-    high = np.concatenate([[min(max(x0[0], x1[0], 0.0), 0.0) / l], np.full(n, tmax),
+    high = np.concatenate([[max(x0[0], x1[0], 0.0) / l], np.full(n, tmax),
                            np.maximum(x0[n + 1 :], x1[n + 1 :]) + math.pi])  # fmt: skip
     space = ob.RealVectorStateSpace(1 + 2 * n)
     bounds = ob.RealVectorBounds(1 + 2 * n)

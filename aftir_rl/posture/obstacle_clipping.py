@@ -73,6 +73,7 @@ if TYPE_CHECKING:
 __all__ = ["ObstacleProblem", "ClippingResult", "obstacle_region_clipping", "obstacle_clipping"]
 
 _CHUNK = 1 << 17
+_MAX_SECTIONS = 6  # 3^14 = 4.8e6 combinations a loop for 7 sections, even at NUM = 2
 
 
 def _apply(
@@ -108,7 +109,7 @@ class ObstacleProblem:
         section_length: ``l`` [cm].
         theta_max: bound on ``|θ_i|`` [rad].
         zones_xy: centres of the obstacle space zones in the plane XOY, shape ``(M, 2)`` [cm].
-        r_oba: radius of the obstacle space zones [cm].
+        r_oba: radius ``r0 + r_b`` of each obstacle space zone, shape ``(M,)`` [cm].
         r_target: radius of the target zones [cm].
         tank: the tank whose walls, other solids and panel rule also apply.
         radius: the arm's body radius for those [cm].
@@ -122,7 +123,7 @@ class ObstacleProblem:
     section_length: float
     theta_max: float
     zones_xy: NDArray[np.float64]
-    r_oba: float
+    r_oba: NDArray[np.float64]
     r_target: float
     tank: Tank
     radius: float
@@ -235,11 +236,11 @@ class ObstacleProblem:
         # Between two samples ``h = l/K`` apart the backbone can dip into a circle by up to
         # ``r − √(r² − h²/4)`` plus the arc's sagitta (under 0.1 cm): keep that much more.
         h = self.section_length / self.points_per_section
-        dip = self.r_oba - math.sqrt(max(self.r_oba**2 - h * h / 4, 0.0)) + 0.1
-        limit = (self.r_oba + dip + m) ** 2
         c, r = self.tank.panel.center, self.tank.panel.radius
         inside = z >= c[2]
-        for cx, cy in self.zones_xy:
+        for (cx, cy), r_oba in zip(self.zones_xy, self.r_oba):
+            dip = r_oba - math.sqrt(max(r_oba**2 - h * h / 4, 0.0)) + 0.1
+            limit = (r_oba + dip + m) ** 2
             ok &= ~np.any(inside & ((x - cx) ** 2 + (y - cy) ** 2 <= limit), axis=1)
         outside = (z < c[2]) & ((x - c[0]) ** 2 + (y - c[1]) ** 2 > (r - m) ** 2)
         ok &= ~np.any(outside, axis=1)
@@ -294,7 +295,8 @@ def obstacle_region_clipping(
     Args:
         problem: the problem.
         num: NUM, parts each interval is split into; lowered so that ``(NUM + 1)^2N`` stays
-            below about 2·10⁶.
+            below about 4·10⁶ (:func:`obstacle_clipping` does not try N ≥ 7, where even
+            NUM = 2 would exceed it).
         dtheta: stop when every step is below this [rad] (and the zone is ``r_target``).
         max_loops: safety bound on loops.
 
@@ -397,22 +399,24 @@ def obstacle_clipping(
     arm, tank = planner.arm, planner.tank
     spheres = [s for s in tank.obstacles if isinstance(s, Sphere)]
     zones = np.array([s.center[:2] for s in spheres], dtype=np.float64).reshape(-1, 2)
-    r_oba = max((s.radius for s in spheres), default=0.0) + arm.radius
+    r_oba = np.array([s.radius + arm.radius for s in spheres], dtype=np.float64)
     others = tuple(s for s in tank.solids if not isinstance(s, Sphere))
     check_tank = Tank(tank.name, tank.box_min, tank.box_max, tank.panel, obstacles=others,
                       walls=tank.walls)  # fmt: skip
     if len(zones):
         near = np.hypot(zones[:, 0] - target[0], zones[:, 1] - target[1])
-        if target[2] >= tank.panel.center[2] and near.min() <= r_oba:
-            name = spheres[int(np.argmin(near))].name or "an obstacle"
+        inside = np.flatnonzero(near <= r_oba)
+        if target[2] >= tank.panel.center[2] and len(inside):
+            i = int(inside[0])
             raise PlanningError(
-                f"Cannot reach the target: it lies in the obstacle space zone of {name} (the "
-                f"vertical cylinder of radius {r_oba:g} cm around it), which the tip may not enter"
+                f"Cannot reach the target: it lies in the obstacle space zone of "
+                f"{spheres[i].name or 'an obstacle'} (the vertical cylinder of radius "
+                f"{r_oba[i]:g} cm around it), which the tip may not enter"
             )
     zone = min(r_target, planner.tolerance) if refine else r_target
     tolerance = planner.tolerance if refine else r_target + 1e-6
     n_min = max(1, math.ceil(float(np.linalg.norm(target)) / arm.section_length - 1e-9))
-    n_max = min(n_min + planner.extra_sections, arm.max_sections)
+    n_max = min(n_min + planner.extra_sections, arm.max_sections, _MAX_SECTIONS)
     for n in range(n_min, n_max + 1):
         problem = ObstacleProblem(target, n, arm.section_length, arm.theta_max, zones, r_oba,
                                   zone, check_tank, arm.radius)  # fmt: skip
@@ -424,7 +428,8 @@ def obstacle_clipping(
         search_tip = result.posture.tip(arm.section_length)
         details = {
             "sections": n, "loops": result.loops, "evaluations": result.evaluations,
-            "mds": result.mds, "r_oba": r_oba, "zone_clearance_cm": problem.zone_clearance(posture),
+            "mds": result.mds, "r_oba": r_oba.tolist(),
+            "zone_clearance_cm": problem.zone_clearance(posture),
             "search_error_cm": float(np.linalg.norm(search_tip - target)),
         }  # fmt: skip
         try:
@@ -433,8 +438,20 @@ def obstacle_clipping(
         except PlanningError:
             continue
     where = ", ".join(f"{v:g}" for v in target)
+    if n_min > _MAX_SECTIONS:
+        raise PlanningError(
+            f"Cannot reach the target: ({where}) cm needs {n_min} sections; region clipping over "
+            f"every θ and φ searches at most {_MAX_SECTIONS} sections (with more, even its "
+            f"coarsest grid, 3^{2 * (_MAX_SECTIONS + 1)} combinations a loop, is too large)"
+        )
+    zones = ""
+    if len(r_oba):
+        zones = f" that keeps out of the obstacle zones (r_oba = {_radii(r_oba)} cm) and"
     raise PlanningError(
         f"Cannot reach the target: region clipping found no posture of {n_min} to {n_max} "
-        f"sections that keeps out of the obstacle zones (r_oba = {r_oba:g} cm) and reaches "
-        f"({where}) cm"
+        f"sections{zones} reaches ({where}) cm"
     )
+
+
+def _radii(r: NDArray[np.float64]) -> str:
+    return ", ".join(f"{v:g}" for v in np.unique(r))

@@ -266,7 +266,7 @@ def plan_trajectory(
         interpolation_steps: checked sub-steps of a continuation (damped least squares) move.
         bridge_seconds: RRT-Connect's budget for a move whose straight interpolation collides
             (0: no bridging, the move is reported as blocked).
-        seed: OMPL's seed for the bridges.
+        seed: OMPL's seed for the bridges (OMPL takes only the first seed of a process).
 
     """
     waypoints = [list(map(float, p)) for p in points] + [list(map(float, target))]
@@ -302,6 +302,8 @@ def plan_trajectory(
             chain[i] = align(chain[i], chain[prev])
             vias[prev] = []
         prev = i
+    # A waypoint the planner failed on but continuation reached has a posture after all.
+    out.failures = [f for f in failures if chain[f[0]] is None]
     previous: int | None = None
     for i, posture in enumerate(chain):
         if posture is None:
@@ -337,7 +339,7 @@ def _checked_move(
     if hit is None:
         return via
     if bridge_seconds > 0:
-        bridge = rrt_connect(planner.scene, previous, chosen, bridge_seconds, seed=seed + index)
+        bridge = rrt_connect(planner.scene, previous, chosen, bridge_seconds, seed=seed)
         if bridge.solved:
             out.bridged.append(index)
             return bridge.postures[1:-1]
