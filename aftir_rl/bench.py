@@ -40,6 +40,7 @@ densified path, the SB3 episode), median seconds per target.
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import os
 import platform
@@ -187,7 +188,7 @@ def posture_outcome(planner: Any, target: ArrayLike, method: str) -> Outcome:
     p = result.posture
     return Outcome(True, result.error_cm, result.clearance_cm, math.nan,
                    time.perf_counter() - start,
-                   posture={"dis": p.dis, "theta": list(p.theta), "phi": list(p.phi)})  # fmt: skip
+                   posture=p.to_dict())  # fmt: skip
 
 
 def q_table_outcome(
@@ -197,12 +198,10 @@ def q_table_outcome(
     import gymnasium as gym
 
     from aftir_rl.agents.q_table import QLearning, greedy_rollout
-    from aftir_rl.config import CONFIG_DIR
     from aftir_rl.posture.motion import densify, tip_path_length
     from aftir_rl.posture.trajectory import plan_trajectory
-    from aftir_rl.train import load_q_table_config
 
-    config = load_q_table_config(CONFIG_DIR / "q_table.yaml")
+    config = _q_table_config()
     start = time.perf_counter()
     try:
         env = gym.make("AFTIR-Tank-v0", tank=planner.tank, target=tuple(target))
@@ -219,20 +218,24 @@ def q_table_outcome(
     seconds = time.perf_counter() - start
     found = [p for p in trajectory.postures if p is not None]
     last = trajectory.postures[-1]
-    moves = dict(trajectory.moves)  # keyed by the waypoint each move starts from
-    motion: list[Any] = []
-    for i, planned in enumerate(trajectory.postures):
-        if planned is not None:
-            motion += [planned.posture, *moves.get(i, [])]
     note = f"{len(trajectory.blocked_moves)} of {len(trajectory.moves)} moves collide"
     return Outcome(
         trajectory.complete,
         last.error_cm if last is not None else math.nan,
         min((p.clearance_cm for p in found), default=math.nan),
-        tip_path_length(densify(motion), planner.arm.section_length),
+        tip_path_length(densify(trajectory.motion()), planner.arm.section_length),
         seconds,
         note=note if trajectory.blocked_moves else "",
     )
+
+
+@functools.cache
+def _q_table_config() -> Any:
+    """``configs/q_table.yaml``, read once per process."""
+    from aftir_rl.config import CONFIG_DIR
+    from aftir_rl.train import load_q_table_config
+
+    return load_q_table_config(CONFIG_DIR / "q_table.yaml")
 
 
 def rrt_outcome(planner: Any, target: ArrayLike, seconds: float = 10.0, seed: int = 0) -> Outcome:

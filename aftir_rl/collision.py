@@ -151,9 +151,12 @@ class CollisionScene:
         self._arms: dict[
             int, tuple[list[fcl.CollisionObject], fcl.DynamicAABBTreeCollisionManager]
         ] = {}
+        # For far_from_everything, which runs on every step of the arm env.
         bounds = [s.aabb() for s in tank.solids]
         self._solid_lo = np.array([b[0] for b in bounds]).reshape(-1, 3)
         self._solid_hi = np.array([b[1] for b in bounds]).reshape(-1, 3)
+        self._box_lo = np.array(tank.box_min, dtype=np.float64)
+        self._box_hi = np.array(tank.box_max, dtype=np.float64)
 
     def __getstate__(self) -> dict[str, object]:
         # fcl objects do not pickle; a copy rebuilds them (envs are pickled by vector wrappers).
@@ -196,8 +199,10 @@ class CollisionScene:
 
     def collides(self, posture: Posture) -> bool:
         """True if the arm touches a solid or wall, or breaks the panel rule."""
-        if not self.panel_ok(posture):
-            return True
+        return not self.panel_ok(posture) or self._touches(posture)
+
+    def _touches(self, posture: Posture) -> bool:
+        """Whether python-fcl finds a capsule of the arm touching a solid or wall."""
         data = fcl.CollisionData()
         self._scene.collide(self._place(posture), data, fcl.defaultCollisionCallback)
         return bool(data.result.is_collision)
@@ -244,7 +249,7 @@ class CollisionScene:
             return False
         if not self.walls:
             return True
-        lo, hi = np.array(self.tank.box_min), np.array(self.tank.box_max)
+        lo, hi = self._box_lo, self._box_hi
         if (points[:, :2] <= lo[:2] + clear).any() or (points >= hi - clear).any():
             return False
         c, r = self.tank.panel.center, self.tank.panel.radius
@@ -279,9 +284,7 @@ class CollisionScene:
             return True
         if self.far_from_everything(pts, self.arm.radius + self.sample_margin(k)):
             return False
-        data = fcl.CollisionData()
-        self._scene.collide(self._place(posture), data, fcl.defaultCollisionCallback)
-        return bool(data.result.is_collision)
+        return self._touches(posture)
 
     def collides_batch(self, dis: ArrayLike, theta: ArrayLike, phi: ArrayLike) -> NDArray[np.bool_]:
         """:meth:`collides` for postures stacked as arrays ``(B,)``, ``(B, N)``, ``(B, N)``."""

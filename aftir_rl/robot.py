@@ -101,6 +101,10 @@ class Posture:
         """The joint vector ``(dis, θ_1..θ_N, φ_1..φ_N)``."""
         return np.concatenate([[self.dis], self.theta, self.phi])
 
+    def to_dict(self) -> dict[str, float | list[float]]:
+        """``{"dis", "theta", "phi"}`` for JSON; ``Posture(**d)`` reads it back."""
+        return {"dis": self.dis, "theta": list(self.theta), "phi": list(self.phi)}
+
     @classmethod
     def from_vector(cls, x: ArrayLike) -> Posture:
         """The posture of a joint vector ``(dis, θ_1..θ_N, φ_1..φ_N)``."""

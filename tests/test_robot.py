@@ -119,3 +119,13 @@ def test_bad_inputs_raise():
         ArmSpec(section_length=-1)
     with pytest.raises(ValueError, match="one value per section"):
         Posture(0.0, (0.1, 0.2), (0.0,))
+
+
+def test_posture_vector_and_dict_round_trip():
+    p = Posture(-12.5, (0.1, -0.2, 0.3), (1.0, 2.0, -3.0))
+    x = p.to_vector()
+    np.testing.assert_array_equal(x, [-12.5, 0.1, -0.2, 0.3, 1.0, 2.0, -3.0])
+    assert Posture.from_vector(x) == p
+    assert Posture(**p.to_dict()) == p
+    with pytest.raises(ValueError, match="1 \\+ 2N values"):
+        Posture.from_vector([0.0, 1.0])

@@ -131,7 +131,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     def posture(self) -> Posture:
         """The current joint variables."""
         s = self._state
-        return Posture(s[0], s[1 : self.n + 1], s[self.n + 1 :])
+        return Posture.from_vector(s)
 
     def _points(self, state: NDArray[np.float64], k: int) -> NDArray[np.float64]:
         return body_points(state[0], state[1 : self.n + 1], state[self.n + 1 :], self.l, k)
@@ -152,7 +152,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             # Every backbone sample is more than radius + margin from every solid's bounds and the
             # walls; the panel rule still needs checking (it is not a distance).
             return bool(panel_violation(self.tank, pts[None])[0]), clear
-        report = self.scene.check(Posture(state[0], state[1 : self.n + 1], state[self.n + 1 :]))
+        report = self.scene.check(Posture.from_vector(state))
         return report.collides, max(report.clearance_cm, 0.0)
 
     def _draw_target(self) -> NDArray[np.float64]:

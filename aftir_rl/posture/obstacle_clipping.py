@@ -114,7 +114,6 @@ class ObstacleProblem:
         tank: the tank whose walls, other solids and panel rule also apply.
         radius: the arm's body radius for those [cm].
         points_per_section: backbone points per section for zones, MDS and checks.
-        margin: extra distance kept from zones, panel rim and solids [cm].
 
     """
 
@@ -128,17 +127,10 @@ class ObstacleProblem:
     tank: Tank
     radius: float
     points_per_section: int = 10
-    margin: float = 0.0
 
     def split(self, x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``(θ, φ)`` from combinations ``x`` of shape ``(B, 2N)``."""
         return x[:, : self.n_sections], x[:, self.n_sections :]
-
-    def gap(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Horizontal distance of the tips of combinations ``x`` to the target [cm]."""
-        theta, phi = self.split(x)
-        tips = tip_position(0.0, theta, phi, self.section_length)
-        return np.hypot(tips[:, 0] - self.target[0], tips[:, 1] - self.target[1])
 
     def zone_for_step(self, step: NDArray[np.float64]) -> float:
         """Reaching radius that accepts the nearest grid point of any exact solution."""
@@ -148,7 +140,7 @@ class ObstacleProblem:
 
     def evaluate_grid(
         self, values: list[NDArray[np.float64]], zone: float, tight: float
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Every combination of the per-angle ``values`` (θ_1..θ_N, then φ_1..φ_N).
 
         The grid is a product, so the frame at the end of sections ``1..i`` is shared by all
@@ -157,8 +149,9 @@ class ObstacleProblem:
         are only computed for the combinations that reach the zone.
 
         Returns:
-            The reaching, feasible combinations ``(S, 2N)``, their ``dis`` and MDS: those within
-            ``tight`` of the target's vertical when any of them is feasible.
+            The reaching, feasible combinations ``(S, 2N)``, their ``dis``, MDS and horizontal
+            tip distance to the target [cm]: those within ``tight`` of the target's vertical
+            when any of them is feasible.
 
         """
         n, l, k = self.n_sections, self.section_length, self.points_per_section
@@ -180,17 +173,22 @@ class ObstacleProblem:
         dis = self.target[2] - tips[:, 2]
         ok = (gap <= zone) & (dis <= 0.0) & (dis >= -n * l)
         grid = _Grid([len(p) for p in pairs], pairs, prefix, local_pts)
-        out = self._survivors(np.flatnonzero(ok & (gap <= tight)), dis, grid)
+        out = self._survivors(np.flatnonzero(ok & (gap <= tight)), dis, gap, grid)
         if len(out[0]) or tight >= zone:
             return out
-        return self._survivors(np.flatnonzero(ok), dis, grid)
+        return self._survivors(np.flatnonzero(ok), dis, gap, grid)
 
     def _survivors(
-        self, idx: NDArray[np.intp], dis: NDArray[np.float64], grid: _Grid
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        self,
+        idx: NDArray[np.intp],
+        dis: NDArray[np.float64],
+        gap: NDArray[np.float64],
+        grid: _Grid,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Feasibility and MDS of the combinations ``idx`` of ``grid``, in chunks."""
         n = self.n_sections
         xs, ds, ms = [np.zeros((0, 2 * n))], [np.zeros(0)], [np.zeros(0)]
+        gs = [np.zeros(0)]
         for begin in range(0, len(idx), _CHUNK):
             part = idx[begin : begin + _CHUNK]
             choice = np.unravel_index(part, grid.sizes)
@@ -210,27 +208,20 @@ class ObstacleProblem:
             xs.append(x[good])
             ds.append(d[good])
             ms.append(mds[good])
-        return np.concatenate(xs), np.concatenate(ds), np.concatenate(ms)
+            gs.append(gap[part][good])
+        return np.concatenate(xs), np.concatenate(ds), np.concatenate(ms), np.concatenate(gs)
 
     def feasible(
-        self,
-        theta: NDArray[np.float64],
-        phi: NDArray[np.float64],
-        dis: NDArray[np.float64],
-        margin: float | None = None,
+        self, theta: NDArray[np.float64], phi: NDArray[np.float64], dis: NDArray[np.float64]
     ) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
         """Which postures clear the zones, walls, other solids and panel rule, and their MDS."""
         pts = body_points(dis, theta, phi, self.section_length, self.points_per_section)
-        return self.feasible_points(pts, margin)
+        return self.feasible_points(pts)
 
     def feasible_points(
-        self, pts: NDArray[np.float64], margin: float | None = None
+        self, pts: NDArray[np.float64]
     ) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
-        """:meth:`feasible` on backbone points ``(B, P, 3)`` (``dis`` applied).
-
-        The MDS is inf where infeasible; ``margin`` defaults to the problem's.
-        """
-        m = self.margin if margin is None else margin
+        """:meth:`feasible` on backbone points ``(B, P, 3)`` (``dis`` applied), MDS inf if not."""
         x, y, z = pts[..., 0], pts[..., 1], pts[..., 2]
         ok = np.ones(len(pts), dtype=bool)
         # Between two samples ``h = l/K`` apart the backbone can dip into a circle by up to
@@ -240,13 +231,13 @@ class ObstacleProblem:
         inside = z >= c[2]
         for (cx, cy), r_oba in zip(self.zones_xy, self.r_oba):
             dip = r_oba - math.sqrt(max(r_oba**2 - h * h / 4, 0.0)) + 0.1
-            limit = (r_oba + dip + m) ** 2
+            limit = (r_oba + dip) ** 2
             ok &= ~np.any(inside & ((x - cx) ** 2 + (y - cy) ** 2 <= limit), axis=1)
-        outside = (z < c[2]) & ((x - c[0]) ** 2 + (y - c[1]) ** 2 > (r - m) ** 2)
+        outside = (z < c[2]) & ((x - c[0]) ** 2 + (y - c[1]) ** 2 > r * r)
         ok &= ~np.any(outside, axis=1)
         idx = np.flatnonzero(ok)
         if len(idx) and (self.tank.walls or self.tank.solids):
-            ok[idx] = points_clear(self.tank, pts[idx], self.radius + m)
+            ok[idx] = points_clear(self.tank, pts[idx], self.radius)
         mds = np.full(len(pts), np.inf)
         mds[ok] = self.mds(pts[ok])
         return ok, mds
@@ -313,13 +304,13 @@ def obstacle_region_clipping(
         evaluations += (num + 1) ** (2 * n)
         # Prefer tips within a tenth of the bound when any is feasible: MDS ranks a loose
         # zone's combinations poorly (a short tip has a small MDS), as in region_clipping.
-        x, dis, mds = problem.evaluate_grid(values, zone, max(problem.r_target, 0.1 * zone))
+        tight = max(problem.r_target, 0.1 * zone)
+        x, dis, mds, gap = problem.evaluate_grid(values, zone, tight)
         if len(x) == 0:
             break
         # Outside the tight zone, MDS alone would pick tips far short of the target (a short
         # arm hugs the reference line): take the least MDS among the nearest tips.
-        gap = problem.gap(x)
-        near = gap <= max(problem.r_target, 0.1 * zone, 2.0 * float(gap.min()))
+        near = gap <= max(tight, 2.0 * float(gap.min()))
         i = int(np.flatnonzero(near)[np.argmin(mds[near])])
         theta, phi = problem.split(x[i : i + 1])
         best = ClippingResult(Posture(dis[i], theta[0], phi[0]), float(mds[i]), loop, evaluations)
@@ -361,7 +352,7 @@ def refine_obstacle(
     if np.linalg.norm(tip[:2] - problem.target[:2]) >= max(tol, 1e-6):
         return None
     dis = float(problem.target[2] - tip[2])
-    ok, _ = problem.feasible(theta[None], phi[None], np.array([dis]), margin=0.0)
+    ok, _ = problem.feasible(theta[None], phi[None], np.array([dis]))
     if not ok[0] or not -n * l <= dis <= 0.0:
         return None
     return Posture(dis, theta, phi)

@@ -103,9 +103,7 @@ class PlannedPosture:
     def to_json(self) -> dict[str, Any]:
         """The posture JSON of design.md §5."""
         return {
-            "dis": self.posture.dis,
-            "theta": list(self.posture.theta),
-            "phi": list(self.posture.phi),
+            **self.posture.to_dict(),
             "section_length": self.section_length,
             "tip": [float(v) for v in self.tip],
             "target": [float(v) for v in self.target],

@@ -100,12 +100,17 @@ class Trajectory:
             "max_dis_step_cm": self.max_dis_step_cm,
             "fallbacks": self.fallbacks,
             "bridged_moves": self.bridged,
-            "moves": [{"from": i, "via": [_posture_json(p) for p in via]} for i, via in self.moves],
+            "moves": [{"from": i, "via": [p.to_dict() for p in via]} for i, via in self.moves],
         }
 
-
-def _posture_json(p: Posture) -> dict[str, Any]:
-    return {"dis": p.dis, "theta": list(p.theta), "phi": list(p.phi)}
+    def motion(self) -> list[Posture]:
+        """Every posture the arm takes, in order: waypoints and the moves' via postures."""
+        vias = dict(self.moves)  # keyed by the waypoint each move starts from
+        out: list[Posture] = []
+        for i, planned in enumerate(self.postures):
+            if planned is not None:
+                out += [planned.posture, *vias.get(i, [])]
+        return out
 
 
 def pad_sections(posture: Posture, n_sections: int, section_length: float) -> Posture:
@@ -121,6 +126,20 @@ def pad_sections(posture: Posture, n_sections: int, section_length: float) -> Po
     )
 
 
+def _central_probes(x: np.ndarray, h: float) -> np.ndarray:
+    """``x + h·e_i`` for every joint ``i``, then ``x − h·e_i``: shape ``(2m, m)``."""
+    step = np.eye(len(x)) * h
+    return np.vstack([x + step, x - step])
+
+
+def _within_limits(planner: Planner, x: np.ndarray) -> np.ndarray:
+    """``x`` with ``|θ| ≤ θ_max`` and ``dis ≤ 0`` (the linear module stays outside)."""
+    n = (len(x) - 1) // 2
+    x[1 : n + 1] = np.clip(x[1 : n + 1], -planner.arm.theta_max, planner.arm.theta_max)
+    x[0] = min(x[0], 0.0)
+    return x
+
+
 def _tip_jacobian(
     x: np.ndarray, n: int, l: float, h: float = 1e-6
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -128,9 +147,7 @@ def _tip_jacobian(
 
     Sections still inside the guide (ending below the floor) are frozen straight.
     """
-    probe = np.repeat(x[None], 2 * len(x) + 1, axis=0)
-    probe[1 : len(x) + 1] += np.eye(len(x)) * h
-    probe[len(x) + 1 :] -= np.eye(len(x)) * h
+    probe = np.vstack([x, _central_probes(x, h)])
     tips = tip_position(probe[:, 0], probe[:, 1 : n + 1], probe[:, n + 1 :], l)
     jac = ((tips[1 : len(x) + 1] - tips[len(x) + 1 :]) / (2 * h)).T
     ends = x[0] + l * np.arange(1, n + 1)
@@ -163,16 +180,14 @@ def continue_posture(
 def _solve_tip(
     planner: Planner, x: np.ndarray, goal: np.ndarray, tol: float, iterations: int, damping: float
 ) -> np.ndarray:
-    l, tmax = planner.arm.section_length, planner.arm.theta_max
     n = (len(x) - 1) // 2
     for _ in range(iterations):
-        tip, jac = _tip_jacobian(x, n, l)
+        tip, jac = _tip_jacobian(x, n, planner.arm.section_length)
         error = tip - goal
         if np.linalg.norm(error) < tol:
             break
-        x = x - jac.T @ np.linalg.solve(jac @ jac.T + damping**2 * np.eye(3), error)
-        x[1 : n + 1] = np.clip(x[1 : n + 1], -tmax, tmax)
-        x[0] = min(x[0], 0.0)
+        step = jac.T @ np.linalg.solve(jac @ jac.T + damping**2 * np.eye(3), error)
+        x = _within_limits(planner, x - step)
     return x
 
 
@@ -198,20 +213,14 @@ def _null_space_step(
 ) -> np.ndarray | None:
     """One descent step on ``objective`` that leaves the tip where it is (to first order)."""
     n = (len(x) - 1) // 2
-    probe = np.repeat(x[None], 2 * len(x), axis=0)
-    probe[: len(x)] += np.eye(len(x)) * h
-    probe[len(x) :] -= np.eye(len(x)) * h
-    value = objective(probe)
+    value = objective(_central_probes(x, h))
     grad = (value[: len(x)] - value[len(x) :]) / (2 * h)
     _, jac = _tip_jacobian(x, n, planner.arm.section_length)
     step = -(grad - np.linalg.pinv(jac) @ (jac @ grad))
     size = np.max(np.abs(step))
     if size < 1e-12:
         return None
-    x = x + step * min(1.0, max_step / size)
-    x[1 : n + 1] = np.clip(x[1 : n + 1], -planner.arm.theta_max, planner.arm.theta_max)
-    x[0] = min(x[0], 0.0)
-    return x
+    return _within_limits(planner, x + step * min(1.0, max_step / size))
 
 
 def repair_posture(
