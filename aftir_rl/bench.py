@@ -21,7 +21,8 @@ Methods:
 - ``q_table+postures`` (seed 002's pipeline): tabular Q-learning on ``AFTIR-Tank-v0``
   (``configs/q_table.yaml``), its greedy cell path, and a posture for every cell
   (:func:`~aftir_rl.posture.trajectory.plan_trajectory`); success is a complete trajectory
-  (every waypoint a posture, every move collision-free when checked densely).
+  (every waypoint a posture, every move collision-free when checked densely; a colliding move
+  gets ``--bridge-seconds`` of RRT-Connect, :func:`~aftir_rl.posture.motion.bridge`).
 - ``rrt_connect``: OMPL's RRT-Connect in joint space from the start posture (the arm straight,
   its tip at the tank's start point) to the planner's posture for the target, with our forward
   kinematics and python-fcl scene as its validity checker
@@ -56,6 +57,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from aftir_rl.atomic import write_json
+from aftir_rl.config import DEFAULT_BRIDGE_SECONDS
 from aftir_rl.errors import AftirError, PlanningError
 
 __all__ = ["Outcome", "Row", "target_sets", "run_benchmark", "format_table", "main"]
@@ -192,7 +194,7 @@ def posture_outcome(planner: Any, target: ArrayLike, method: str) -> Outcome:
 
 
 def q_table_outcome(
-    planner: Any, target: ArrayLike, seed: int = 0, bridge_seconds: float = 0.0
+    planner: Any, target: ArrayLike, seed: int = 0, bridge_seconds: float = DEFAULT_BRIDGE_SECONDS
 ) -> Outcome:
     """Seed 002's pipeline on one target: Q-learning, greedy path, postures along it."""
     import gymnasium as gym
@@ -240,8 +242,7 @@ def _q_table_config() -> Any:
 
 def rrt_outcome(planner: Any, target: ArrayLike, seconds: float = 10.0, seed: int = 0) -> Outcome:
     """RRT-Connect from the start posture to the planner's posture for ``target``."""
-    from aftir_rl.posture.motion import densify, rrt_connect, tip_path_length
-    from aftir_rl.posture.trajectory import pad_sections
+    from aftir_rl.posture.motion import densify, pad_sections, rrt_connect, tip_path_length
     from aftir_rl.robot import Posture
 
     try:
@@ -304,6 +305,7 @@ def run_benchmark(
     rrt_seconds: float = 10.0,
     seed: int = 0,
     models: Sequence[str | Path] = (),
+    bridge_seconds: float = DEFAULT_BRIDGE_SECONDS,
     progress: Callable[[str], None] | None = None,
 ) -> list[Row]:
     """Run every method of ``methods`` (default :data:`METHODS_FOR`) on its target sets."""
@@ -318,7 +320,7 @@ def run_benchmark(
                 if progress:
                     progress(f"{name} {method} {tuple(np.round(target, 1))}")
                 if method == "q_table+postures":
-                    row.outcomes.append(q_table_outcome(planner, target, seed))
+                    row.outcomes.append(q_table_outcome(planner, target, seed, bridge_seconds))
                 elif method == "rrt_connect":
                     row.outcomes.append(rrt_outcome(planner, target, rrt_seconds, seed))
                 else:
@@ -372,6 +374,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=7, help="seed of the random targets")
     parser.add_argument("--rrt-seconds", type=float, default=10.0, metavar="S",
                         help="RRT-Connect's budget per target (default 10)")  # fmt: skip
+    parser.add_argument("--bridge-seconds", type=float, default=DEFAULT_BRIDGE_SECONDS,
+                        metavar="S", help="RRT-Connect's budget per colliding move of a "
+                        f"q_table+postures trajectory, 0 for none (default "
+                        f"{DEFAULT_BRIDGE_SECONDS:g})")  # fmt: skip
     parser.add_argument(
         "--model",
         action="append",
@@ -384,6 +390,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.n_random < 1 or not 0 < args.rrt_seconds < math.inf:
         parser.error("--n-random must be at least 1 and --rrt-seconds positive and finite")
+    if not 0 <= args.bridge_seconds < math.inf:
+        parser.error("--bridge-seconds must be a finite 0 or more")
     problem = _check_inputs(args.model, args.json)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
@@ -393,7 +401,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         sets = {k: v for k, v in target_sets(args.n_random, args.seed).items() if k in args.sets}
         progress = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
         rows = run_benchmark(sets, rrt_seconds=args.rrt_seconds, models=args.model,
-                             progress=progress)  # fmt: skip
+                             progress=progress, bridge_seconds=args.bridge_seconds)  # fmt: skip
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

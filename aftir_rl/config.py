@@ -26,6 +26,10 @@ CONFIG_DIR = Path(
     os.environ.get("AFTIR_RL_CONFIG_DIR", Path(__file__).resolve().parent.parent / "configs")
 )
 
+#: RRT-Connect's budget [s] for each colliding move of a joint trajectory (used by
+#: :func:`aftir_rl.posture.trajectory.plan_trajectory`, ``train q_table``, ``bench``, ``evaluate``).
+DEFAULT_BRIDGE_SECONDS = 10.0
+
 
 def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read a YAML file that must hold a mapping.

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from aftir_rl.atomic import write_json
-from aftir_rl.config import CONFIG_DIR, from_mapping, read_yaml
+from aftir_rl.config import CONFIG_DIR, DEFAULT_BRIDGE_SECONDS, from_mapping, read_yaml
 from aftir_rl.errors import AftirError, CheckpointError, ConfigError
 
 __all__ = ["main", "train_q_table", "load_q_table_config"]
@@ -102,7 +102,7 @@ def train_q_table(
     resume: str | Path | None = None,
     progress_bar: bool = True,
     postures: bool = True,
-    bridge_seconds: float = 0.0,
+    bridge_seconds: float = DEFAULT_BRIDGE_SECONDS,
 ) -> list[dict[str, Any]]:
     """Train one Q-table per target and write a run directory for each.
 
@@ -117,7 +117,7 @@ def train_q_table(
         postures: turn the greedy path into joint variables (``trajectory.json``, a picture of
             the arm under ``paths/<target>_arm``).
         bridge_seconds: RRT-Connect's budget for each move of that trajectory that collides
-            (0: none).
+            (0: none; see :func:`aftir_rl.posture.motion.bridge`).
 
     Returns:
         One summary dict per target (what ``path.json`` holds, plus ``run_dir`` and ``seconds``).
@@ -261,6 +261,7 @@ def _log_trajectory(
         "failures": [f"waypoint {i} {pt}: {why}" for i, pt, why in trajectory.failures],
         "moves": len(trajectory.moves),
         "blocked_moves": len(trajectory.blocked_moves),
+        "bridged_moves": len(trajectory.bridged),
         "max_joint_step_deg": trajectory.max_joint_step_deg,
     }
     logger.record("eval/postures_found", len(found) / len(trajectory.waypoints))
@@ -363,7 +364,8 @@ def _print_summary(s: dict[str, Any]) -> None:
         t = s["trajectory"]
         print(
             f"  postures: {t['postures']}/{t['waypoints']} waypoints; {t['blocked_moves']} of "
-            f"{t['moves']} moves collide; largest joint step {t['max_joint_step_deg']:.0f} deg"
+            f"{t['moves']} moves collide ({t['bridged_moves']} bridged by RRT-Connect); "
+            f"largest joint step {t['max_joint_step_deg']:.0f} deg"
         )
         for failure in t["failures"]:
             print(f"  no posture at {failure}")
@@ -407,9 +409,10 @@ def _parser() -> argparse.ArgumentParser:
     q.add_argument(
         "--bridge-seconds",
         type=float,
-        default=0.0,
+        default=DEFAULT_BRIDGE_SECONDS,
         metavar="S",
-        help="let RRT-Connect try S seconds on each colliding move of the postures (default 0)",
+        help="RRT-Connect's budget for each colliding move of the postures, 0 for none "
+        f"(default {DEFAULT_BRIDGE_SECONDS:g})",
     )
     for algo in ("ppo", "sac", "td3"):
         p = sub.add_parser(

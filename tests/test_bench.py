@@ -87,6 +87,7 @@ def test_bench_cli(tmp_path):
     (["--model", "{bad_run}"], "config.json is missing or not a training run's"),
     (["--n-random", "0"], "--n-random must be at least 1"),
     (["--rrt-seconds", "nan"], "--rrt-seconds positive and finite"),
+    (["--bridge-seconds", "-1"], "--bridge-seconds must be a finite 0 or more"),
     (["--json", "/nonexistent/dir/out.json"], "cannot write in"),
 ])  # fmt: skip
 def test_bench_cli_rejects_bad_input(tmp_path, args, message):

@@ -9,8 +9,11 @@ from aftir_rl.collision import CollisionScene
 from aftir_rl.posture import Planner
 from aftir_rl.posture.motion import (
     align,
+    bending_plane,
+    bridge,
     densify,
     first_collision,
+    in_plane,
     joint_distance,
     rrt_connect,
     tip_path_length,
@@ -147,3 +150,36 @@ def test_trajectory_moves_are_what_it_reports(planner):
     assert trajectory.complete == (not blocked)
     data = trajectory.to_json()
     assert len(data["moves"]) == len(points) and data["complete"] == trajectory.complete
+
+
+def test_in_plane_is_the_same_arm():
+    # Sections bent in phi = 0.4 and in 0.4 + pi (the other way round), and a straight one.
+    p = Posture(-80.0, (0.3, 0.0, 0.7, 1.2), (0.4, 2.0, 0.4 + math.pi, 0.4 - math.pi))
+    assert bending_plane(p) == pytest.approx(0.4)
+    q = in_plane(p, bending_plane(p))
+    np.testing.assert_allclose(q.points(50, 6), p.points(50, 6), atol=1e-9)
+    assert np.allclose(q.phi, 0.4) and q.theta[:3] == pytest.approx((0.3, 0.0, -0.7))
+    skew = Posture(-80.0, (0.3, 0.5), (0.4, 1.4))
+    assert bending_plane(skew) is None
+    with pytest.raises(ValueError, match="bend out of the plane"):
+        in_plane(skew, 0.4)
+
+
+def test_bridge_the_first_move_along_the_floor(planner):
+    # From the start cell's centre to the next cell along the floor: continuation fails there and
+    # the straight joint interpolation to TGA's hooked posture collides at once. Both postures
+    # bend in the plane phi = 0 with at most 4 sections out, so the bridge searches 5 joints.
+    n, l = 8, 50
+    start = pad_sections(planner.plan((10, 0, 10)).posture, n, l)
+    goal = align(pad_sections(planner.plan((30, 0, 10)).posture, n, l), start)
+    scene = CollisionScene(planner.tank)
+    assert first_collision(scene, densify([start, goal])) is not None
+    assert bending_plane(start, goal) is not None
+    plan = bridge(planner.scene, start, goal, time_limit=30)
+    assert plan.solved, plan.reason
+    assert plan.postures[0] == start and plan.postures[-1] == goal
+    assert all(p.n_sections == n for p in plan.postures)
+    # Independent check: every densified posture with fcl itself, not the fast pre-check.
+    dense = densify(plan.postures)
+    assert not any(scene.collides(p) for p in dense)
+    assert max(abs(t) for p in dense for t in p.theta) <= planner.arm.theta_max + 1e-9

@@ -40,6 +40,10 @@ from aftir_rl.robot import Posture, tip_position
 __all__ = [
     "MotionPlan",
     "align",
+    "bending_plane",
+    "bridge",
+    "in_plane",
+    "pad_sections",
     "densify",
     "first_collision",
     "joint_distance",
@@ -74,6 +78,49 @@ def align(posture: Posture, reference: Posture, straight: float = 1e-9) -> Postu
     phi = ref_phi + _wrap(phi - ref_phi)
     phi = np.where(np.abs(theta) <= straight, ref_phi, phi)
     return Posture(posture.dis, theta, phi)
+
+
+def pad_sections(posture: Posture, n_sections: int, section_length: float) -> Posture:
+    """The same arm with straight sections added at its base to reach ``n_sections``."""
+    extra = n_sections - posture.n_sections
+    if extra < 0:
+        raise ValueError(f"cannot pad {posture.n_sections} sections down to {n_sections}")
+    first_phi = posture.phi[0] if posture.phi else 0.0
+    return Posture(
+        posture.dis - extra * section_length,
+        (0.0,) * extra + posture.theta,
+        (first_phi,) * extra + posture.phi,
+    )
+
+
+def bending_plane(*postures: Posture, tol: float = 1e-6) -> float | None:
+    """The one plane ``φ`` (mod π) that every bent section of the postures bends in, or None.
+
+    Postures in one plane through the panel axis are planar arms: the whole arm stays in that
+    plane when only ``dis`` and the (signed) ``θ_i`` change.
+    """
+    phis = [phi for p in postures for theta, phi in zip(p.theta, p.phi) if abs(theta) > tol]
+    if not phis:
+        return postures[0].phi[0] if postures and postures[0].phi else 0.0
+    offsets = _wrap(2 * (np.array(phis) - phis[0])) / 2
+    return float(phis[0]) if np.all(np.abs(offsets) < tol) else None
+
+
+def in_plane(posture: Posture, plane: float, tol: float = 1e-6) -> Posture:
+    """``posture`` written with every ``φ_i = plane`` and signed ``θ_i`` (the same arm).
+
+    Raises:
+        ValueError: a bent section does not bend in ``plane`` (nor in ``plane + π``).
+
+    """
+    theta, phi = np.array(posture.theta), np.array(posture.phi)
+    offset = _wrap(phi - plane)
+    bent = np.abs(theta) > tol
+    off_plane = bent & (np.abs(_wrap(2 * offset)) > 2 * tol)
+    if np.any(off_plane):
+        raise ValueError(f"sections {np.flatnonzero(off_plane).tolist()} bend out of the plane")
+    sign = np.where(np.abs(offset) > math.pi / 2, -1.0, 1.0)
+    return Posture(posture.dis, np.where(bent, theta * sign, 0.0), np.full(len(theta), plane))
 
 
 def joint_distance(a: Posture, b: Posture, section_length: float) -> float:
@@ -159,6 +206,7 @@ def rrt_connect(
     seed: int = 0,
     simplify: bool = True,
     resolution: float = 0.002,
+    plane: float | None = None,
 ) -> MotionPlan:
     """OMPL's RRT-Connect from ``start`` to ``goal`` in the joint space of the arm.
 
@@ -172,6 +220,8 @@ def rrt_connect(
             same calls repeats its results.
         simplify: shortcut the path with OMPL's simplifier.
         resolution: OMPL's edge-check resolution, a fraction of the space's extent.
+        plane: plan in this one bending plane [rad]: every ``φ_i`` is held at ``plane`` and
+            only ``dis`` and the ``θ_i`` (signed) move. Both postures must lie in it.
 
     Returns:
         The plan; ``solved`` is False with a reason when no path was found in time or our dense
@@ -195,12 +245,16 @@ def rrt_connect(
         ou.RNG.setSeed(int(seed) + 1)  # OMPL takes 0 for "pick one"
         _SEEDED = True
     x0, x1 = start.to_vector(), goal.to_vector()
+    if plane is not None:
+        x0, x1 = in_plane(start, plane).to_vector(), in_plane(goal, plane).to_vector()
     low = np.concatenate([[min(x0[0], x1[0], -n * l) / l], np.full(n, -tmax),
                           np.minimum(x0[n + 1 :], x1[n + 1 :]) - math.pi])  # fmt: skip
     high = np.concatenate([[max(x0[0], x1[0], 0.0) / l], np.full(n, tmax),
                            np.maximum(x0[n + 1 :], x1[n + 1 :]) + math.pi])  # fmt: skip
-    space = ob.RealVectorStateSpace(1 + 2 * n)
-    bounds = ob.RealVectorBounds(1 + 2 * n)
+    dims = 1 + (n if plane is not None else 2 * n)
+    low, high, x0, x1 = low[:dims], high[:dims], x0[:dims], x1[:dims]
+    space = ob.RealVectorStateSpace(dims)
+    bounds = ob.RealVectorBounds(dims)
     for i, (lo, hi) in enumerate(zip(low, high)):
         bounds.setLow(i, float(lo))
         bounds.setHigh(i, float(hi))
@@ -209,8 +263,10 @@ def rrt_connect(
     checks = [0]
 
     def to_posture(state: object) -> Posture:
-        x = np.array([state[i] for i in range(1 + 2 * n)])  # type: ignore[index]
+        x = np.array([state[i] for i in range(dims)])  # type: ignore[index]
         x[0] *= l
+        if plane is not None:
+            return Posture(x[0], x[1:], np.full(n, plane))
         return Posture.from_vector(x)
 
     def valid(state: object) -> bool:
@@ -233,8 +289,10 @@ def rrt_connect(
         if simplify:
             setup.simplifySolution(max(0.1, time_limit / 10))
         path = setup.getSolutionPath()
-        postures = [to_posture(path.getState(i)) for i in range(path.getStateCount())]
-        postures[0], postures[-1] = start, goal
+        postures = [start]
+        for i in range(1, path.getStateCount() - 1):
+            postures.append(align(to_posture(path.getState(i)), postures[-1]))
+        postures.append(goal)
         hit = first_collision(scene, densify(postures))
         if hit is None:
             plan.postures, plan.solved = postures, True
@@ -246,5 +304,64 @@ def rrt_connect(
     # Drop OMPL's objects (and the callback's reference cycle) now, not at interpreter exit.
     del setup, states, space, bounds, valid
     gc.collect()
+    plan.seconds = time.perf_counter() - began
+    return plan
+
+
+def bridge(
+    scene: CollisionScene,
+    start: Posture,
+    goal: Posture,
+    time_limit: float = 10.0,
+    seed: int = 0,
+) -> MotionPlan:
+    """RRT-Connect from ``start`` to ``goal`` in the smallest joint space the two share.
+
+    Two reductions keep the search small; each leaves a path that is a path of the full arm:
+
+    - leading sections that are straight in both postures (the ones still in the guide, or
+      padding) stay straight: the arm is planned without them, its base raised by their length;
+    - when every bent section of both postures bends in one plane through the panel axis (TGA
+      postures do), the search runs in that plane: ``dis`` and the signed ``θ_i`` only.
+
+    A plane search that finds nothing gives the rest of the budget to the full reduced space. A
+    path that OMPL accepts but our dense check does not is planned again with a 4x finer edge
+    resolution while time is left. The returned postures have ``start``'s sections.
+    """
+    began = time.perf_counter()
+    n, l = start.n_sections, scene.arm.section_length
+    goal = align(goal, start)
+    keep = 0
+    while keep < n - 1 and abs(start.theta[keep]) < 1e-9 and abs(goal.theta[keep]) < 1e-9:
+        keep += 1
+
+    def strip(p: Posture) -> Posture:
+        return Posture(p.dis + keep * l, p.theta[keep:], p.phi[keep:])
+
+    a, b = strip(start), strip(goal)
+    plane = bending_plane(a, b)
+    attempts = [plane, None] if plane is not None else [None]
+    plan = MotionPlan(reason="no time left")
+    resolution = 0.002
+    for k, attempt in enumerate(attempts):
+        while True:
+            left = time_limit - (time.perf_counter() - began)
+            budget = left / 2 if (k == 0 and len(attempts) == 2) else left
+            if budget <= 0.05:
+                break
+            plan = rrt_connect(scene, a, b, budget, seed, resolution=resolution, plane=attempt)
+            if plan.solved or "between its edge checks" not in plan.reason:
+                break
+            resolution /= 4
+        if plan.solved:
+            break
+    if plan.solved:
+        padded = [start]
+        for p in plan.postures[1:-1]:
+            padded.append(align(pad_sections(p, n, l), padded[-1]))
+        plan.postures = [*padded, goal]
+        if first_collision(scene, densify(plan.postures)) is not None:
+            plan.postures, plan.solved = [], False
+            plan.reason = "the bridge collides once written with all sections"
     plan.seconds = time.perf_counter() - began
     return plan

@@ -37,7 +37,7 @@ Readings taken
 - **Signs and conventions.** The paper's *descending distance* is ``−dis`` (the tip's height above
   the base minus ``z_G``; row 9 prints −12.3 for a base raised by 12.3). Our ``dis`` stays ``≤ 0``
   (the linear module never enters the tank): where the paper raises the base (``dis > 0``), straight
-  sections are added at the base (:func:`~aftir_rl.posture.trajectory.pad_sections` with
+  sections are added at the base (:func:`~aftir_rl.posture.motion.pad_sections` with
   ``⌈dis/ℓ⌉`` sections), the same arm above the floor; ``details["joints"]`` counts the paper's
   ``m`` only. The paper's rotation angle lies in ``[0°, 360°)`` (``details["rotation_deg"]``),
   the posture's ``φ`` in ``(−π, π]``. Method III's bend is signed as above (the paper prints −71.4
@@ -88,8 +88,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from aftir_rl.errors import PlanningError
+from aftir_rl.posture.motion import pad_sections
 from aftir_rl.posture.planner import PlannedPosture, Planner
-from aftir_rl.posture.trajectory import pad_sections
 from aftir_rl.robot import Posture
 
 __all__ = [

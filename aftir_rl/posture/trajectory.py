@@ -16,9 +16,11 @@ waypoint's planned posture needs):
 Where continuation still fails, the planner's own posture for that waypoint is used (a
 *fallback*). Every move between neighbouring postures, through its sub-steps, is then checked
 densely (:func:`~aftir_rl.posture.motion.densify`: no joint changes by more than 0.1° and
-``dis`` by no more than 0.5 cm between checked postures). A move that collides can be bridged by
-OMPL's RRT-Connect in joint space (``bridge_seconds``); one that still collides is reported in
-``blocked_moves``, and a cell with no posture in ``failures``, with the reason, not hidden.
+``dis`` by no more than 0.5 cm between checked postures). A move that collides is bridged by
+OMPL's RRT-Connect (:func:`~aftir_rl.posture.motion.bridge`: in the smallest joint space the two
+postures share, in their bending plane when they have one; ``bridge_seconds`` per move); one
+that still collides is reported in ``blocked_moves``, and a cell with no posture in
+``failures``, with the reason, not hidden.
 
 Postures are compared and interpolated after :func:`~aftir_rl.posture.motion.align`: a section
 bent by ``θ`` in the plane ``φ`` is the same as one bent by ``−θ`` in ``φ + π``. A posture with
@@ -37,12 +39,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from aftir_rl.collision import point_clearance
+from aftir_rl.config import DEFAULT_BRIDGE_SECONDS
 from aftir_rl.errors import PlanningError
-from aftir_rl.posture.motion import align, densify, first_collision, rrt_connect
+from aftir_rl.posture.motion import align, bridge, densify, first_collision, pad_sections
 from aftir_rl.posture.planner import PlannedPosture, Planner
 from aftir_rl.robot import Posture, body_points, tip_position
 
 __all__ = [
+    "DEFAULT_BRIDGE_SECONDS",
     "Trajectory",
     "plan_trajectory",
     "continue_posture",
@@ -111,19 +115,6 @@ class Trajectory:
             if planned is not None:
                 out += [planned.posture, *vias.get(i, [])]
         return out
-
-
-def pad_sections(posture: Posture, n_sections: int, section_length: float) -> Posture:
-    """The same arm with straight sections added at its base to reach ``n_sections``."""
-    extra = n_sections - posture.n_sections
-    if extra < 0:
-        raise ValueError(f"cannot pad {posture.n_sections} sections down to {n_sections}")
-    first_phi = posture.phi[0] if posture.phi else 0.0
-    return Posture(
-        posture.dis - extra * section_length,
-        (0.0,) * extra + posture.theta,
-        (first_phi,) * extra + posture.phi,
-    )
 
 
 def _central_probes(x: np.ndarray, h: float) -> np.ndarray:
@@ -263,7 +254,7 @@ def plan_trajectory(
     points: Sequence[ArrayLike],
     target: ArrayLike,
     interpolation_steps: int = 4,
-    bridge_seconds: float = 0.0,
+    bridge_seconds: float = DEFAULT_BRIDGE_SECONDS,
     seed: int = 0,
 ) -> Trajectory:
     """Postures for every point of a tip path and the exact target, and checked moves between.
@@ -274,7 +265,8 @@ def plan_trajectory(
         target: the exact target [cm], planned last.
         interpolation_steps: checked sub-steps of a continuation (damped least squares) move.
         bridge_seconds: RRT-Connect's budget for a move whose straight interpolation collides
-            (0: no bridging, the move is reported as blocked).
+            (:func:`~aftir_rl.posture.motion.bridge`; 0: no bridging, the move is reported as
+            blocked).
         seed: OMPL's seed for the bridges (OMPL takes only the first seed of a process).
 
     """
@@ -348,10 +340,10 @@ def _checked_move(
     if hit is None:
         return via
     if bridge_seconds > 0:
-        bridge = rrt_connect(planner.scene, previous, chosen, bridge_seconds, seed=seed)
-        if bridge.solved:
+        plan = bridge(planner.scene, previous, chosen, bridge_seconds, seed=seed)
+        if plan.solved:
             out.bridged.append(index)
-            return bridge.postures[1:-1]
+            return plan.postures[1:-1]
     out.blocked_moves.append((index, hit / (len(dense) - 1)))
     return via
 
