@@ -18,7 +18,7 @@ from aftir_rl.posture.motion import (
     rrt_connect,
     tip_path_length,
 )
-from aftir_rl.posture.trajectory import pad_sections, plan_trajectory, repair_posture
+from aftir_rl.posture.trajectory import pad_sections, plan_trajectory, repair_posture, slide
 from aftir_rl.robot import Posture, tip_position
 
 
@@ -183,3 +183,18 @@ def test_bridge_the_first_move_along_the_floor(planner):
     dense = densify(plan.postures)
     assert not any(scene.collides(p) for p in dense)
     assert max(abs(t) for p in dense for t in p.theta) <= planner.arm.theta_max + 1e-9
+
+
+def test_slide_by_a_whole_section_keeps_the_body_and_lengthens_it():
+    rng = np.random.default_rng(5)
+    l, k = 50, 6
+    for p in random_postures(rng, 20, 5):
+        p = pad_sections(p, 6, l)  # the first section straight, as in the guide
+        pushed = slide(p, l, l)
+        assert pushed.dis == pytest.approx(p.dis + l)
+        # Exact at one section: the old body from its second section on, point for point ...
+        np.testing.assert_allclose(pushed.points(l, k)[: 5 * k + 1], p.points(l, k)[k:],
+                                   atol=1e-9)  # fmt: skip
+        # ... then one more section bent like the last.
+        np.testing.assert_allclose(pushed.theta[-1], p.theta[-1])
+        np.testing.assert_allclose(slide(p, 0.0, l).points(l, k), p.points(l, k), atol=1e-9)

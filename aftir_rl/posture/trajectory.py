@@ -16,7 +16,14 @@ waypoint's planned posture needs):
 Where continuation still fails, the planner's own posture for that waypoint is used (a
 *fallback*). Every move between neighbouring postures, through its sub-steps, is then checked
 densely (:func:`~aftir_rl.posture.motion.densify`: no joint changes by more than 0.1° and
-``dis`` by no more than 0.5 cm between checked postures). A move that collides is bridged by
+``dis`` by no more than 0.5 cm between checked postures).
+
+Damped least squares takes the smallest joint change, which bends the sections and almost never
+pushes more arm in: along the reference paths ``dis`` stays within 1 cm over 8 waypoints, and
+the arm that reached the hatch is then too short for the cells beyond it. So when that chain has
+a colliding move, a second chain is built in which every sub-step first *slides* the arm in by
+the tip's advance along its heading (:func:`slide`, an approximate follow-the-leader step), and
+the chain with fewer colliding moves is kept. A move that still collides is bridged by
 OMPL's RRT-Connect (:func:`~aftir_rl.posture.motion.bridge`: in the smallest joint space the two
 postures share, in their bending plane when they have one; ``bridge_seconds`` per move); one
 that still collides is reported in ``blocked_moves``, and a cell with no posture in
@@ -43,7 +50,7 @@ from aftir_rl.config import DEFAULT_BRIDGE_SECONDS
 from aftir_rl.errors import PlanningError
 from aftir_rl.posture.motion import align, bridge, densify, first_collision, pad_sections
 from aftir_rl.posture.planner import PlannedPosture, Planner
-from aftir_rl.robot import Posture, body_points, tip_position
+from aftir_rl.robot import Posture, body_points, forward_kinematics, tip_position
 
 __all__ = [
     "DEFAULT_BRIDGE_SECONDS",
@@ -52,6 +59,7 @@ __all__ = [
     "continue_posture",
     "repair_posture",
     "pad_sections",
+    "slide",
 ]
 
 
@@ -72,6 +80,8 @@ class Trajectory:
         moves: ``(index, via)``: the postures the arm passes between waypoint ``index`` and the
             next (continuation sub-steps or an RRT-Connect bridge), endpoints excluded.
         bridged: moves whose straight interpolation collided and RRT-Connect replaced.
+        inserting: the postures were continued with the arm sliding in as the tip advances
+            (the second of the two chains :func:`plan_trajectory` builds).
 
     """
 
@@ -84,6 +94,7 @@ class Trajectory:
     fallbacks: list[int] = field(default_factory=list)
     moves: list[tuple[int, list[Posture]]] = field(default_factory=list)
     bridged: list[int] = field(default_factory=list)
+    inserting: bool = False
 
     @property
     def complete(self) -> bool:
@@ -104,6 +115,7 @@ class Trajectory:
             "max_dis_step_cm": self.max_dis_step_cm,
             "fallbacks": self.fallbacks,
             "bridged_moves": self.bridged,
+            "inserting": self.inserting,
             "moves": [{"from": i, "via": [p.to_dict() for p in via]} for i, via in self.moves],
         }
 
@@ -271,7 +283,6 @@ def plan_trajectory(
 
     """
     waypoints = [list(map(float, p)) for p in points] + [list(map(float, target))]
-    l = planner.arm.section_length
     planned: list[PlannedPosture | None] = []
     failures: list[tuple[int, list[float], str]] = []
     for i, point in enumerate(waypoints):
@@ -281,92 +292,153 @@ def plan_trajectory(
             planned.append(None)
             failures.append((i, point, str(exc)))
     n = max((p.posture.n_sections for p in planned if p is not None), default=1)
-    out = Trajectory(waypoints, [], failures)
     points_arr = np.array(waypoints)
-    chain: list[Posture | None] = [None] * len(waypoints)
-    vias: dict[int, list[Posture]] = {}  # the move from waypoint i to the next one
-    methods: list[str] = ["continued"] * len(waypoints)
-    prev: int | None = None
-    for i in range(len(waypoints)):
-        own = planned[i]
-        if prev is not None:
-            chosen, via = _continue(planner, chain[prev], points_arr[i], interpolation_steps)
-            if chosen is not None:
-                chain[i], vias[prev], prev = chosen, via, i
-                continue
-        if own is None:
-            continue
-        methods[i] = own.method
-        chain[i] = pad_sections(own.posture, n, l)
-        if prev is not None:
-            out.fallbacks.append(i)
-            chain[i] = align(chain[i], chain[prev])
-            vias[prev] = []
-        prev = i
+    chain = _build_chain(planner, planned, points_arr, n, interpolation_steps, insert=False)
+    if chain.blocked:
+        pushed = _build_chain(planner, planned, points_arr, n, interpolation_steps, insert=True)
+        if len(pushed.blocked) < len(chain.blocked):
+            chain = pushed
+    out = Trajectory(waypoints, [], failures, fallbacks=chain.fallbacks, inserting=chain.insert)
     # A waypoint the planner failed on but continuation reached has a posture after all.
-    out.failures = [f for f in failures if chain[f[0]] is None]
+    out.failures = [f for f in failures if chain.postures[f[0]] is None]
     previous: int | None = None
-    for i, posture in enumerate(chain):
+    for i, posture in enumerate(chain.postures):
         if posture is None:
             out.postures.append(None)
             continue
         if previous is not None:
-            via = _checked_move(planner, chain[previous], vias.get(previous, []), posture,
-                                previous, bridge_seconds, seed, out)  # fmt: skip
+            via = chain.vias.get(previous, [])
+            hit = chain.blocked.get(previous)
+            if hit is not None:
+                via = _bridge_move(planner, chain.postures[previous], via, posture, previous,
+                                   hit, bridge_seconds, seed, out)  # fmt: skip
             out.moves.append((previous, via))
-        out.postures.append(planner.checked(posture, points_arr[i], methods[i]))
+        out.postures.append(planner.checked(posture, points_arr[i], chain.methods[i]))
         previous = i
     out.max_joint_step_deg, out.max_dis_step_cm = _steps(out.postures)
     return out
 
 
-def _checked_move(
+@dataclass
+class _Chain:
+    """Postures continued along the waypoints, before bridging."""
+
+    insert: bool
+    postures: list[Posture | None]
+    vias: dict[int, list[Posture]]  # the move from waypoint i to the next one
+    methods: list[str]
+    fallbacks: list[int]
+    blocked: dict[int, float] = field(default_factory=dict)  # move i: where it first collides
+
+
+def _build_chain(
+    planner: Planner,
+    planned: Sequence[PlannedPosture | None],
+    points: np.ndarray,
+    n: int,
+    steps: int,
+    insert: bool,
+) -> _Chain:
+    """Continue from waypoint to waypoint, falling back to the planner's posture; check moves."""
+    l = planner.arm.section_length
+    chain = _Chain(insert, [None] * len(points), {}, ["continued"] * len(points), [])
+    prev: int | None = None
+    for i in range(len(points)):
+        if prev is not None:
+            chosen, via = _continue(planner, chain.postures[prev], points[i], steps, insert=insert)
+            if chosen is not None:
+                chain.postures[i], chain.vias[prev], prev = chosen, via, i
+                continue
+        own = planned[i]
+        if own is None:
+            continue
+        chain.methods[i] = own.method
+        chain.postures[i] = pad_sections(own.posture, n, l)
+        if prev is not None:
+            chain.fallbacks.append(i)
+            chain.postures[i] = align(chain.postures[i], chain.postures[prev])
+            chain.vias[prev] = []
+        prev = i
+    previous: int | None = None
+    for i, posture in enumerate(chain.postures):
+        if posture is None:
+            continue
+        if previous is not None:
+            dense = densify([chain.postures[previous], *chain.vias[previous], posture])
+            hit = first_collision(planner.scene, dense)
+            if hit is not None:
+                chain.blocked[previous] = hit / (len(dense) - 1)
+        previous = i
+    return chain
+
+
+def _bridge_move(
     planner: Planner,
     previous: Posture,
     via: list[Posture],
     chosen: Posture,
     index: int,
+    hit: float,
     bridge_seconds: float,
     seed: int,
     out: Trajectory,
 ) -> list[Posture]:
-    """The via postures of a collision-free move, bridged by RRT-Connect where needed.
+    """The via postures of a move that collides (first at ``hit`` of the way), bridged if can be.
 
-    A move that still collides is recorded in ``out.blocked_moves`` with the fraction of the
-    densified move where it first does.
+    A move RRT-Connect does not bridge is recorded in ``out.blocked_moves``.
     """
-    dense = densify([previous, *via, chosen])
-    hit = first_collision(planner.scene, dense)
-    if hit is None:
-        return via
     if bridge_seconds > 0:
         plan = bridge(planner.scene, previous, chosen, bridge_seconds, seed=seed)
         if plan.solved:
             out.bridged.append(index)
             return plan.postures[1:-1]
-    out.blocked_moves.append((index, hit / (len(dense) - 1)))
+    out.blocked_moves.append((index, hit))
     return via
 
 
 def _continue(
-    planner: Planner, previous: Posture, point: np.ndarray, steps: int, depth: int = 4
+    planner: Planner,
+    previous: Posture,
+    point: np.ndarray,
+    steps: int,
+    depth: int = 4,
+    insert: bool = False,
 ) -> tuple[Posture | None, list[Posture]]:
     """Continue ``previous`` to ``point`` in ``steps + 1`` checked sub-steps.
 
     A sub-step whose posture collides is repaired (:func:`repair_posture`); one whose
-    interpolated move collides is split in two, down to ``depth`` halvings. Returns the final
-    posture (None on failure) and the sub-step postures before it.
+    interpolated move collides is split in two, down to ``depth`` halvings. With ``insert``,
+    each sub-step first slides the arm along itself by the tip's advance along its heading
+    (:func:`slide`). Returns the final posture (None on failure) and the sub-step postures
+    before it.
     """
     start_tip = previous.tip(planner.arm.section_length)
     current, via = previous, []
+    tips = start_tip + np.outer(np.arange(steps + 2) / (steps + 1), point - start_tip)
     for k in range(1, steps + 2):
-        part = _sub_step(planner, current, start_tip + (point - start_tip) * (k - 1) / (steps + 1),
-                         start_tip + (point - start_tip) * k / (steps + 1), depth)  # fmt: skip
+        part = _sub_step(planner, current, tips[k - 1], tips[k], depth, insert)
         if part is None:
             return None, []
         via += part
         current = via[-1]
     return current, via[:-1]
+
+
+def slide(posture: Posture, delta: float, section_length: float) -> Posture:
+    """The arm pushed ``delta`` [cm] further in, sliding along its own backbone (approximately).
+
+    ``dis`` grows by ``delta`` and section ``k`` takes ``1 − δ/l`` of its own bend and ``δ/l``
+    of section ``k + 1``'s (as bending vectors ``θ(cos φ, sin φ)``); the last section keeps its
+    own. At ``δ = l`` this is exact: the body in the tank is the old one, lengthened at the tip
+    by one more section bent like the last. In between, a section spans two old sections of
+    different curvature and can only approximate them.
+    """
+    t = delta / section_length
+    theta, phi = np.array(posture.theta), np.array(posture.phi)
+    bend = np.stack([theta * np.cos(phi), theta * np.sin(phi)])
+    bend[:, :-1] = (1 - t) * bend[:, :-1] + t * bend[:, 1:]
+    moved = Posture(posture.dis + delta, np.hypot(*bend), np.arctan2(bend[1], bend[0]))
+    return align(moved, posture)
 
 
 def _sub_step(
@@ -375,11 +447,25 @@ def _sub_step(
     tip_from: np.ndarray,
     tip_to: np.ndarray,
     depth: int,
+    insert: bool = False,
+    slide_first: bool = True,
 ) -> list[Posture] | None:
     """Postures from ``current`` (tip at ``tip_from``) to the tip at ``tip_to``, or None.
 
-    Each move between consecutive postures is collision-free.
+    Each move between consecutive postures is collision-free. With ``insert`` (and
+    ``slide_first``), a sub-step whose tip advances along its heading first tries sliding the
+    arm in by that advance, then continues from there.
     """
+    if insert and slide_first:
+        l = planner.arm.section_length
+        heading = forward_kinematics(current.dis, current.theta, current.phi, l)[-1, :3, 2]
+        advance = float(np.dot(tip_to - tip_from, heading))
+        if advance > 0.5 and current.dis + advance <= 0.0:
+            pushed = slide(current, advance, l)
+            if first_collision(planner.scene, densify([current, pushed])) is None:
+                rest = _sub_step(planner, pushed, pushed.tip(l), tip_to, depth, True, False)
+                if rest is not None:
+                    return [pushed, *rest]
     nxt = continue_posture(planner, current, tip_to)
     if nxt is not None and planner.scene.collides(nxt):
         nxt = repair_posture(planner, nxt, tip_to)
@@ -390,10 +476,10 @@ def _sub_step(
     if depth == 0:
         return None
     mid = (tip_from + tip_to) / 2
-    first = _sub_step(planner, current, tip_from, mid, depth - 1)
+    first = _sub_step(planner, current, tip_from, mid, depth - 1, insert)
     if first is None:
         return None
-    second = _sub_step(planner, first[-1], mid, tip_to, depth - 1)
+    second = _sub_step(planner, first[-1], mid, tip_to, depth - 1, insert)
     return None if second is None else first + second
 
 
