@@ -32,7 +32,9 @@ Methods:
   env draws targets from (``AFTIR-ArmReach-v0``: in front of the panel in bay 1).
 
 Columns: success rate, median tip error [cm], smallest clearance to the tank [cm] (for
-RRT-Connect over about 50 postures sampled along the path, so an upper bound), median tip
+RRT-Connect over about 50 postures sampled along the path, for Q-learning + postures over the
+waypoints' postures and about 50 sampled along the whole motion, bridges included: upper
+bounds), median tip
 path length [cm] (for the motions: Q-learning's cell path through its postures, RRT-Connect's
 densified path, the SB3 episode), median seconds per target.
 
@@ -200,7 +202,7 @@ def q_table_outcome(
     import gymnasium as gym
 
     from aftir_rl.agents.q_table import QLearning, greedy_rollout
-    from aftir_rl.posture.motion import densify, tip_path_length
+    from aftir_rl.posture.motion import densify, sampled_clearance, tip_path_length
     from aftir_rl.posture.trajectory import plan_trajectory
 
     config = _q_table_config()
@@ -218,14 +220,14 @@ def q_table_outcome(
         return Outcome(False, seconds=time.perf_counter() - start, note="greedy path fails")
     trajectory = plan_trajectory(planner, points, target, bridge_seconds=bridge_seconds, seed=seed)
     seconds = time.perf_counter() - start
-    found = [p for p in trajectory.postures if p is not None]
     last = trajectory.postures[-1]
     note = f"{len(trajectory.blocked_moves)} of {len(trajectory.moves)} moves collide"
+    motion = trajectory.motion()
     return Outcome(
         trajectory.complete,
         last.error_cm if last is not None else math.nan,
-        min((p.clearance_cm for p in found), default=math.nan),
-        tip_path_length(densify(trajectory.motion()), planner.arm.section_length),
+        min(trajectory.clearance_cm(), sampled_clearance(planner.scene, motion)),
+        tip_path_length(densify(motion), planner.arm.section_length),
         seconds,
         note=note if trajectory.blocked_moves else "",
     )
@@ -242,7 +244,13 @@ def _q_table_config() -> Any:
 
 def rrt_outcome(planner: Any, target: ArrayLike, seconds: float = 10.0, seed: int = 0) -> Outcome:
     """RRT-Connect from the start posture to the planner's posture for ``target``."""
-    from aftir_rl.posture.motion import densify, pad_sections, rrt_connect, tip_path_length
+    from aftir_rl.posture.motion import (
+        densify,
+        pad_sections,
+        rrt_connect,
+        sampled_clearance,
+        tip_path_length,
+    )
     from aftir_rl.robot import Posture
 
     try:
@@ -255,10 +263,9 @@ def rrt_outcome(planner: Any, target: ArrayLike, seconds: float = 10.0, seed: in
     plan = rrt_connect(planner.scene, start, pad_sections(goal.posture, n, l), seconds, seed=seed)
     if not plan.solved:
         return Outcome(False, seconds=plan.seconds, note=plan.reason)
-    dense = densify(plan.postures)
-    # Sampled (about 50 postures of the densified path): an upper bound on the path's clearance.
-    clearance = min(planner.scene.clearance(p) for p in dense[:: max(1, len(dense) // 50)])
-    return Outcome(True, goal.error_cm, clearance, tip_path_length(dense, l), plan.seconds)
+    clearance = sampled_clearance(planner.scene, plan.postures)
+    path = tip_path_length(densify(plan.postures), l)
+    return Outcome(True, goal.error_cm, clearance, path, plan.seconds)
 
 
 def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray]]]) -> list[Row]:

@@ -6,7 +6,8 @@ path is replayed in ``AFTIR-Tank-v0`` and turned into arm postures
 the last reaches the target and every move between them is collision-free. An SB3 run
 (``model.zip``) is evaluated on its env's fixed evaluation targets (or ``--target``), one
 deterministic episode each. For both the table gives
-success rate, tip error, tip path length, the smallest clearance to the tank along the motion and
+success rate, tip error, tip path length, the smallest clearance to the tank along the motion
+(for a Q-learning run: its postures and about 50 sampled along the motion, an upper bound) and
 seconds per target; the same numbers go to TensorBoard under ``compare/<run>/...`` in a new
 ``evaluate__<time>`` directory of ``--logdir``.
 """
@@ -34,6 +35,7 @@ def _q_table_run(run_dir: Path) -> dict[str, Any]:
 
     from aftir_rl.agents.q_table import QLearning, greedy_rollout
     from aftir_rl.posture import Planner
+    from aftir_rl.posture.motion import sampled_clearance
     from aftir_rl.posture.trajectory import plan_trajectory
 
     _, meta = QLearning.read_checkpoint(run_dir / "q_table.npz")
@@ -47,7 +49,8 @@ def _q_table_run(run_dir: Path) -> dict[str, Any]:
     states, reached = greedy_rollout(agent, env)
     raster = env.unwrapped.raster
     points = [raster.cell_center(raster.cell(s)) for s in states]
-    trajectory = plan_trajectory(Planner(env.unwrapped.tank), points, target)
+    planner = Planner(env.unwrapped.tank)
+    trajectory = plan_trajectory(planner, points, target)
     seconds = time.perf_counter() - start
     found = [p for p in trajectory.postures if p is not None]
     tips = np.array([p.tip for p in found]) if found else np.zeros((1, 3))
@@ -58,7 +61,10 @@ def _q_table_run(run_dir: Path) -> dict[str, Any]:
         "success_rate": float(reached and last is not None and trajectory.complete),
         "tip_error_cm": last.error_cm if last is not None else float("nan"),
         "path_length_cm": float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1))),
-        "min_clearance_cm": min((p.clearance_cm for p in found), default=float("nan")),
+        # The waypoints' postures and about 50 sampled along the motion, bridges included.
+        "min_clearance_cm": min(
+            trajectory.clearance_cm(), sampled_clearance(planner.scene, trajectory.motion())
+        ),
         "seconds_per_target": seconds,
         "note": f"{len(trajectory.blocked_moves)} of {len(trajectory.moves)} moves collide",
     }

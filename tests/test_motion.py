@@ -179,6 +179,9 @@ def test_bridge_the_first_move_along_the_floor(planner):
     assert plan.solved, plan.reason
     assert plan.postures[0] == start and plan.postures[-1] == goal
     assert all(p.n_sections == n for p in plan.postures)
+    # In the plane: every bent section of every posture between bends in phi = 0 (or pi).
+    assert all(abs(math.sin(phi)) < 1e-9 for p in plan.postures[1:-1]
+               for t, phi in zip(p.theta, p.phi) if abs(t) > 1e-9)  # fmt: skip
     # Independent check: every densified posture with fcl itself, not the fast pre-check.
     dense = densify(plan.postures)
     assert not any(scene.collides(p) for p in dense)
@@ -198,3 +201,5 @@ def test_slide_by_a_whole_section_keeps_the_body_and_lengthens_it():
         # ... then one more section bent like the last.
         np.testing.assert_allclose(pushed.theta[-1], p.theta[-1])
         np.testing.assert_allclose(slide(p, 0.0, l).points(l, k), p.points(l, k), atol=1e-9)
+    with pytest.raises(ValueError, match="can slide by 0 to 50"):
+        slide(p, 80.0, l)

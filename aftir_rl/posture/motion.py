@@ -20,7 +20,10 @@ RRT-Connect (the ``ompl`` wheel) in the joint space, with our forward kinematics
 scene as its validity checker. Its path is shortcut by OMPL's simplifier, then densified and
 checked by :func:`first_collision` independently of OMPL's own edge checks, so a path is only
 reported solved if our check agrees. ``dis`` enters OMPL's distance divided by ``l`` so that
-one section length of travel weighs about one radian.
+one section length of travel weighs about one radian. :func:`bridge` runs it in the smallest
+joint space two postures share (no sections straight in both; their common bending plane, when
+they have one), which is what the trajectories of
+:func:`~aftir_rl.posture.trajectory.plan_trajectory` use for a move that collides.
 """
 
 from __future__ import annotations
@@ -49,6 +52,7 @@ __all__ = [
     "joint_distance",
     "tip_path_length",
     "rrt_connect",
+    "sampled_clearance",
 ]
 
 _SEEDED = False
@@ -162,6 +166,21 @@ def first_collision(scene: CollisionScene, postures: Sequence[Posture]) -> int |
     return None
 
 
+def sampled_clearance(
+    scene: CollisionScene, postures: Sequence[Posture], samples: int = 50
+) -> float:
+    """Smallest clearance [cm] over about ``samples`` evenly spaced postures of a densified path.
+
+    The postures are the path's vertices; the clearance of the sampled ones (the last included)
+    is an upper bound on the whole path's.
+    """
+    if not postures:
+        return math.nan
+    dense = densify(postures)
+    picked = [*dense[:: max(1, len(dense) // samples)], dense[-1]]
+    return min(scene.clearance(p) for p in picked)
+
+
 def tip_path_length(postures: Sequence[Posture], section_length: float) -> float:
     """Length of the tip's path [cm] through the postures (densify them first)."""
     if len(postures) < 2:
@@ -178,7 +197,8 @@ class MotionPlan:
 
     Attributes:
         postures: the path's postures, start first and goal last (OMPL's vertices after
-            shortcutting); empty when unsolved.
+            shortcutting, in the representation OMPL checked; in a plane search, with the start
+            and goal rewritten into that representation next to them); empty when unsolved.
         solved: an exact path was found and every densified posture along it passed our check.
         seconds: planning wall time, simplification and our check included.
         checks: validity checks OMPL asked for.
@@ -244,9 +264,21 @@ def rrt_connect(
     if not _SEEDED:
         ou.RNG.setSeed(int(seed) + 1)  # OMPL takes 0 for "pick one"
         _SEEDED = True
-    x0, x1 = start.to_vector(), goal.to_vector()
+    ends = [start, goal]
     if plane is not None:
-        x0, x1 = in_plane(start, plane).to_vector(), in_plane(goal, plane).to_vector()
+        in_plane(start, plane), in_plane(goal, plane)  # ValueError if they leave the plane
+        # One representation for the whole path: straight sections get phi = plane (the arm
+        # does not move), the goal is aligned to that, and each section keeps its phi (plane or
+        # plane + pi) with theta signed to match. An edge between two states then interpolates
+        # theta and dis only: exactly the in-plane edge OMPL checked.
+        bent = np.abs(start.theta) > 1e-9
+        ends[0] = Posture(start.dis, start.theta, np.where(bent, start.phi, plane))
+        ends[1] = align(goal, ends[0])
+        family = np.array(ends[0].phi)
+        sign = np.sign(np.cos(family - plane))
+    x0, x1 = ends[0].to_vector(), ends[1].to_vector()
+    if plane is not None:
+        x0, x1 = (np.concatenate([x[:1], x[1 : n + 1] * sign]) for x in (x0, x1))
     low = np.concatenate([[min(x0[0], x1[0], -n * l) / l], np.full(n, -tmax),
                           np.minimum(x0[n + 1 :], x1[n + 1 :]) - math.pi])  # fmt: skip
     high = np.concatenate([[max(x0[0], x1[0], 0.0) / l], np.full(n, tmax),
@@ -266,7 +298,7 @@ def rrt_connect(
         x = np.array([state[i] for i in range(dims)])  # type: ignore[index]
         x[0] *= l
         if plane is not None:
-            return Posture(x[0], x[1:], np.full(n, plane))
+            return Posture(x[0], x[1:] * sign, family)
         return Posture.from_vector(x)
 
     def valid(state: object) -> bool:
@@ -289,10 +321,11 @@ def rrt_connect(
         if simplify:
             setup.simplifySolution(max(0.1, time_limit / 10))
         path = setup.getSolutionPath()
-        postures = [start]
-        for i in range(1, path.getStateCount() - 1):
-            postures.append(align(to_posture(path.getState(i)), postures[-1]))
-        postures.append(goal)
+        # OMPL's own states, written as checked: no re-alignment, which would change the edges.
+        inner = [to_posture(path.getState(i)) for i in range(1, path.getStateCount() - 1)]
+        if plane is not None:  # the start and goal in the path's representation, same arms
+            inner = [ends[0], *inner, ends[1]]
+        postures = [start, *inner, goal]
         hit = first_collision(scene, densify(postures))
         if hit is None:
             plan.postures, plan.solved = postures, True
@@ -324,9 +357,11 @@ def bridge(
     - when every bent section of both postures bends in one plane through the panel axis (TGA
       postures do), the search runs in that plane: ``dis`` and the signed ``θ_i`` only.
 
-    A plane search that finds nothing gives the rest of the budget to the full reduced space. A
-    path that OMPL accepts but our dense check does not is planned again with a 4x finer edge
-    resolution while time is left. The returned postures have ``start``'s sections.
+    The plane search gets half the budget and a failed one leaves the rest to the full reduced
+    space. A path that OMPL accepts but our dense check does not is planned again with a 4x
+    finer edge resolution while time is left. Each attempt also simplifies its path for a tenth
+    of its budget, so a call can run that much over ``time_limit``. The returned postures have
+    ``start``'s sections; the path ends at ``goal`` aligned to ``start`` (:func:`align`).
     """
     began = time.perf_counter()
     n, l = start.n_sections, scene.arm.section_length
@@ -342,8 +377,8 @@ def bridge(
     plane = bending_plane(a, b)
     attempts = [plane, None] if plane is not None else [None]
     plan = MotionPlan(reason="no time left")
-    resolution = 0.002
     for k, attempt in enumerate(attempts):
+        resolution = 0.002
         while True:
             left = time_limit - (time.perf_counter() - began)
             budget = left / 2 if (k == 0 and len(attempts) == 2) else left
@@ -355,11 +390,8 @@ def bridge(
             resolution /= 4
         if plan.solved:
             break
-    if plan.solved:
-        padded = [start]
-        for p in plan.postures[1:-1]:
-            padded.append(align(pad_sections(p, n, l), padded[-1]))
-        plan.postures = [*padded, goal]
+    if plan.solved:  # the same representation as OMPL's states, so the same edges
+        plan.postures = [start, *(pad_sections(p, n, l) for p in plan.postures[1:-1]), goal]
         if first_collision(scene, densify(plan.postures)) is not None:
             plan.postures, plan.solved = [], False
             plan.reason = "the bridge collides once written with all sections"

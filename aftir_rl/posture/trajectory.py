@@ -23,7 +23,8 @@ pushes more arm in: along the reference paths ``dis`` stays within 1 cm over 8 w
 the arm that reached the hatch is then too short for the cells beyond it. So when that chain has
 a colliding move, a second chain is built in which every sub-step first *slides* the arm in by
 the tip's advance along its heading (:func:`slide`, an approximate follow-the-leader step), and
-the chain with fewer colliding moves is kept. A move that still collides is bridged by
+the chain with fewer waypoints left without a posture, then fewer colliding moves (counted
+before bridging), is kept. A move that still collides is bridged by
 OMPL's RRT-Connect (:func:`~aftir_rl.posture.motion.bridge`: in the smallest joint space the two
 postures share, in their bending plane when they have one; ``bridge_seconds`` per move); one
 that still collides is reported in ``blocked_moves``, and a cell with no posture in
@@ -118,6 +119,10 @@ class Trajectory:
             "inserting": self.inserting,
             "moves": [{"from": i, "via": [p.to_dict() for p in via]} for i, via in self.moves],
         }
+
+    def clearance_cm(self) -> float:
+        """Smallest clearance [cm] of the waypoints' postures (nan if there are none)."""
+        return min((p.clearance_cm for p in self.postures if p is not None), default=math.nan)
 
     def motion(self) -> list[Posture]:
         """Every posture the arm takes, in order: waypoints and the moves' via postures."""
@@ -296,7 +301,7 @@ def plan_trajectory(
     chain = _build_chain(planner, planned, points_arr, n, interpolation_steps, insert=False)
     if chain.blocked:
         pushed = _build_chain(planner, planned, points_arr, n, interpolation_steps, insert=True)
-        if len(pushed.blocked) < len(chain.blocked):
+        if pushed.score < chain.score:
             chain = pushed
     out = Trajectory(waypoints, [], failures, fallbacks=chain.fallbacks, inserting=chain.insert)
     # A waypoint the planner failed on but continuation reached has a posture after all.
@@ -329,6 +334,11 @@ class _Chain:
     methods: list[str]
     fallbacks: list[int]
     blocked: dict[int, float] = field(default_factory=dict)  # move i: where it first collides
+
+    @property
+    def score(self) -> tuple[int, int]:
+        """Waypoints without a posture, then colliding moves (before bridging): lower is better."""
+        return sum(p is None for p in self.postures), len(self.blocked)
 
 
 def _build_chain(
@@ -389,9 +399,14 @@ def _bridge_move(
     """
     if bridge_seconds > 0:
         plan = bridge(planner.scene, previous, chosen, bridge_seconds, seed=seed)
-        if plan.solved:
+        bridged = plan.postures[1:-1]
+        # The move as stored, to ``chosen`` as written here: checked again, not assumed.
+        if (
+            plan.solved
+            and first_collision(planner.scene, densify([previous, *bridged, chosen])) is None
+        ):
             out.bridged.append(index)
-            return plan.postures[1:-1]
+            return bridged
     out.blocked_moves.append((index, hit))
     return via
 
@@ -429,10 +444,17 @@ def slide(posture: Posture, delta: float, section_length: float) -> Posture:
 
     ``dis`` grows by ``delta`` and section ``k`` takes ``1 − δ/l`` of its own bend and ``δ/l``
     of section ``k + 1``'s (as bending vectors ``θ(cos φ, sin φ)``); the last section keeps its
-    own. At ``δ = l`` this is exact: the body in the tank is the old one, lengthened at the tip
-    by one more section bent like the last. In between, a section spans two old sections of
-    different curvature and can only approximate them.
+    own. At ``δ = l``, when the first section is straight (in the guide), this is exact: the
+    body in the tank is the old one, lengthened at the tip by one more section bent like the
+    last. In between, a section spans two old sections of different curvature and can only
+    approximate them.
+
+    Raises:
+        ValueError: ``delta`` is not in ``[0, l]``.
+
     """
+    if not 0.0 <= delta <= section_length:
+        raise ValueError(f"can slide by 0 to {section_length:g} cm, not {delta:g}")
     t = delta / section_length
     theta, phi = np.array(posture.theta), np.array(posture.phi)
     bend = np.stack([theta * np.cos(phi), theta * np.sin(phi)])
@@ -454,13 +476,14 @@ def _sub_step(
 
     Each move between consecutive postures is collision-free. With ``insert`` (and
     ``slide_first``), a sub-step whose tip advances along its heading first tries sliding the
-    arm in by that advance, then continues from there.
+    arm in by that advance, then continues from there without sliding again at that level (the
+    halves of a split sub-step may each slide).
     """
     if insert and slide_first:
         l = planner.arm.section_length
         heading = forward_kinematics(current.dis, current.theta, current.phi, l)[-1, :3, 2]
         advance = float(np.dot(tip_to - tip_from, heading))
-        if advance > 0.5 and current.dis + advance <= 0.0:
+        if 0.5 < advance <= l and current.dis + advance <= 0.0:
             pushed = slide(current, advance, l)
             if first_collision(planner.scene, densify([current, pushed])) is None:
                 rest = _sub_step(planner, pushed, pushed.tip(l), tip_to, depth, True, False)
