@@ -202,7 +202,6 @@ def q_table_outcome(
     import gymnasium as gym
 
     from aftir_rl.agents.q_table import QLearning, greedy_rollout
-    from aftir_rl.posture.motion import densify, sampled_clearance, tip_path_length
     from aftir_rl.posture.trajectory import plan_trajectory
 
     config = _q_table_config()
@@ -220,16 +219,14 @@ def q_table_outcome(
         return Outcome(False, seconds=time.perf_counter() - start, note="greedy path fails")
     trajectory = plan_trajectory(planner, points, target, bridge_seconds=bridge_seconds, seed=seed)
     seconds = time.perf_counter() - start
-    last = trajectory.postures[-1]
-    note = f"{len(trajectory.blocked_moves)} of {len(trajectory.moves)} moves collide"
-    motion = trajectory.motion()
+    m = trajectory.measures(planner.scene)
     return Outcome(
         trajectory.complete,
-        last.error_cm if last is not None else math.nan,
-        min(trajectory.clearance_cm(), sampled_clearance(planner.scene, motion)),
-        tip_path_length(densify(motion), planner.arm.section_length),
+        m["tip_error_cm"],
+        m["min_clearance_cm"],
+        m["path_cm"],
         seconds,
-        note=note if trajectory.blocked_moves else "",
+        note=trajectory.note if trajectory.blocked_moves else "",
     )
 
 

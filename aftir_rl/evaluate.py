@@ -35,7 +35,6 @@ def _q_table_run(run_dir: Path) -> dict[str, Any]:
 
     from aftir_rl.agents.q_table import QLearning, greedy_rollout
     from aftir_rl.posture import Planner
-    from aftir_rl.posture.motion import sampled_clearance
     from aftir_rl.posture.trajectory import plan_trajectory
 
     _, meta = QLearning.read_checkpoint(run_dir / "q_table.npz")
@@ -52,21 +51,16 @@ def _q_table_run(run_dir: Path) -> dict[str, Any]:
     planner = Planner(env.unwrapped.tank)
     trajectory = plan_trajectory(planner, points, target)
     seconds = time.perf_counter() - start
-    found = [p for p in trajectory.postures if p is not None]
-    tips = np.array([p.tip for p in found]) if found else np.zeros((1, 3))
-    last = trajectory.postures[-1]
+    m = trajectory.measures(planner.scene)
     return {
         "agent": "q_table + TGA/TSM",
         "targets": 1,
-        "success_rate": float(reached and last is not None and trajectory.complete),
-        "tip_error_cm": last.error_cm if last is not None else float("nan"),
-        "path_length_cm": float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1))),
-        # The waypoints' postures and about 50 sampled along the motion, bridges included.
-        "min_clearance_cm": min(
-            trajectory.clearance_cm(), sampled_clearance(planner.scene, trajectory.motion())
-        ),
+        "success_rate": float(reached and trajectory.complete),
+        "tip_error_cm": m["tip_error_cm"],
+        "path_length_cm": m["path_cm"],
+        "min_clearance_cm": m["min_clearance_cm"],
         "seconds_per_target": seconds,
-        "note": f"{len(trajectory.blocked_moves)} of {len(trajectory.moves)} moves collide",
+        "note": trajectory.note,
     }
 
 

@@ -13,9 +13,9 @@ from __future__ import annotations
 import math
 import os
 import platform
-import time
 
 import numpy as np
+from bench_posture import fmt_theta as fmt
 
 from aftir_rl.posture import Planner
 from aftir_rl.posture.obstacle_clipping import obstacle_clipping
@@ -31,16 +31,12 @@ PAPER = [  # seed 000 Table II: theta, phi (rad), dis (cm), tip (cm)
 TANKS = ["open_space", "open_space_obstacles1", "open_space_obstacles2", "open_space_obstacles3"]
 
 
-def zone_distance(posture: Posture, centres: list[tuple[float, float, float]]) -> float:
-    pts = posture.points(25.0, 40)
+def zone_distance(posture: Posture, centres: list[tuple[float, float, float]], l: float) -> float:
+    pts = posture.points(l, 40)
     pts = pts[pts[:, 2] >= 0]
     if not centres:
         return math.inf
     return min(float(np.min(np.hypot(pts[:, 0] - c[0], pts[:, 1] - c[1]))) for c in centres)
-
-
-def fmt(values) -> str:
-    return "{" + ", ".join(f"{v:.2f}" for v in values) + "}"
 
 
 def main() -> None:
@@ -52,21 +48,20 @@ def main() -> None:
     print("|---|---:|---|---:|---|---|---:|---:|---:|---:|---:|")
     for k, (tank, paper) in enumerate(zip(TANKS, PAPER)):
         planner = Planner(tank)
+        l = planner.arm.section_length
         centres = [s.center for s in planner.tank.obstacles]
         for mode, refine in (("ours, paper's zone", False), ("ours, refined", True)):
-            start = time.perf_counter()
             r = obstacle_clipping(planner, TARGET, refine=refine)
-            seconds = time.perf_counter() - start
             p = r.posture
-            zone = zone_distance(p, centres)
+            zone = zone_distance(p, centres, l)
             print(f"| ({'abcd'[k]}) | {k} | {mode} | {p.n_sections} | {fmt(p.theta)} | "
                   f"{fmt(p.phi)} | {p.dis:.2f} | {r.error_cm:.2g} | {zone:.2f} | "
-                  f"{r.details['loops']} | {seconds:.2f} |")  # fmt: skip
+                  f"{r.details['loops']} | {r.seconds:.2f} |")  # fmt: skip
         theta, phi, dis, _ = paper
         pp = Posture(dis, theta, phi)
-        err = float(np.linalg.norm(pp.tip(25.0) - np.array(TARGET)))
+        err = float(np.linalg.norm(pp.tip(l) - np.array(TARGET)))
         print(f"| ({'abcd'[k]}) | {k} | paper | 3 | {fmt(theta)} | {fmt(phi)} | {dis:.2f} | "
-              f"{err:.2g} | {zone_distance(pp, centres):.2f} | | |")  # fmt: skip
+              f"{err:.2g} | {zone_distance(pp, centres, l):.2f} | | |")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -265,8 +265,10 @@ def rrt_connect(
         ou.RNG.setSeed(int(seed) + 1)  # OMPL takes 0 for "pick one"
         _SEEDED = True
     ends = [start, goal]
+    x0, x1 = start.to_vector(), goal.to_vector()
     if plane is not None:
-        in_plane(start, plane), in_plane(goal, plane)  # ValueError if they leave the plane
+        # OMPL's state: dis and the signed in-plane bends (ValueError off the plane).
+        x0, x1 = (in_plane(p, plane).to_vector()[: n + 1] for p in (start, goal))
         # One representation for the whole path: straight sections get phi = plane (the arm
         # does not move), the goal is aligned to that, and each section keeps its phi (plane or
         # plane + pi) with theta signed to match. An edge between two states then interpolates
@@ -276,9 +278,6 @@ def rrt_connect(
         ends[1] = align(goal, ends[0])
         family = np.array(ends[0].phi)
         sign = np.sign(np.cos(family - plane))
-    x0, x1 = ends[0].to_vector(), ends[1].to_vector()
-    if plane is not None:
-        x0, x1 = (np.concatenate([x[:1], x[1 : n + 1] * sign]) for x in (x0, x1))
     low = np.concatenate([[min(x0[0], x1[0], -n * l) / l], np.full(n, -tmax),
                           np.minimum(x0[n + 1 :], x1[n + 1 :]) - math.pi])  # fmt: skip
     high = np.concatenate([[max(x0[0], x1[0], 0.0) / l], np.full(n, tmax),

@@ -70,7 +70,7 @@ METHODS = (
     "region_division",
 )
 _CHUNK = 4096
-_MAX_GRID = 2e6  # region clipping grids larger than this (13+ searched angles) are not tried
+_MAX_GRID = 2e6  # region clipping grids larger than this (14+ searched angles) are not tried
 
 
 @dataclass

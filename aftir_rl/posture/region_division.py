@@ -415,13 +415,10 @@ def region_division(planner: Planner, target: ArrayLike) -> PlannedPosture:
             reasons.append(f"{cand.label}: needs {posture.n_sections} sections")
             continue
         try:
-            result = planner.checked(posture, goal, METHOD)
+            details = _details(cand, psi, posture, tried)
+            return planner.checked(posture, goal, METHOD, details=details, started=start)
         except PlanningError as exc:
             reasons.append(f"{cand.label}: {str(exc).split(': ', 1)[-1]}")
-            continue
-        result.details = _details(cand, psi, posture, tried)
-        result.seconds = time.perf_counter() - start
-        return result
     raise PlanningError(_failure(goal, found, reasons))
 
 

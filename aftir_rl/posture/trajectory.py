@@ -14,7 +14,7 @@ waypoint's planned posture needs):
 - a sub-step whose move collides is split in two, down to 1/16 of a sub-step.
 
 Where continuation still fails, the planner's own posture for that waypoint is used (a
-*fallback*). Every move between neighbouring postures, through its sub-steps, is then checked
+*fallback*). Every move between neighbouring postures, through its sub-steps, is checked
 densely (:func:`~aftir_rl.posture.motion.densify`: no joint changes by more than 0.1° and
 ``dis`` by no more than 0.5 cm between checked postures).
 
@@ -46,10 +46,18 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from aftir_rl.collision import point_clearance
+from aftir_rl.collision import CollisionScene, point_clearance
 from aftir_rl.config import DEFAULT_BRIDGE_SECONDS
 from aftir_rl.errors import PlanningError
-from aftir_rl.posture.motion import align, bridge, densify, first_collision, pad_sections
+from aftir_rl.posture.motion import (
+    align,
+    bridge,
+    densify,
+    first_collision,
+    pad_sections,
+    sampled_clearance,
+    tip_path_length,
+)
 from aftir_rl.posture.planner import PlannedPosture, Planner
 from aftir_rl.robot import Posture, body_points, forward_kinematics, tip_position
 
@@ -120,9 +128,26 @@ class Trajectory:
             "moves": [{"from": i, "via": [p.to_dict() for p in via]} for i, via in self.moves],
         }
 
-    def clearance_cm(self) -> float:
-        """Smallest clearance [cm] of the waypoints' postures (nan if there are none)."""
-        return min((p.clearance_cm for p in self.postures if p is not None), default=math.nan)
+    @property
+    def note(self) -> str:
+        """``"B of M moves collide"``."""
+        return f"{len(self.blocked_moves)} of {len(self.moves)} moves collide"
+
+    def measures(self, scene: CollisionScene) -> dict[str, float]:
+        """What ``bench`` and ``evaluate`` report of a trajectory.
+
+        ``tip_error_cm`` of the last posture (nan if none); ``min_clearance_cm`` over the
+        waypoints' postures and about 50 postures sampled along the whole motion, bridges
+        included (:func:`~aftir_rl.posture.motion.sampled_clearance`: an upper bound);
+        ``path_cm``, the tip's path along the densified motion.
+        """
+        motion, last = self.motion(), self.postures[-1]
+        waypoints = min((p.clearance_cm for p in self.postures if p is not None), default=math.nan)
+        return {
+            "tip_error_cm": last.error_cm if last is not None else math.nan,
+            "min_clearance_cm": min(waypoints, sampled_clearance(scene, motion)),
+            "path_cm": tip_path_length(densify(motion), scene.arm.section_length),
+        }
 
     def motion(self) -> list[Posture]:
         """Every posture the arm takes, in order: waypoints and the moves' via postures."""
@@ -349,7 +374,11 @@ def _build_chain(
     steps: int,
     insert: bool,
 ) -> _Chain:
-    """Continue from waypoint to waypoint, falling back to the planner's posture; check moves."""
+    """Continue from waypoint to waypoint, falling back to the planner's posture.
+
+    Records the moves that collide, checked densely: a continued move in :func:`_sub_step`, one
+    sub-step at a time, a move to a fallback posture here.
+    """
     l = planner.arm.section_length
     chain = _Chain(insert, [None] * len(points), {}, ["continued"] * len(points), [])
     prev: int | None = None
@@ -365,20 +394,15 @@ def _build_chain(
         chain.methods[i] = own.method
         chain.postures[i] = pad_sections(own.posture, n, l)
         if prev is not None:
+            # Continued moves were checked sub-step by sub-step; a fallback's move is checked here.
             chain.fallbacks.append(i)
             chain.postures[i] = align(chain.postures[i], chain.postures[prev])
             chain.vias[prev] = []
-        prev = i
-    previous: int | None = None
-    for i, posture in enumerate(chain.postures):
-        if posture is None:
-            continue
-        if previous is not None:
-            dense = densify([chain.postures[previous], *chain.vias[previous], posture])
+            dense = densify([chain.postures[prev], chain.postures[i]])
             hit = first_collision(planner.scene, dense)
             if hit is not None:
-                chain.blocked[previous] = hit / (len(dense) - 1)
-        previous = i
+                chain.blocked[prev] = hit / (len(dense) - 1)
+        prev = i
     return chain
 
 
