@@ -8,6 +8,7 @@ type (PyYAML reads ``1e-3`` as a string, so numbers are parsed by us, not by YAM
 from __future__ import annotations
 
 import dataclasses
+import importlib.resources
 import math
 import os
 import types
@@ -21,10 +22,23 @@ from aftir_rl.errors import ConfigError
 
 T = TypeVar("T")
 
-#: Folder of the shipped configuration files (``configs/`` at the repository root).
-CONFIG_DIR = Path(
-    os.environ.get("AFTIR_RL_CONFIG_DIR", Path(__file__).resolve().parent.parent / "configs")
-)
+
+def _shipped_config_dir() -> Path:
+    """The shipped ``configs/`` folder: ``aftir_rl/configs`` inside an installed wheel.
+
+    The repository keeps ``configs/`` at its top; the build maps it into the package as
+    ``aftir_rl.configs`` (``[tool.setuptools.package-dir]``), so a wheel carries one copy of each
+    file. An editable install or a source checkout has no ``aftir_rl/configs``: the repository's
+    own folder is used.
+    """
+    shipped = importlib.resources.files("aftir_rl") / "configs"
+    if shipped.is_dir():
+        return Path(str(shipped))
+    return Path(__file__).resolve().parent.parent / "configs"
+
+
+#: Folder of the shipped configuration files (``AFTIR_RL_CONFIG_DIR`` overrides it).
+CONFIG_DIR = Path(os.environ.get("AFTIR_RL_CONFIG_DIR") or _shipped_config_dir())
 
 #: RRT-Connect's budget [s] for each colliding move of a joint trajectory (used by
 #: :func:`aftir_rl.posture.trajectory.plan_trajectory`, ``train q_table``, ``bench``, ``evaluate``).

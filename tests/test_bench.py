@@ -44,6 +44,7 @@ def test_target_sets_are_fixed_and_free():
     assert len(a["seed001"]) == 12 and len(a["seed000"]) == 4
 
 
+@pytest.mark.slow
 def test_benchmark_outcomes_check_out(tank):
     sets = {"bay1": [("b737_center", np.array([20.0, 10.0, 60.0]))]}
     methods = {"bay1": ("tga", "rrt_connect", "q_table+postures")}
@@ -64,6 +65,7 @@ def test_benchmark_outcomes_check_out(tank):
     assert q.path_cm >= np.linalg.norm(target - np.array(tank.start_point)) - 1e-6
 
 
+@pytest.mark.slow
 def test_bench_cli(tmp_path):
     out = tmp_path / "bench.json"
     run = subprocess.run(

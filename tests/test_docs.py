@@ -18,6 +18,7 @@ def test_readme_snippet_runs(capsys):
     assert capsys.readouterr().out.strip() == "True 22 (14, 9, 4)"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(p.name for p in (ROOT / "notebooks").glob("*.ipynb")))
 def test_notebook_executes(name, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # anything the notebook writes goes to tmp_path

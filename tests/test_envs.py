@@ -27,14 +27,18 @@ def test_check_env(env_id):
 def test_seeded_rollouts_are_identical(env_id):
     def rollout(seed):
         env = gym.make(env_id)
+
+        def flat(o):
+            return gym.spaces.flatten(env.observation_space, o).astype(float)
+
         env.action_space.seed(seed)
         obs, _ = env.reset(seed=seed)
-        out = [np.asarray(obs, dtype=float)]
+        out = [flat(obs)]
         for _ in range(150):
             obs, r, term, trunc, _ = env.step(env.action_space.sample())
-            out.append(np.concatenate([np.ravel(obs).astype(float), [r, term, trunc]]))
+            out.append(np.concatenate([flat(obs), [r, term, trunc]]))
             if term or trunc:
-                out.append(np.asarray(env.reset()[0], dtype=float))
+                out.append(flat(env.reset()[0]))
         return out
 
     a, b = rollout(3), rollout(3)
@@ -52,7 +56,10 @@ def test_pickle_round_trip(env_id):
     env.step(action)
     clone = pickle.loads(pickle.dumps(env))
     a, b = clone.step(action), env.step(action)
-    np.testing.assert_array_equal(a[0], b[0])
+    flat = gym.spaces.flatten
+    np.testing.assert_array_equal(
+        flat(env.observation_space, a[0]), flat(env.observation_space, b[0])
+    )
     assert a[1:4] == b[1:4]
 
 

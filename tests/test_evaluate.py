@@ -5,9 +5,12 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 from aftir_rl import evaluate, train
 
 
+@pytest.mark.slow
 def test_compare_q_table_and_ppo_runs(tmp_path, capsys):
     runs = tmp_path / "runs"
     # A generous bridge budget: the one move to bridge here takes about 3 s, on a quiet machine.

@@ -4,12 +4,18 @@ from __future__ import annotations
 
 import gymnasium as gym
 
+from aftir_rl.envs.tank_goal import TankGoalEnv
 from aftir_rl.envs.tank_grid import Action, TankGridEnv
 
-__all__ = ["Action", "TankGridEnv", "ENV_IDS", "register_envs"]
+__all__ = ["Action", "TankGridEnv", "TankGoalEnv", "ENV_IDS", "register_envs"]
 
 #: Every environment id registered by :func:`register_envs`.
-ENV_IDS: tuple[str, ...] = ("AFTIR-Tank-v0", "AFTIR-Arm-v0", "AFTIR-ArmReach-v0")
+ENV_IDS: tuple[str, ...] = (
+    "AFTIR-Tank-v0",
+    "AFTIR-TankGoal-v0",
+    "AFTIR-Arm-v0",
+    "AFTIR-ArmReach-v0",
+)
 
 #: Bay-1 reach task: targets in front of the panel that 2 sections reach, drawn per episode.
 REACH_REGION = ((-40.0, -40.0, 20.0), (60.0, 40.0, 90.0))
@@ -27,6 +33,12 @@ def register_envs() -> None:
             id="AFTIR-Tank-v0",
             entry_point="aftir_rl.envs.tank_grid:TankGridEnv",
             max_episode_steps=500,
+        )
+    if "AFTIR-TankGoal-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-TankGoal-v0",
+            entry_point="aftir_rl.envs.tank_goal:TankGoalEnv",
+            max_episode_steps=100,
         )
     if "AFTIR-Arm-v0" not in gym.registry:
         gym.register(

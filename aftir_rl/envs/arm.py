@@ -262,7 +262,9 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode= to make()")
             return None
-        from aftir_rl.plotting import render_path
+        if getattr(self, "_renderer", None) is None:  # kept: blitting, a few ms per frame
+            from aftir_rl.plotting import PathRenderer
 
-        return render_path(self.tank, np.array(self._tips), self.target,
-                           arms=[self._points(self._state, 10)], title="AFTIR-Arm")  # fmt: skip
+            self._renderer = PathRenderer(self.tank, title="AFTIR-Arm")
+        return self._renderer.render(np.array(self._tips), self.target,
+                                     arms=[self._points(self._state, 10)])  # fmt: skip

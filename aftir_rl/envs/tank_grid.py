@@ -235,7 +235,9 @@ class TankGridEnv(gym.Env[int, int]):
             marks[cells[-1]] = "A"
             legend = "# obstructed  . free  S start  T target  * path  A tip"
             return legend + "\n" + self.raster.ascii(marks)
-        from aftir_rl.plotting import render_path
+        if getattr(self, "_renderer", None) is None:  # kept: blitting, a few ms per frame
+            from aftir_rl.plotting import PathRenderer
 
+            self._renderer = PathRenderer(self.tank, title="AFTIR-Tank-v0")
         points = np.array([self.raster.cell_center(c) for c in cells])
-        return render_path(self.tank, points, self.target_point, title="AFTIR-Tank-v0")
+        return self._renderer.render(points, self.target_point)

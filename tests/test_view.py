@@ -1,0 +1,317 @@
+"""The run view: reading run directories, the figure, the CLI, and the page in a real browser.
+
+The browser check drives Debian's Chromium headless over the DevTools protocol on a pipe
+(``--remote-debugging-pipe``: JSON messages ending in NUL on fds 3 and 4), with the standard
+library only. It is skipped when ``/usr/bin/chromium`` is missing (CI: ``apt-get install -y
+chromium``).
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import os
+import re
+import select
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aftir_rl.errors import AftirError, CheckpointError
+from aftir_rl.posture.motion import densify
+from aftir_rl.robot import Posture
+from aftir_rl.view import build_figure, read_run, write_view
+
+CHROMIUM = Path("/usr/bin/chromium")
+L = 50.0
+
+
+def _motion() -> list[Posture]:
+    """Three sections pushed in straight, then the top two bending toward +x (dense)."""
+    keys = [
+        Posture(-150.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
+        Posture(-100.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
+        Posture(-100.0, [0.0, 0.4, 0.9], [0.3, 0.3, 0.3]),
+    ]
+    return densify(keys, max_angle=0.02, max_dis=1.0)
+
+
+def _q_table_run(root: Path, tank, name: str = "q_table__AFTIR-Tank-v0__t__0__now") -> Path:
+    run = root / name
+    run.mkdir(parents=True)
+    motion = _motion()
+    tips = np.array([p.tip(L) for p in motion])
+    cells: list[list[int]] = []
+    for tip in tips[tips[:, 2] > 0]:
+        cell = list(tank.raster.point_to_cell(tip))
+        if not cells or cells[-1] != cell:
+            cells.append(cell)
+    path = {
+        "target": tips[-1].tolist(),
+        "target_cell": cells[-1],
+        "cells": cells,
+        "points_cm": [tank.raster.cell_center(c).tolist() for c in cells],
+    }
+    trajectory = {
+        "complete": True,
+        "margin_cm": 1.0,
+        "section_length": L,
+        "method": "test",
+        "motion": [p.to_dict() for p in motion],
+        "waypoint_index": [0, 50, len(motion) - 1],
+    }
+    (run / "path.json").write_text(json.dumps(path))
+    (run / "trajectory.json").write_text(json.dumps(trajectory))
+    return run
+
+
+def _sb3_run(root: Path) -> Path:
+    run = root / "ppo__AFTIR-Arm-v0__random__0__now"
+    run.mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps({"algo": "ppo", "tank": "b737_center"}))
+    (run / "summary.json").write_text(json.dumps({"algo": "ppo", "timesteps": 64}))
+    return run
+
+
+# ------------------------------------------------------------------------------ without a browser
+def test_read_run_and_figure(tmp_path, tank):
+    run = read_run(_q_table_run(tmp_path, tank))
+    motion = _motion()
+    assert run.n_motion == len(motion) and run.section_length == L
+    assert np.allclose(run.tips()[-1], motion[-1].tip(L))
+    assert run.waypoint_index == [0, 50, len(motion) - 1]
+    fig = build_figure([run, read_run(_sb3_run(tmp_path))], tank, max_frames=20)
+    assert len(fig.frames) == 20
+    names = {t.name for t in fig.data}
+    assert {"baffle", "pipes", "boxes (stringers)", "access panel", "cell path", "arm"} <= names
+    arm = next(i for i, t in enumerate(fig.data) if t.name == "arm")
+    assert fig.frames[-1].traces == (arm,)
+    assert np.allclose(np.array(fig.frames[-1].data[0].z)[-1], motion[-1].tip(L)[2], atol=0.01)
+    assert fig.data[arm].legendgroup == "run0"
+
+
+def test_frames_are_bounded_and_keep_the_ends(tmp_path, tank):
+    run = read_run(_q_table_run(tmp_path, tank))
+    from aftir_rl.view import _frame_indices
+
+    idx = _frame_indices(run, 30)
+    assert len(idx) <= 30 and idx[0] == 0 and idx[-1] == run.n_motion - 1
+    assert 50 in idx and np.all(np.diff(idx) > 0)
+
+
+def test_old_trajectory_form_pads_sections(tmp_path):
+    run = tmp_path / "old"
+    run.mkdir()
+    short = {"dis": -40.0, "theta": [0.2], "phi": [0.0], "section_length": 25}
+    long = {"dis": -50.0, "theta": [0.0, 0.3], "phi": [0.0, 0.0], "section_length": 25}
+    via = {"dis": -45.0, "theta": [0.0, 0.25], "phi": [0.0, 0.0]}
+    data = {"postures": [short, None, long], "moves": [{"from": 0, "via": [via]}]}
+    (run / "trajectory.json").write_text(json.dumps(data))
+    got = read_run(run)
+    assert got.n_motion == 3 and got.theta.shape == (3, 2) and got.waypoint_index == [0, 2]
+    # the one-section posture is the same arm as a straight section below it and dis - l
+    assert np.allclose(got.tips()[0], Posture(-40.0, [0.2], [0.0]).tip(25))
+
+
+@pytest.mark.parametrize(
+    "setup, message",
+    [
+        (None, "no such directory"),
+        ({}, "not a run directory"),
+        ({"path.json": "{not json"}, "cannot read it as JSON"),
+        ({"trajectory.json": '{"motion": [{"dis": 1}]}'}, "motion[0]"),
+        ({"trajectory.json": '{"motion": 3}'}, "motion: expected a list"),
+        ({"path.json": '{"points_cm": [[1, 2]]}'}, "points_cm"),
+    ],
+)
+def test_unreadable_runs_raise_one_line(tmp_path, setup, message):
+    run = tmp_path / "run"
+    if setup is not None:
+        run.mkdir()
+        for name, text in setup.items():
+            (run / name).write_text(text)
+    with pytest.raises(CheckpointError, match=message.replace("[", r"\[")) as err:
+        write_view([run], tmp_path / "v.html")
+    assert isinstance(err.value, AftirError) and "\n" not in str(err.value)
+    assert not (tmp_path / "v.html").exists()
+
+
+def test_cli(tmp_path, tank):
+    run = _q_table_run(tmp_path, tank)
+    cmd = [sys.executable, "-m", "aftir_rl.cli_view"]
+    out = tmp_path / "page" / "v.html"
+    proc = subprocess.run([*cmd, str(run), "-o", str(out), "--max-frames", "10"],
+                          capture_output=True, text=True)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert out.stat().st_size < 6e6 and "aftir-view" in out.read_text()
+    bad = subprocess.run([*cmd, str(tmp_path / "missing"), "-o", str(out)],
+                         capture_output=True, text=True)  # fmt: skip
+    assert (
+        bad.returncode == 2 and bad.stderr.startswith("error: ") and "Traceback" not in bad.stderr
+    )
+    assert len(bad.stderr.strip().splitlines()) == 1
+    assert "RUN_DIR" in subprocess.run([*cmd, "--help"], capture_output=True, text=True).stdout
+
+
+# ------------------------------------------------------------------------------ in a real browser
+class _DevTools:
+    """Chromium headless driven over ``--remote-debugging-pipe`` (stdlib only)."""
+
+    def __init__(self, user_dir: str) -> None:
+        to_chrome, from_chrome = os.pipe(), os.pipe()
+        # Chromium reads commands on fd 3 and writes replies on fd 4; a tiny shim puts the pipe
+        # ends there whatever fds this process already holds.
+        shim = (
+            "import fcntl, os, sys\n"
+            "a, b = (fcntl.fcntl(int(x), fcntl.F_DUPFD, 10) for x in sys.argv[1:3])\n"
+            "os.dup2(a, 3)\nos.dup2(b, 4)\nos.execv(sys.argv[3], sys.argv[3:])\n"
+        )
+        args = [
+            str(CHROMIUM), "--headless", "--no-sandbox", "--remote-debugging-pipe",
+            "--disable-gpu", "--enable-unsafe-swiftshader", "--disable-background-networking",
+            "--disable-component-update", "--disable-sync", "--no-first-run",
+            "--no-default-browser-check", "--window-size=1280,1000",
+            f"--user-data-dir={user_dir}", "about:blank",
+        ]  # fmt: skip
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", shim, str(to_chrome[0]), str(from_chrome[1]), *args],
+            pass_fds=(to_chrome[0], from_chrome[1]),
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        os.close(to_chrome[0])
+        os.close(from_chrome[1])
+        self.write, self.read = to_chrome[1], from_chrome[0]
+        self.buffer, self.next_id, self.events = b"", 0, []
+
+    def send(self, method: str, params=None, session=None, timeout: float = 20.0):
+        self.next_id += 1
+        msg = {"id": self.next_id, "method": method, "params": params or {}}
+        if session:
+            msg["sessionId"] = session
+        os.write(self.write, json.dumps(msg).encode() + b"\0")
+        end = time.monotonic() + timeout
+        while True:
+            while b"\0" not in self.buffer:
+                ready, _, _ = select.select([self.read], [], [], max(0.0, end - time.monotonic()))
+                if not ready:
+                    raise TimeoutError(f"no reply to {method} in {timeout} s")
+                chunk = os.read(self.read, 1 << 20)
+                if not chunk:
+                    raise EOFError(f"chromium closed the pipe (exit {self.proc.poll()})")
+                self.buffer += chunk
+            raw, self.buffer = self.buffer.split(b"\0", 1)
+            reply = json.loads(raw)
+            if reply.get("id") == self.next_id:
+                assert "error" not in reply, f"{method}: {reply['error']}"
+                return reply["result"]
+            self.events.append(reply)
+
+    def evaluate(self, session: str, expression: str):
+        result = self.send("Runtime.evaluate", {"expression": expression, "awaitPromise": True,
+                                                "returnByValue": True}, session)  # fmt: skip
+        assert "exceptionDetails" not in result, result["exceptionDetails"]
+        return result["result"].get("value")
+
+    def errors(self) -> list[str]:
+        """Uncaught exceptions, console.error/assert calls and error-level log entries."""
+        out = []
+        for event in self.events:
+            method, params = event.get("method"), event.get("params", {})
+            if method == "Runtime.exceptionThrown":
+                details = params["exceptionDetails"]
+                out.append(details.get("exception", {}).get("description") or details["text"])
+            elif method == "Runtime.consoleAPICalled" and params["type"] in ("error", "assert"):
+                out.append(" ".join(str(a.get("value", a.get("description"))) for a in
+                                    params["args"]))  # fmt: skip
+            elif method == "Log.entryAdded" and params["entry"]["level"] == "error":
+                out.append(params["entry"]["text"])
+        return out
+
+    def close(self) -> None:
+        try:
+            self.send("Browser.close", timeout=5)
+        except (OSError, TimeoutError, EOFError):
+            pass
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        os.close(self.write)
+        os.close(self.read)
+
+
+_DRAWN = """new Promise(done => { const start = Date.now(); (function poll() {
+  const gd = document.getElementById('aftir-view');
+  if (gd && gd._fullLayout && gd._fullLayout.scene && gd._fullLayout.scene._scene &&
+      document.querySelector('.gl-container canvas')) return done(true);
+  if (Date.now() - start > 10000) return done(false);
+  setTimeout(poll, 50); })(); })"""
+
+_STATE = """(() => { const gd = document.getElementById('aftir-view');
+  const canvas = document.querySelector('.gl-container canvas');
+  return {svg: document.querySelectorAll('.main-svg').length, traces: gd.data.length,
+    canvas: canvas ? [canvas.width, canvas.height] : null,
+    frames: gd._transitionData._frames.length,
+    sliders: document.querySelectorAll('.slider-container').length,
+    legend: Array.from(document.querySelectorAll('.legendtext')).map(e => e.textContent),
+    noWebGL: document.body.innerText.includes('WebGL is not supported')}; })()"""
+
+_ANIMATE = """(async () => { const gd = document.getElementById('aftir-view');
+  const arm = gd._fullData.findIndex(t => t.name === 'arm');
+  const tipZ = () => { const z = gd._fullData[arm].z; return z[z.length - 1]; };
+  const before = tipZ();
+  await Plotly.animate(gd, [String(gd._transitionData._frames.length - 1)],
+    {frame: {duration: 0, redraw: true}, transition: {duration: 0}, mode: 'immediate'});
+  return [before, tipZ()]; })()"""
+
+
+@pytest.mark.skipif(not CHROMIUM.exists(), reason="needs Chromium: apt-get install -y chromium")
+def test_page_draws_in_headless_chromium(tmp_path, tank):
+    from PIL import Image
+
+    runs = [_q_table_run(tmp_path, tank), _sb3_run(tmp_path)]
+    page = write_view(runs, tmp_path / "view.html", max_frames=40)
+    fig = build_figure([read_run(r) for r in runs], tank, max_frames=40)
+    assert 30 < len(fig.frames) <= 40
+    html = page.read_text()
+    assert not re.search(r"<(script|link)[^>]+(src|href)=", html)  # plotly.js is inline
+    with tempfile.TemporaryDirectory() as user_dir:
+        browser = _DevTools(user_dir)
+        try:
+            target = browser.send("Target.createTarget", {"url": "about:blank"})["targetId"]
+            attach = {"targetId": target, "flatten": True}
+            session = browser.send("Target.attachToTarget", attach)["sessionId"]
+            for domain in ("Runtime", "Log", "Page"):
+                browser.send(f"{domain}.enable", session=session)
+            browser.send("Page.navigate", {"url": page.as_uri()}, session)
+            assert browser.evaluate(session, _DRAWN), "plotly did not draw the 3D scene in 10 s"
+            state = browser.evaluate(session, _STATE)
+            assert state["svg"] >= 1 and state["canvas"] and min(state["canvas"]) > 100, state
+            assert (
+                not state["noWebGL"]
+                and state["frames"] == len(fig.frames)
+                and state["sliders"] == 1
+            )
+            assert runs[0].name in " ".join(state["legend"]) and "arm" in state["legend"]
+            assert "no path to draw" in browser.evaluate(session, "document.body.innerText")
+            before, after = browser.evaluate(session, _ANIMATE)
+            assert before == pytest.approx(-150 + 3 * L, abs=0.01)  # straight, tip at z = 0
+            assert after == pytest.approx(_motion()[-1].tip(L)[2], abs=0.01)
+            shot = browser.send("Page.captureScreenshot", {"format": "png"}, session)["data"]
+            pixels = np.asarray(Image.open(io.BytesIO(base64.b64decode(shot))).convert("RGB"))
+            browser.send("Runtime.evaluate", {"expression": "0"}, session)  # flush late events
+            errors = browser.errors()
+        finally:
+            browser.close()
+    assert not errors, errors
+    # the first run's colour (#1f77b4: the arm, tip route and cell path) is on the screen
+    blue = np.all(np.abs(pixels.astype(int) - [31, 119, 180]) < 40, axis=-1)
+    assert blue.sum() > 200, f"only {blue.sum()} pixels of the run's colour"
