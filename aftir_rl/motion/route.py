@@ -1,0 +1,441 @@
+"""A route that a follow-the-leader arm can follow, from the learned cell path to the exact target.
+
+The route (:class:`aftir_rl.motion.ftl.Route`) is planned as a beam search over the bending
+vector ``κ`` of one route section after another:
+
+- **Guide.** A distance-to-go field over the tank's raster: Dijkstra over free cells
+  (26-neighbourhood, Euclidean steps) from the target, restricted to a *corridor* around the
+  learned cell path (the path's cells grown by ``corridor`` cells; the whole free raster when no
+  path is given, or when no route is found in the corridor). A point's distance-to-go is the
+  smallest ``D(c) + |p − centre(c)|`` over the corridor cells ``c`` next to it, so the route
+  follows the learned cells without having to visit their centres (a constant-curvature arm
+  rising from the panel cannot hug the floor as the first cells of a greedy path do).
+- **Moves.** The next section's ``κ`` is the last one plus a change from a fixed set (at most
+  ``max_change`` rad), bounded by ``θ_max``. Small changes between neighbouring sections keep
+  the follow-the-leader deviation between stages small (:mod:`aftir_rl.motion.ftl`).
+- **Clearance as a cost** (Kuntz et al.: integrate 1/clearance along the path): each section's
+  backbone samples must keep ``radius + margin + slack`` from every solid, wall and the floor
+  outside the panel, and pay ``clearance_weight · Σ ds / (clearance − margin)``; with the length,
+  a curvature-change cost and the distance-to-go this ranks the beam.
+- **Closing.** A beam state whose tip is within reach of the target is closed exactly by damped
+  least squares on the bending vectors of its last sections (tip error ≤ 1e-6 cm); the closed
+  route is re-checked for clearance over its whole body. The cheapest closed route wins.
+
+Units cm and rad. All candidates of one depth are evaluated in one batched call.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from itertools import product
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from aftir_rl.collision import point_clearance
+from aftir_rl.errors import PlanningError
+from aftir_rl.motion.ftl import Route, kappa_to_angles
+from aftir_rl.robot import ArmSpec, body_points, section_transforms, tip_position
+from aftir_rl.tank import Tank
+
+__all__ = ["RouteSettings", "RouteResult", "GuideField", "plan_route"]
+
+_NEIGHBOURS = np.array([d for d in product((-1, 0, 1), repeat=3) if any(d)], dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class RouteSettings:
+    """Knobs of the route search (defaults measured on the reference tank, see the README).
+
+    Attributes:
+        margin: clearance the arm's surface keeps from everything [cm].
+        slack: extra clearance asked of the route, for the deviation between FTL stages [cm].
+        beam_width: states kept per depth.
+        max_change: largest change of ``κ`` between neighbouring sections [rad].
+        leads: straight travel above the floor to try before the first bend [cm].
+        corridor: cells the learned path is grown by to make the corridor.
+        clearance_weight: weight of ``∫ ds / (clearance − margin)``.
+        change_weight: weight of ``Σ |Δκ|²·l``.
+        samples: backbone samples per section in the search.
+        max_seconds: wall-clock budget of one search.
+
+    """
+
+    margin: float = 1.0
+    slack: float = 1.5
+    beam_width: int = 160
+    max_change: float = 0.75
+    leads: tuple[float, ...] = (0.0, 15.0, 30.0)
+    corridor: int = 2
+    clearance_weight: float = 4.0
+    change_weight: float = 20.0
+    samples: int = 10
+    max_seconds: float = 20.0
+    bin_cm: float = 12.0
+    closings: int = 10
+    bin_heading: float = 0.5
+
+
+@dataclass
+class RouteResult:
+    """A planned route and what the search saw.
+
+    Attributes:
+        route: the route (its end is the target).
+        n_sections: arm sections that deploy it.
+        clearance_cm: smallest clearance of the route's body (surface, radius included) [cm].
+        cost: the search's cost of the route.
+        corridor: ``"learned path"`` or ``"whole tank"``: where the guide field came from.
+        seconds: planning time [s].
+        expanded: candidate sections evaluated.
+
+    """
+
+    route: Route
+    n_sections: int
+    clearance_cm: float
+    cost: float
+    corridor: str
+    seconds: float
+    expanded: int = 0
+    notes: list[str] = field(default_factory=list)
+
+
+class GuideField:
+    """Distance-to-go [cm] to a target through the free space of a tank, on a fine grid.
+
+    The grid has cells of half the raster's size (10 cm in the reference tank). A grid point is
+    free when it keeps the arm's radius from every solid and wall; two neighbouring points
+    (26-neighbourhood) are joined when the midpoint between them is free too, so a thin wall
+    such as the 4 cm baffle cuts every edge across it except through the hatch. Distances are
+    Euclidean along the edges, relaxed with numpy until they settle. ``allowed`` (on the raster)
+    restricts the field to a corridor.
+    """
+
+    def __init__(
+        self, tank: Tank, target: ArrayLike, allowed: NDArray[np.bool_] | None = None
+    ) -> None:
+        raster = tank.raster
+        self.size = float(raster.cell_size) / 2
+        self.origin = np.array(raster.origin, dtype=np.float64)
+        self.shape = np.array(raster.shape) * 2
+        free, edges = _grid_edges(tank, self.size)
+        if allowed is not None:
+            free = free & np.repeat(np.repeat(np.repeat(allowed, 2, 0), 2, 1), 2, 2)
+        self.free, self.edges = free, edges
+        target = np.asarray(target, dtype=np.float64)
+        centres = self.origin + (np.indices(tuple(self.shape)).transpose(1, 2, 3, 0) + 0.5) * (
+            self.size
+        )
+        dist = np.full(tuple(self.shape), np.inf)
+        near = np.linalg.norm(centres - target, axis=-1)
+        seed = free & (near <= 1.75 * self.size)
+        if not seed.any():
+            seed = free & (near <= near[free].min() + 1e-9) if free.any() else seed
+        dist[seed] = near[seed]
+        steps = np.linalg.norm(_NEIGHBOURS, axis=1) * self.size
+        for _ in range(int(self.shape.sum()) * 4):
+            new = dist.copy()
+            for e, (d, w) in enumerate(zip(_NEIGHBOURS, steps)):
+                # dist[x] <- dist[x + d] + w where the edge x -> x + d exists
+                src = _shifted(dist, -d)
+                new = np.minimum(new, np.where(edges[e] & free, src + w, np.inf))
+            new = np.where(free, new, np.inf)
+            if np.array_equal(new, dist):
+                break
+            dist = new
+        self.dist = dist
+        self.target = target
+
+    def __call__(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Distance-to-go of points ``(..., 3)``; ``inf`` where no reachable grid point is near.
+
+        A point uses its own grid cell and the neighbours joined to it by an edge (so nothing
+        leaks through a thin wall), each at its distance plus the straight line to it.
+        """
+        p = np.asarray(points, dtype=np.float64)
+        cell = np.clip(np.floor((p - self.origin) / self.size).astype(np.int64), 0, self.shape - 1)
+        own = self.dist[cell[..., 0], cell[..., 1], cell[..., 2]]
+        centre = self.origin + (cell + 0.5) * self.size
+        best = own + np.linalg.norm(p - centre, axis=-1)
+        for e, d in enumerate(_NEIGHBOURS):
+            c = cell + d
+            ok = np.all((c >= 0) & (c < self.shape), axis=-1)
+            cc = np.where(ok[..., None], c, 0)
+            joined = self.edges[e][cell[..., 0], cell[..., 1], cell[..., 2]] & ok
+            dd = self.dist[cc[..., 0], cc[..., 1], cc[..., 2]]
+            v = dd + np.linalg.norm(p - (self.origin + (cc + 0.5) * self.size), axis=-1)
+            best = np.minimum(best, np.where(joined, v, np.inf))
+        near = np.linalg.norm(p - self.target, axis=-1)
+        return np.where(near < self.size, np.minimum(best, near), best)
+
+
+def _shifted(a: NDArray[np.float64], d: NDArray[np.int64]) -> NDArray[np.float64]:
+    """``out[x] = a[x - d]`` with ``inf`` where ``x - d`` is outside."""
+    out = np.full_like(a, np.inf)
+    src = tuple(slice(max(0, -k), a.shape[i] - max(0, k)) for i, k in enumerate(d))
+    dst = tuple(slice(max(0, k), a.shape[i] - max(0, -k)) for i, k in enumerate(d))
+    out[dst] = a[src]
+    return out
+
+
+_EDGE_CACHE: dict[tuple[int, float], tuple[NDArray[np.bool_], NDArray[np.bool_]]] = {}
+
+
+def _grid_edges(tank: Tank, size: float) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Free grid points and, per neighbour direction, whether the edge's midpoint is free."""
+    key = (id(tank), size)
+    if key not in _EDGE_CACHE:
+        shape = tuple(int(n) * 2 for n in tank.raster.shape)
+        origin = np.array(tank.raster.origin, dtype=np.float64)
+        centres = origin + (np.indices(shape).transpose(1, 2, 3, 0) + 0.5) * size
+        r = tank.arm.radius
+        free = point_clearance(tank, centres) >= r
+        edges = np.zeros((len(_NEIGHBOURS),) + shape, dtype=bool)
+        for e, d in enumerate(_NEIGHBOURS):
+            mid = centres + 0.5 * size * d
+            target_free = _shifted(free.astype(np.float64), -d) == 1.0
+            edges[e] = free & target_free & (point_clearance(tank, mid) >= r)
+        _EDGE_CACHE[key] = (free, edges)
+    return _EDGE_CACHE[key]
+
+
+def _corridor(tank: Tank, cells: Sequence[Sequence[int]], grow: int) -> NDArray[np.bool_]:
+    mask = np.zeros(tank.raster.shape, dtype=bool)
+    shape = np.array(tank.raster.shape)
+    for c in cells:
+        lo = np.clip(np.asarray(c) - grow, 0, shape)
+        hi = np.clip(np.asarray(c) + grow + 1, 0, shape)
+        mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]] = True
+    return mask
+
+
+def _changes(max_change: float) -> NDArray[np.float64]:
+    """The set of ``Δκ`` moves: none, and 3 sizes in 8 directions (25 moves)."""
+    out = [(0.0, 0.0)]
+    for r in (max_change / 3, 2 * max_change / 3, max_change):
+        for a in np.arange(8) * math.pi / 4:
+            out.append((r * math.cos(a), r * math.sin(a)))
+    return np.array(out)
+
+
+def _clip_kappa(kappa: NDArray[np.float64], theta_max: float) -> NDArray[np.float64]:
+    norm = np.hypot(kappa[..., 0], kappa[..., 1])
+    scale = np.where(norm > theta_max, theta_max / np.maximum(norm, 1e-12), 1.0)
+    return kappa * scale[..., None]
+
+
+def _section_samples(
+    rot: NDArray[np.float64], pos: NDArray[np.float64], kappa: NDArray[np.float64], l: float, k: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Samples ``(B, k, 3)`` of one new section per state, and its end frame ``(B,3,3), (B,3)``."""
+    theta, phi = kappa_to_angles(kappa)
+    frac = np.arange(1, k + 1) / k
+    local = section_transforms(theta[:, None] * frac, phi[:, None], l * frac)  # (B, k, 4, 4)
+    pts = np.einsum("bij,bkj->bki", rot, local[..., :3, 3]) + pos[:, None, :]
+    end_rot = rot @ local[:, -1, :3, :3]
+    return pts, end_rot, pts[:, -1, :]
+
+
+def route_clearance(tank: Tank, arm: ArmSpec, route: Route, per_section: int = 20) -> float:
+    """Smallest clearance [cm] of the final body of ``route`` (its surface, radius included)."""
+    theta, phi = kappa_to_angles(route.kappa)
+    pts = body_points(route.lead, theta, phi, route.section_length, per_section)
+    return float(point_clearance(tank, pts).min()) - arm.radius
+
+
+def _close(
+    lead: float, kappa: NDArray[np.float64], target: NDArray[np.float64], l: float,
+    theta_max: float, free: int = 3, iterations: int = 40,
+) -> NDArray[np.float64] | None:  # fmt: skip
+    """Damped least squares on the last ``free`` sections' ``κ`` until the tip is at ``target``."""
+    kap = kappa.copy()
+    m = len(kap)
+    j0 = max(0, m - free)
+    nv = 2 * (m - j0)
+    eps = 1e-6
+    for _ in range(iterations):
+        theta, phi = kappa_to_angles(kap)
+        tip = tip_position(lead, theta, phi, l)
+        err = target - tip
+        if np.linalg.norm(err) < 1e-7:
+            return kap
+        trial = np.repeat(kap[None], nv, axis=0)
+        flat = trial[:, j0:].reshape(nv, nv)
+        flat[np.arange(nv), np.arange(nv)] += eps
+        trial[:, j0:] = flat.reshape(nv, m - j0, 2)
+        th, ph = kappa_to_angles(trial)
+        jac = ((tip_position(lead, th, ph, l) - tip) / eps).T  # (3, nv)
+        lam = 1e-2 * l * l if np.linalg.norm(err) > 5 else 1e-4 * l * l
+        step = jac.T @ np.linalg.solve(jac @ jac.T + lam * 1e-4 * np.eye(3), err)
+        norm = np.linalg.norm(step)
+        if norm > 0.3:
+            step *= 0.3 / norm
+        kap[j0:] = _clip_kappa(kap[j0:] + step.reshape(m - j0, 2), theta_max)
+    theta, phi = kappa_to_angles(kap)
+    ok = np.linalg.norm(target - tip_position(lead, theta, phi, l)) < 1e-6
+    return kap if ok else None
+
+
+def plan_route(
+    tank: Tank,
+    target: ArrayLike,
+    cells: Sequence[Sequence[int]] | None = None,
+    settings: RouteSettings | None = None,
+    arm: ArmSpec | None = None,
+) -> RouteResult:
+    """Plan a follow-the-leader route from the panel to ``target`` [cm].
+
+    Args:
+        tank: the tank.
+        target: the exact end point of the route [cm].
+        cells: the learned cell path (start first), or None to search the whole free raster.
+        settings: search knobs; default :class:`RouteSettings`.
+        arm: the arm; default the tank's.
+
+    Raises:
+        PlanningError: no route keeps the margin (the message says why).
+
+    """
+    settings = settings or RouteSettings()
+    arm = arm or tank.arm
+    target = np.asarray(target, dtype=np.float64)
+    start = time.perf_counter()
+    need = arm.radius + settings.margin
+    tip_clear = float(point_clearance(tank, target[None])[0])
+    if tip_clear < need:
+        raise PlanningError(
+            f"Cannot reach the target: it lies {tip_clear:.2f} cm from the tank, closer than "
+            f"the arm's radius {arm.radius:g} cm plus the margin {settings.margin:g} cm"
+        )
+    attempts: list[tuple[str, NDArray[np.bool_] | None]] = []
+    if cells is not None and tank.cell_size is not None:
+        attempts.append(("learned path", _corridor(tank, cells, settings.corridor)))
+    attempts.append(("whole tank", None))
+    notes: list[str] = []
+    for name, allowed in attempts:
+        guide = GuideField(tank, target, allowed)
+        result = _beam(tank, arm, target, guide, settings, start)
+        if result is not None:
+            result.corridor = name
+            result.notes = notes
+            result.seconds = time.perf_counter() - start
+            return result
+        notes.append(f"no route in the {name} corridor")
+    raise PlanningError(
+        "Cannot reach the target: no follow-the-leader route keeps the margin of "
+        f"{settings.margin:g} cm ({'; '.join(notes)})"
+    )
+
+
+def _beam(
+    tank: Tank,
+    arm: ArmSpec,
+    target: NDArray[np.float64],
+    guide: GuideField,
+    settings: RouteSettings,
+    start: float,
+) -> RouteResult | None:
+    l, k = arm.section_length, settings.samples
+    need = arm.radius + settings.margin + settings.slack
+    changes = _changes(settings.max_change)
+    leads = np.array([v for v in settings.leads if v < l * arm.max_sections])
+    # states
+    n0 = len(leads)
+    rot = np.repeat(np.eye(3)[None], n0, axis=0)
+    pos = np.stack([np.zeros(n0), np.zeros(n0), leads], axis=1)
+    kap_hist = np.zeros((n0, 0, 2))
+    lead = leads.copy()
+    cost = leads.copy()
+    best: tuple[float, Route, float] | None = None
+    expanded = 0
+    max_depth = arm.max_sections
+    for depth in range(max_depth):
+        if time.perf_counter() - start > settings.max_seconds or len(cost) == 0:
+            break
+        last = kap_hist[:, -1, :] if depth else np.zeros((len(cost), 2))
+        b, c = len(cost), len(changes)
+        new_k = _clip_kappa(last[:, None, :] + changes[None, :, :], arm.theta_max).reshape(-1, 2)
+        rep = np.repeat(np.arange(b), c)
+        pts, end_rot, end_pos = _section_samples(rot[rep], pos[rep], new_k, l, k)
+        expanded += len(rep)
+        clear = point_clearance(tank, pts) - arm.radius  # surface clearance (B*C, k)
+        ok = clear.min(axis=1) >= need - arm.radius
+        # sections needed so far: bent + straight below the floor must fit in the arm
+        n_needed = depth + 1 + np.ceil(lead[rep] / l - 1e-9)
+        ok &= n_needed <= arm.max_sections
+        if not np.any(ok):
+            break
+        idx = np.flatnonzero(ok)
+        rep, new_k, pts, end_rot, end_pos, clear = (
+            rep[idx], new_k[idx], pts[idx], end_rot[idx], end_pos[idx], clear[idx]
+        )  # fmt: skip
+        dk = new_k - (kap_hist[rep, -1, :] if depth else 0.0)
+        g = (
+            cost[rep]
+            + l
+            + settings.clearance_weight
+            * (l / k)
+            * np.sum(1.0 / np.maximum(clear - settings.margin, 0.25), axis=1)
+            + settings.change_weight * l * np.einsum("ij,ij->i", dk, dk) / 10.0
+        )
+        h = guide(end_pos)
+        hist = np.concatenate([kap_hist[rep], new_k[:, None, :]], axis=1)
+        if best is not None and depth >= 1 and np.min(g + h) > best[0]:
+            break
+        # prune: finite guide, then best per (position, heading) bin, then the beam width
+        f = g + h
+        keep = np.flatnonzero(np.isfinite(f))
+        if len(keep) == 0:
+            break
+        heading = end_rot[keep, :, 2]
+        key = np.concatenate(
+            [np.floor(end_pos[keep] / settings.bin_cm), np.round(heading / settings.bin_heading)],
+            axis=1,
+        ).astype(np.int64)
+        order = keep[np.argsort(f[keep])]
+        key = key[np.argsort(f[keep])]
+        _, first = np.unique(key, axis=0, return_index=True)
+        order = order[np.sort(first)][: settings.beam_width]
+        rot, pos, kap_hist = end_rot[order], end_pos[order], hist[order]
+        lead, cost = lead[rep[order]], g[order]
+        # closing: append one or two sections to the most promising states near the target
+        dist = np.linalg.norm(pos - target, axis=1)
+        togo = h[order]  # through free space: a wall between tip and target does not count as near
+        near = np.flatnonzero((dist < 1.9 * l) & (togo < 2.2 * l))
+        for i in near[np.argsort(togo[near])][: settings.closings]:
+            for extra in (1, 2) if dist[i] < 0.95 * l else (2,):
+                if depth + 1 + extra + math.ceil(lead[i] / l - 1e-9) > arm.max_sections:
+                    continue
+                start_k = np.concatenate([kap_hist[i], np.repeat(kap_hist[i][-1:], extra, 0)])
+                closed = _close(lead[i], start_k, target, l, arm.theta_max, free=extra + 1)
+                if closed is None:
+                    continue
+                route = Route(lead[i], closed, l)
+                rc = route_clearance(tank, arm, route)
+                if rc < settings.margin + 0.5 * settings.slack:
+                    continue
+                dk_all = np.diff(np.vstack([np.zeros((1, 2)), closed]), axis=0)
+                change = np.hypot(dk_all[:, 0], dk_all[:, 1])
+                total = (
+                    float(cost[i]) + extra * l
+                    + settings.clearance_weight * extra * l / max(rc - settings.margin, 0.25)
+                    + settings.change_weight * l * float(np.sum(change[-extra - 1 :] ** 2)) / 10
+                )  # fmt: skip
+                if best is None or total < best[0]:
+                    best = (total, route, rc)
+    if best is None:
+        return None
+    total, route, rc = best
+    return RouteResult(
+        route=route,
+        n_sections=max(route.min_sections(), 1),
+        clearance_cm=rc,
+        cost=total,
+        corridor="",
+        seconds=time.perf_counter() - start,
+        expanded=expanded,
+    )
