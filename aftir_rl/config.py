@@ -44,6 +44,11 @@ CONFIG_DIR = Path(os.environ.get("AFTIR_RL_CONFIG_DIR") or _shipped_config_dir()
 #: :func:`aftir_rl.posture.trajectory.plan_trajectory`, ``train q_table``, ``bench``, ``evaluate``).
 DEFAULT_BRIDGE_SECONDS = 10.0
 
+#: Clearance [cm] the arm's surface keeps from every solid, wall, the floor outside the panel and
+#: the guide, along a whole motion (``--margin`` of ``train q_table``, ``plan``, ``evaluate``,
+#: ``bench``).
+DEFAULT_MARGIN = 1.0
+
 
 def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read a YAML file that must hold a mapping.

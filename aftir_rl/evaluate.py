@@ -25,12 +25,15 @@ from typing import Any
 
 import numpy as np
 
-from aftir_rl.errors import AftirError, CheckpointError
+from aftir_rl.config import DEFAULT_MARGIN
+from aftir_rl.errors import AftirError, CheckpointError, ConfigError
 
 __all__ = ["main", "evaluate_run"]
 
 
-def _q_table_run(run_dir: Path) -> dict[str, Any]:
+def _q_table_run(
+    run_dir: Path, motion: str = "ftl", margin: float = DEFAULT_MARGIN
+) -> dict[str, Any]:
     import gymnasium as gym
 
     from aftir_rl.agents.q_table import QLearning, greedy_rollout
@@ -48,6 +51,22 @@ def _q_table_run(run_dir: Path) -> dict[str, Any]:
     states, reached = greedy_rollout(agent, env)
     raster = env.unwrapped.raster
     points = [raster.cell_center(raster.cell(s)) for s in states]
+    if motion == "ftl":
+        from aftir_rl.motion.plan import plan_motion
+
+        cells = [raster.cell(s) for s in states]
+        plan = plan_motion(env.unwrapped.tank, target, cells, margin=margin)
+        nan = float("nan")
+        return {
+            "agent": "q_table + FTL motion",
+            "targets": 1,
+            "success_rate": float(reached and plan.complete),
+            "tip_error_cm": plan.tip_error_cm if plan.complete else nan,
+            "path_length_cm": plan.tip_path_length_cm if plan.complete else nan,
+            "min_clearance_cm": plan.min_clearance_cm if plan.complete else nan,
+            "seconds_per_target": time.perf_counter() - start,
+            "note": "" if plan.complete else (plan.reason or "")[:80],
+        }
     planner = Planner(env.unwrapped.tank)
     trajectory = plan_trajectory(planner, points, target)
     seconds = time.perf_counter() - start
@@ -78,8 +97,16 @@ def _sb3_run(run_dir: Path, targets: list[np.ndarray] | None) -> dict[str, Any]:
             "note": note}  # fmt: skip
 
 
-def evaluate_run(run_dir: str | Path, targets: list[np.ndarray] | None = None) -> dict[str, Any]:
+def evaluate_run(
+    run_dir: str | Path,
+    targets: list[np.ndarray] | None = None,
+    motion: str = "ftl",
+    margin: float = DEFAULT_MARGIN,
+) -> dict[str, Any]:
     """Evaluate one run directory (Q-table or SB3).
+
+    A Q-table run's greedy path becomes a follow-the-leader motion keeping ``margin`` [cm]
+    (``motion="ftl"``) or the papers' postures per cell (``"progressive"``).
 
     Raises:
         CheckpointError: not a run directory this knows, or unreadable files.
@@ -87,7 +114,7 @@ def evaluate_run(run_dir: str | Path, targets: list[np.ndarray] | None = None) -
     """
     run_dir = Path(run_dir)
     if (run_dir / "q_table.npz").exists():
-        return _q_table_run(run_dir)
+        return _q_table_run(run_dir, motion, margin)
     if (run_dir / "model.zip").exists() and (run_dir / "config.json").exists():
         return _sb3_run(run_dir, targets)
     raise CheckpointError(
@@ -105,10 +132,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--target", nargs=3, type=float, action="append", metavar=("X", "Y", "Z"),
                         help="evaluation target for SB3 runs (repeatable)")  # fmt: skip
     parser.add_argument("--logdir", default="runs", help="where the evaluate__<time> logs go")
+    parser.add_argument("--motion", choices=("ftl", "progressive"), default="ftl",
+                        help="a Q-table run's motion: follow-the-leader (default) or the papers' "
+                        "postures per cell")  # fmt: skip
+    parser.add_argument("--margin", type=float, default=DEFAULT_MARGIN, metavar="CM",
+                        help=f"clearance the arm keeps ({DEFAULT_MARGIN:g} cm)")  # fmt: skip
     args = parser.parse_args(argv)
     targets = [np.array(t) for t in args.target] if args.target else None
     try:
-        results = {Path(r).name: evaluate_run(r, targets) for r in args.runs}
+        if not 0 <= args.margin <= 20:
+            raise ConfigError(f"--margin must be between 0 and 20 cm, got {args.margin}")
+        results = {
+            Path(r).name: evaluate_run(r, targets, args.motion, args.margin) for r in args.runs
+        }
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

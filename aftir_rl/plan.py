@@ -12,7 +12,8 @@ import math
 import sys
 from collections.abc import Sequence
 
-from aftir_rl.errors import AftirError
+from aftir_rl.config import DEFAULT_MARGIN
+from aftir_rl.errors import AftirError, ConfigError, PlanningError
 from aftir_rl.posture.planner import METHODS, PlannedPosture, Planner
 
 __all__ = ["main", "format_table"]
@@ -55,9 +56,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--method", default="auto", choices=METHODS,
                         help="auto: TSM beyond the baffle, TGA otherwise (default)")  # fmt: skip
     parser.add_argument("--json", action="store_true", help="print the posture JSON")
+    parser.add_argument(
+        "--margin", type=float, default=DEFAULT_MARGIN, metavar="CM",
+        help=f"clearance the arm's surface keeps from the tank (default {DEFAULT_MARGIN:g} cm)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     try:
+        if not 0 <= args.margin <= 20:
+            raise ConfigError(f"--margin must be between 0 and 20 cm, got {args.margin}")
         result = Planner(args.tank).plan(args.target, method=args.method)
+        if result.clearance_cm < args.margin:
+            raise PlanningError(
+                f"Cannot reach the target with a margin of {args.margin:g} cm: the "
+                f"{result.method} posture keeps only {result.clearance_cm:.2f} cm from the tank "
+                "(a smaller --margin accepts it)"
+            )
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

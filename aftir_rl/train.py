@@ -33,7 +33,13 @@ from typing import Any
 import numpy as np
 
 from aftir_rl.atomic import write_json
-from aftir_rl.config import CONFIG_DIR, DEFAULT_BRIDGE_SECONDS, from_mapping, read_yaml
+from aftir_rl.config import (
+    CONFIG_DIR,
+    DEFAULT_BRIDGE_SECONDS,
+    DEFAULT_MARGIN,
+    from_mapping,
+    read_yaml,
+)
 from aftir_rl.errors import AftirError, CheckpointError, ConfigError
 
 __all__ = ["main", "train_q_table", "load_q_table_config"]
@@ -103,6 +109,8 @@ def train_q_table(
     progress_bar: bool = True,
     postures: bool = True,
     bridge_seconds: float = DEFAULT_BRIDGE_SECONDS,
+    motion: str = "ftl",
+    margin: float = DEFAULT_MARGIN,
 ) -> list[dict[str, Any]]:
     """Train one Q-table per target and write a run directory for each.
 
@@ -117,7 +125,11 @@ def train_q_table(
         postures: turn the greedy path into joint variables (``trajectory.json``, a picture of
             the arm under ``paths/<target>_arm``).
         bridge_seconds: RRT-Connect's budget for each move of that trajectory that collides
-            (0: none; see :func:`aftir_rl.posture.motion.bridge`).
+            (0: none; see :func:`aftir_rl.posture.motion.bridge`); ``progressive`` only.
+        motion: ``"ftl"`` (default): a follow-the-leader motion along a route planned from the
+            learned cells (:func:`aftir_rl.motion.plan.plan_motion`); ``"progressive"``: the
+            papers' way, a posture per cell continued from the previous one.
+        margin: clearance [cm] the arm's surface keeps along the motion (``ftl``).
 
     Returns:
         One summary dict per target (what ``path.json`` holds, plus ``run_dir`` and ``seconds``).
@@ -188,9 +200,6 @@ def train_q_table(
             success, optimum = summary["success"], summary["bfs_optimal_steps"]
             tip_error, length_cm = summary["tip_error_cm"], summary["path_length_cm"]
             points, steps = np.array(summary["points_cm"]), summary["length_steps"]
-            logger.record("eval/success_rate", float(success))
-            logger.record("eval/tip_error_cm", tip_error)
-            logger.record("eval/path_length_cm", length_cm)
             logger.record("eval/path_length_steps", steps)
             logger.record("eval/bfs_optimal_steps", optimum)
             picture = render_path(
@@ -206,10 +215,17 @@ def train_q_table(
                 exclude=("stdout", "log", "json", "csv"),
             )
             trajectory = None
-            if postures:
+            if postures and motion == "ftl":
+                trajectory = _log_motion(logger, base, summary, target, margin)
+            elif postures:
                 trajectory = _log_trajectory(
                     logger, base, points, target, summary, bridge_seconds, seed
                 )
+                logger.record("eval/success_rate", float(success))
+                logger.record("eval/tip_error_cm", tip_error)
+                logger.record("eval/path_length_cm", length_cm)
+            else:
+                logger.record("eval/success_rate", float(success))
             logger.dump(step=agent.num_timesteps)
             logger.close()
             agent.save(
@@ -233,6 +249,85 @@ def train_q_table(
         summary["run_dir"] = str(run_dir)
         summaries.append(summary)
     return summaries
+
+
+def train_q_table_all_targets(
+    config: Any, seed: int = 0, logdir: str | Path = "runs", progress_bar: bool = True
+) -> dict[str, Any]:
+    """One goal-conditioned Q-learning run for every reachable cell of the tank.
+
+    Writes ``runs/q_table_goal__AFTIR-TankGoal-v0__all__{seed}__{time}/`` with
+    ``q_table_goal.npz``, ``summary.json``, ``progress.csv`` and TensorBoard events
+    (``eval/success_rate``: the share of goals whose greedy path reaches them).
+    """
+    from stable_baselines3.common.logger import configure
+
+    from aftir_rl.agents.q_table_goal import train_all_targets
+
+    name = _run_name("q_table_goal", "AFTIR-TankGoal-v0", "all", seed)
+    partial = Path(logdir) / f".{name}.partial"
+    partial.mkdir(parents=True, exist_ok=False)
+    try:
+        logger = configure(str(partial), ["csv", "tensorboard"])
+        params = {**dataclasses.asdict(config), "seed": seed, "target": "all"}
+        logger.record("hyperparameters", _hyperparameter_text(params), exclude=("csv",))
+        agent, summary = train_all_targets(
+            config=config, seed=seed, logger=logger, progress_bar=progress_bar
+        )
+        logger.record("eval/success_rate", summary["n_reached"] / summary["n_goals"])
+        logger.record("eval/bfs_optimal_rate", summary["n_optimal"] / summary["n_goals"])
+        logger.dump(step=agent.num_timesteps)
+        logger.close()
+        agent.save(partial / "q_table_goal.npz", extra={"config": dataclasses.asdict(config)})
+        write_json(partial / "summary.json", summary)
+        run_dir = Path(logdir) / name
+        partial.rename(run_dir)
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        raise
+    summary["run_dir"] = str(run_dir)
+    return summary
+
+
+def _log_motion(
+    logger: Any, env: Any, summary: dict[str, Any], target: Sequence[float], margin: float
+) -> Any:
+    """A follow-the-leader motion along the learned cells: logged, pictured, summarised."""
+    from stable_baselines3.common.logger import Image
+
+    from aftir_rl.motion.plan import plan_motion
+    from aftir_rl.plotting import render_path
+
+    plan = plan_motion(env.tank, target, summary["cells"], margin=margin)
+    summary["motion"] = {
+        "complete": plan.complete,
+        "seconds": plan.seconds,
+        "reason": plan.reason,
+        "entries": len(plan.motion) if plan.motion is not None else 0,
+        "n_sections": plan.motion.n_sections if plan.motion is not None else None,
+        "min_clearance_cm": plan.min_clearance_cm,
+        "ftl_deviation_cm": plan.ftl_deviation_cm,
+        "tip_error_cm": plan.tip_error_cm,
+        "route_departure_cm": plan.route_departure_cm,
+    }
+    # The same tags, with the same meaning, as every other algorithm (the arm's tip).
+    logger.record("eval/success_rate", float(plan.complete))
+    logger.record("eval/collision_rate", 0.0 if plan.complete else 1.0)
+    if plan.motion is not None:
+        logger.record("eval/tip_error_cm", plan.tip_error_cm)
+        logger.record("eval/path_length_cm", plan.tip_path_length_cm)
+        logger.record("eval/min_clearance_cm", plan.min_clearance_cm)
+        logger.record("eval/ftl_deviation_max_cm", plan.ftl_deviation_cm[0])
+        m = plan.motion
+        shown = sorted(set(np.linspace(0, len(m) - 1, 7).astype(int)))
+        arms = [m.posture(i).points(m.route.section_length, 10) for i in shown]
+        picture = render_path(
+            env.tank, m.tips(), env.target_point, arms=arms,
+            title=f"follow-the-leader motion to {_target_tag(target)} "
+            f"({len(m)} entries, clearance {plan.min_clearance_cm:.1f} cm)",
+        )  # fmt: skip
+        logger.record("paths/eval", Image(picture, "HWC"), exclude=("stdout", "log", "json", "csv"))
+    return plan
 
 
 def _log_trajectory(
@@ -360,6 +455,17 @@ def _print_summary(s: dict[str, Any]) -> None:
         f"{s['bfs_optimal_steps']} ({verdict}); {s['path_length_cm']:.0f} cm"
     )
     print("  cells: " + " ".join("(" + ",".join(map(str, c)) + ")" for c in s["cells"]))
+    if "motion" in s:
+        m = s["motion"]
+        if m["complete"]:
+            dev = m["ftl_deviation_cm"]
+            print(
+                f"  motion: follow-the-leader, {m['n_sections']} sections, {m['entries']} entries "
+                f"in {m['seconds']:.2f} s; clearance {m['min_clearance_cm']:.2f} cm, FTL deviation "
+                f"max {dev[0]:.2f} / mean {dev[1]:.2f} cm, tip error {m['tip_error_cm']:.1e} cm"
+            )
+        else:
+            print(f"  motion: none in {m['seconds']:.2f} s: {m['reason']}")
     if "trajectory" in s:
         t = s["trajectory"]
         print(
@@ -397,6 +503,11 @@ def _parser() -> argparse.ArgumentParser:
         help="target point in cm; repeat for several (default: the tank's reference targets)",
     )
     q.add_argument("--episodes", type=int, help="training episodes per target (overrides config)")
+    q.add_argument(
+        "--all-targets",
+        action="store_true",
+        help="one goal-conditioned run (AFTIR-TankGoal-v0) that learns every reachable cell",
+    )
     q.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     q.add_argument("--logdir", default="runs", help="parent of the run directories (default runs/)")
     q.add_argument("--resume", help="q_table.npz or run directory to continue training from")
@@ -405,6 +516,20 @@ def _parser() -> argparse.ArgumentParser:
         "--no-postures",
         action="store_true",
         help="skip turning the greedy path into arm postures (trajectory.json)",
+    )
+    q.add_argument(
+        "--motion",
+        choices=("ftl", "progressive"),
+        default="ftl",
+        help="ftl: follow-the-leader motion along a route from the learned cells (default); "
+        "progressive: the papers' posture per cell, continued and bridged",
+    )
+    q.add_argument(
+        "--margin",
+        type=float,
+        default=DEFAULT_MARGIN,
+        metavar="CM",
+        help=f"clearance of the arm's surface along the motion (default {DEFAULT_MARGIN:g} cm)",
     )
     q.add_argument(
         "--bridge-seconds",
@@ -469,10 +594,25 @@ def main(argv: Sequence[str] | None = None) -> int:
             if args.episodes < 1:
                 raise ConfigError(f"--episodes must be at least 1, got {args.episodes}")
             config = dataclasses.replace(config, episodes=args.episodes)
+        if not 0 <= args.margin <= 20:
+            raise ConfigError(f"--margin must be between 0 and 20 cm, got {args.margin}")
         if not 0 <= args.bridge_seconds < math.inf:
             raise ConfigError(
                 f"--bridge-seconds must be a finite 0 or more, got {args.bridge_seconds}"
             )
+        if args.all_targets:
+            if args.target or args.resume:
+                raise ConfigError("--all-targets learns every cell: drop --target and --resume")
+            s = train_q_table_all_targets(
+                config, seed=args.seed, logdir=args.logdir, progress_bar=not args.no_progress
+            )
+            print(
+                f"every target of {s['tank']}: {s['n_goals']} goals, {s['episodes']} episodes "
+                f"each in {s['seconds']:.1f} s; greedy paths reach {s['n_reached']} and are "
+                f"BFS-optimal for {s['n_optimal']}"
+            )
+            print(f"  run dir: {s['run_dir']}")
+            return 0
         targets = args.target
         if targets is None:
             from aftir_rl.tank import load_tank
@@ -487,6 +627,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             progress_bar=not args.no_progress,
             postures=not args.no_postures,
             bridge_seconds=args.bridge_seconds,
+            motion=args.motion,
+            margin=args.margin,
         )
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)

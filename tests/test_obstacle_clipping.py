@@ -64,7 +64,7 @@ def test_obstacle_under_the_target_makes_it_unreachable():
 def test_plan_cli_obstacle_clipping_json():
     out = subprocess.run(
         [sys.executable, "-m", "aftir_rl.plan", "--tank", ROWS[3], "--target", "30", "18", "51",
-         "--method", "obstacle_clipping", "--json"],
+         "--method", "obstacle_clipping", "--json", "--margin", "0"],
         capture_output=True, text=True, check=True,
     )  # fmt: skip
     data = json.loads(out.stdout)

@@ -242,6 +242,7 @@ def ftl_motion(
     max_move: float = 0.9,
     fit: bool = True,
     keys_per_stage: int = 10,
+    theta_max: float = math.pi / 2,
 ) -> FTLMotion:
     """The whole deployment, dense enough that no backbone point moves more than ``max_move``.
 
@@ -251,7 +252,7 @@ def ftl_motion(
     ``keys_per_stage`` points of each stage by a least-squares fit of the body to the route
     (:func:`_fit_shape`), linear in ``κ`` between those points. Steps are halved where a backbone
     sample would move farther than ``max_move`` [cm] between entries (samples 2.5 cm apart at
-    ``l = 50``).
+    ``l = 50``). Fitted shapes are kept within the joint limit ``theta_max``.
     """
     l, n, m = route.section_length, int(n_sections), route.n_route_sections
     s0 = min(float(start_height), route.lead)
@@ -267,7 +268,7 @@ def ftl_motion(
         )
         for i, sk in enumerate(keys):
             if sk > route.lead and not on_stage[i]:
-                key_kappa[i] = _clip_norm(_fit_shape(route, n, sk, key_kappa[i]), math.pi)
+                key_kappa[i] = _clip_norm(_fit_shape(route, n, sk, key_kappa[i]), theta_max)
 
     def at(s: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
         flat = key_kappa.reshape(len(keys), -1)
