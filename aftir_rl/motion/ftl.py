@@ -67,7 +67,8 @@ class Route:
     """The tip's route: a straight ``lead`` above the floor, then constant-curvature sections.
 
     Attributes:
-        lead: straight travel up the panel's axis above the floor before the first bend [cm].
+        lead: straight travel up the panel's axis before the first bend [cm], measured from the
+            floor; negative where the first bend starts inside the panel's guide.
         kappa: bending vector of each route section, shape ``(M, 2)`` [rad].
         section_length: ``l`` [cm].
 
@@ -194,6 +195,10 @@ def route_points(route: Route, u: ArrayLike) -> NDArray[np.float64]:
     return np.where((u <= route.lead)[..., None], axis, world)
 
 
+#: Weight of the tip against one body sample in the between-stage fit (the tip leads).
+TIP_WEIGHT = 10.0
+
+
 def _fit_shape(
     route: Route, n: int, s: float, kappa: NDArray[np.float64], iterations: int = 4
 ) -> NDArray[np.float64]:
@@ -208,12 +213,15 @@ def _fit_shape(
     frac = np.arange(per + 1) / per
     u = dis + (np.arange(n)[:, None] + frac[None, :]) * l  # arc position of every sample
     goal = route_points(route, u.reshape(-1)).reshape(-1)
-    free = np.flatnonzero(dis + (np.arange(n) + 1) * l > max(route.lead, 0.0) + 1e-9)
+    free = np.flatnonzero(dis + (np.arange(n) + 1) * l > route.lead + 1e-9)
     if len(free) == 0:
         return kappa
     kap = kappa.copy()
     nv = 2 * len(free)
     eps = 1e-6
+    # the leader: the tip is held on the route far more firmly than the body
+    weight = np.ones(n * per + 1)
+    weight[-1] = TIP_WEIGHT
 
     def samples(k: NDArray[np.float64]) -> NDArray[np.float64]:
         th, ph = kappa_to_angles(k)
@@ -223,11 +231,11 @@ def _fit_shape(
         base = samples(kap)  # (N*per + 1, 3)
         res = goal.reshape(-1, 3)
         res = np.concatenate([res[:1], res.reshape(n, per + 1, 3)[:, 1:].reshape(-1, 3)])
-        err = (res - base).reshape(-1)
+        err = ((res - base) * weight[:, None]).reshape(-1)
         trial = np.repeat(kap[None], nv, axis=0)
         for v in range(nv):
             trial[v, free[v // 2], v % 2] += eps
-        jac = ((samples(trial) - base[None]).reshape(nv, -1) / eps).T
+        jac = (((samples(trial) - base[None]) * weight[None, :, None]).reshape(nv, -1) / eps).T
         step, *_ = np.linalg.lstsq(jac.T @ jac + 1e-6 * np.eye(nv), jac.T @ err, rcond=None)
         kap[free] += step.reshape(-1, 2)
         if np.abs(step).max() < 1e-7:

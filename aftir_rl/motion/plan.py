@@ -27,12 +27,18 @@ from aftir_rl.tank import Tank
 
 __all__ = ["MotionPlan", "plan_motion", "DEFAULT_MARGIN", "SEARCH_VARIANTS"]
 
-#: Route-search settings tried in turn (the margin is set per call).
+#: Route-search settings tried in turn (the margin is set per call): the first whose motion
+#: keeps the margin and the deviation goal wins; otherwise the complete one of least deviation.
 SEARCH_VARIANTS: tuple[RouteSettings, ...] = (
-    RouteSettings(clearance_weight=1.0, change_weight=5.0),
     RouteSettings(clearance_weight=1.0, change_weight=20.0),
+    RouteSettings(clearance_weight=1.0, change_weight=40.0, max_change=0.5),
+    RouteSettings(clearance_weight=1.0, change_weight=5.0),
     RouteSettings(clearance_weight=0.5, change_weight=5.0, beam_width=250, max_change=1.0),
 )
+
+#: Largest follow-the-leader deviation [cm] a motion should keep (the published FTL anchors:
+#: about 2% of the shape); a motion above it is kept only when no search setting does better.
+DEVIATION_GOAL = 2.5
 
 
 @dataclass
@@ -142,6 +148,7 @@ def plan_motion(
     arm = tank.arm
     h0 = min(float(tank.start_point[2]) if start_height is None else float(start_height), 20.0)
     reasons: list[str] = []
+    best: MotionPlan | None = None
     for settings in SEARCH_VARIANTS:
         try:
             found = plan_route(tank, target, cells, replace(settings, margin=margin), arm)
@@ -171,8 +178,13 @@ def plan_motion(
         )
         if cells is not None and tank.cell_size is not None:
             plan.waypoint_index, plan.route_departure_cm = _waypoints(tank, cells, tips)
-        plan.seconds = time.perf_counter() - start
-        return plan
+        if best is None or plan.ftl_deviation_cm[0] < best.ftl_deviation_cm[0]:
+            best = plan
+        if best.ftl_deviation_cm[0] <= DEVIATION_GOAL:
+            break
+    if best is not None:
+        best.seconds = time.perf_counter() - start
+        return best
     return MotionPlan(
         target=target,
         margin_cm=margin,

@@ -55,7 +55,8 @@ class RouteSettings:
         slack: extra clearance asked of the route, for the deviation between FTL stages [cm].
         beam_width: states kept per depth.
         max_change: largest change of ``κ`` between neighbouring sections [rad].
-        leads: straight travel above the floor to try before the first bend [cm].
+        leads: straight travel above the floor before the first bend [cm]; negative: the
+            first bend starts inside the panel's guide (its rim is checked like any surface).
         corridor: cells the learned path is grown by to make the corridor.
         clearance_weight: weight of ``∫ ds / (clearance − margin)``.
         change_weight: weight of ``Σ |Δκ|²·l``.
@@ -68,7 +69,7 @@ class RouteSettings:
     slack: float = 1.5
     beam_width: int = 160
     max_change: float = 0.75
-    leads: tuple[float, ...] = (0.0, 15.0, 30.0)
+    leads: tuple[float, ...] = (-20.0, -10.0, 0.0, 15.0, 30.0)
     corridor: int = 2
     clearance_weight: float = 4.0
     change_weight: float = 20.0
