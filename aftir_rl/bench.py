@@ -23,6 +23,10 @@ Methods:
   (:func:`~aftir_rl.posture.trajectory.plan_trajectory`); success is a complete trajectory
   (every waypoint a posture, every move collision-free when checked densely; a colliding move
   gets ``--bridge-seconds`` of RRT-Connect, :func:`~aftir_rl.posture.motion.bridge`).
+- ``q_table+ftl``: the same greedy cell path turned into a follow-the-leader motion
+  (:func:`~aftir_rl.motion.plan.plan_motion`); success is a complete motion whose arm keeps
+  ``--margin`` (1 cm) along the whole, densely checked motion; the FTL deviation column is the
+  largest distance of the body from the tip's traced curve.
 - ``rrt_connect``: OMPL's RRT-Connect in joint space from the start posture (the arm straight,
   its tip at the tank's start point) to the planner's posture for the target, with our forward
   kinematics and python-fcl scene as its validity checker
@@ -59,8 +63,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from aftir_rl.atomic import write_json
-from aftir_rl.config import DEFAULT_BRIDGE_SECONDS
+from aftir_rl.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.errors import AftirError, PlanningError
+from aftir_rl.safety import cli
 
 __all__ = ["Outcome", "Row", "target_sets", "run_benchmark", "format_table", "main"]
 
@@ -95,6 +100,7 @@ class Outcome:
     ran: bool = True
     note: str = ""
     posture: dict[str, Any] | None = None
+    deviation_cm: float = math.nan
 
 
 @dataclass
@@ -124,6 +130,8 @@ class Row:
             "min_clearance_cm": min((o.clearance_cm for o in ok if not math.isnan(o.clearance_cm)),
                                     default=math.nan),
             "path_cm": median([o.path_cm for o in ok]),
+            "ftl_deviation_cm": max((o.deviation_cm for o in ok if not math.isnan(o.deviation_cm)),
+                                    default=math.nan),
             "seconds": median([o.seconds for o in ran]),
             "notes": "; ".join(notes) + ("; ..." if len(counts) > 1 else ""),
         }  # fmt: skip
@@ -154,10 +162,10 @@ METHODS_FOR = {
     "seed004": ("blind", "region_clipping", "tga", "obstacle_clipping"),
     "seed000": ("obstacle_clipping", "tga"),
     "seed001": ("region_division", "blind", "tga"),
-    "seed002": ("tsm", "q_table+postures", "rrt_connect"),
-    "bay1": ("tga", "region_clipping", "blind", "obstacle_clipping", "q_table+postures",
-             "rrt_connect"),
-    "bay2": ("tsm", "q_table+postures", "rrt_connect"),
+    "seed002": ("tsm", "q_table+ftl", "q_table+postures", "rrt_connect"),
+    "bay1": ("tga", "region_clipping", "blind", "obstacle_clipping", "q_table+ftl",
+             "q_table+postures", "rrt_connect"),
+    "bay2": ("tsm", "q_table+ftl", "q_table+postures", "rrt_connect"),
 }  # fmt: skip
 
 
@@ -230,6 +238,37 @@ def q_table_outcome(
     )
 
 
+def q_table_ftl_outcome(
+    planner: Any, target: ArrayLike, seed: int = 0, margin: float = DEFAULT_MARGIN
+) -> Outcome:
+    """Q-learning, its greedy path, and a follow-the-leader motion along it keeping ``margin``."""
+    import gymnasium as gym
+
+    from aftir_rl.agents.q_table import QLearning, greedy_rollout
+    from aftir_rl.motion.plan import plan_motion
+
+    config = _q_table_config()
+    start = time.perf_counter()
+    try:
+        env = gym.make("AFTIR-Tank-v0", tank=planner.tank, target=tuple(target))
+    except AftirError as exc:
+        return Outcome(False, ran=False, note=_short(exc))
+    agent = QLearning.from_config(env, config, seed=seed)
+    agent.learn(config.episodes)
+    states, reached = greedy_rollout(agent, env)
+    if not reached:
+        return Outcome(False, seconds=time.perf_counter() - start, note="greedy path fails")
+    raster = env.unwrapped.raster
+    plan = plan_motion(planner.tank, target, [raster.cell(s) for s in states], margin=margin)
+    seconds = time.perf_counter() - start
+    if not plan.complete:
+        return Outcome(False, seconds=seconds, note=_short(PlanningError(plan.reason or "")))
+    return Outcome(
+        True, plan.tip_error_cm, plan.min_clearance_cm, plan.tip_path_length_cm, seconds,
+        deviation_cm=plan.ftl_deviation_cm[0],
+    )  # fmt: skip
+
+
 @functools.cache
 def _q_table_config() -> Any:
     """``configs/q_table.yaml``, read once per process."""
@@ -270,17 +309,13 @@ def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray
 
     Targets outside the region the env draws its targets from (``target_region``) are not run.
     """
-    import json
-
     import gymnasium as gym
 
-    from aftir_rl.agents.sb3 import evaluate_policy_on_targets, load_model
+    from aftir_rl.agents.sb3 import evaluate_policy_on_targets, load_run
 
-    run_dir = Path(run_dir)
-    config = json.loads((run_dir / "config.json").read_text())
-    algo, env_id = config["algo"], config["env_id"]
-    env_id = env_id if ":" in env_id else f"aftir_rl:{env_id}"
-    model = load_model(algo, run_dir / "model.zip")
+    # config.json checked key by key, the model loaded without unpickling (agents.sb3.load_run)
+    algo, run_config, env_id, model = load_run(run_dir)
+    config = {"env_id": run_config.env_id}
     lo, hi = gym.make(env_id).unwrapped.target_region
     rows = []
     for name in ("seed002", "bay1", "bay2"):
@@ -311,6 +346,7 @@ def run_benchmark(
     models: Sequence[str | Path] = (),
     bridge_seconds: float = DEFAULT_BRIDGE_SECONDS,
     progress: Callable[[str], None] | None = None,
+    margin: float = DEFAULT_MARGIN,
 ) -> list[Row]:
     """Run every method of ``methods`` (default :data:`METHODS_FOR`) on its target sets."""
     methods = methods or METHODS_FOR
@@ -323,7 +359,9 @@ def run_benchmark(
                 planner = planners(tank)
                 if progress:
                     progress(f"{name} {method} {tuple(np.round(target, 1))}")
-                if method == "q_table+postures":
+                if method == "q_table+ftl":
+                    row.outcomes.append(q_table_ftl_outcome(planner, target, seed, margin))
+                elif method == "q_table+postures":
                     row.outcomes.append(q_table_outcome(planner, target, seed, bridge_seconds))
                 elif method == "rrt_connect":
                     row.outcomes.append(rrt_outcome(planner, target, rrt_seconds, seed))
@@ -350,8 +388,8 @@ def format_table(rows: Sequence[Row]) -> str:
     """The markdown table of the README."""
     lines = [
         "| set | method | targets | success | tip error (cm) | min clearance (cm) | "
-        "path (cm) | s / target | note |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---|",
+        "FTL deviation (cm) | path (cm) | s / target | note |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for row in rows:
         s = row.summary()
@@ -359,11 +397,13 @@ def format_table(rows: Sequence[Row]) -> str:
         lines.append(
             f"| {s['set']} | {s['method']} | {targets} | {_fmt(100 * s['success_rate'], '.0f')}% "
             f"| {_fmt(s['tip_error_cm'], '.2g')} | {_fmt(s['min_clearance_cm'])} | "
-            f"{_fmt(s['path_cm'], '.0f')} | {_fmt(s['seconds'], '.3f')} | {s['notes']} |"
+            f"{_fmt(s['ftl_deviation_cm'])} | {_fmt(s['path_cm'], '.0f')} | "
+            f"{_fmt(s['seconds'], '.3f')} | {s['notes']} |"
         )
     return "\n".join(lines)
 
 
+@cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.bench``."""
     parser = argparse.ArgumentParser(
@@ -391,11 +431,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--json", metavar="PATH", help="also write every outcome as JSON")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    parser.add_argument("--margin", type=float, default=DEFAULT_MARGIN, metavar="CM",
+                        help="clearance the q_table+ftl motions keep (default "
+                        f"{DEFAULT_MARGIN:g} cm)")  # fmt: skip
     args = parser.parse_args(argv)
     if args.n_random < 1 or not 0 < args.rrt_seconds < math.inf:
         parser.error("--n-random must be at least 1 and --rrt-seconds positive and finite")
     if not 0 <= args.bridge_seconds < math.inf:
         parser.error("--bridge-seconds must be a finite 0 or more")
+    if not 0 <= args.margin <= 20:
+        parser.error("--margin must be between 0 and 20 cm")
+    if not 0 <= args.seed < 2**32:
+        parser.error("--seed must be from 0 to 2**32 - 1")
     problem = _check_inputs(args.model, args.json)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
@@ -405,7 +452,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         sets = {k: v for k, v in target_sets(args.n_random, args.seed).items() if k in args.sets}
         progress = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
         rows = run_benchmark(sets, rrt_seconds=args.rrt_seconds, models=args.model,
-                             progress=progress, bridge_seconds=args.bridge_seconds)  # fmt: skip
+                             progress=progress, bridge_seconds=args.bridge_seconds,
+                             margin=args.margin)  # fmt: skip
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -422,17 +470,21 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _check_inputs(models: Sequence[str], json_path: str | None) -> str:
     """What is wrong with the run directories or the JSON path ("" if nothing), before a run."""
-    import json
-
     for run_dir in models:
         run = Path(run_dir)
         if not (run / "model.zip").exists():
             return f"{run_dir}: no model.zip; give a run directory of python -m aftir_rl.train"
+        from aftir_rl.agents.sb3 import load_run, sb3_config_from_run
+        from aftir_rl.safety import read_json
+
         try:
-            config = json.loads((run / "config.json").read_text())
-            config["algo"], config["env_id"]  # noqa: B018
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            return f"{run_dir}: config.json is missing or not a training run's ({exc!r})"
+            sb3_config_from_run(read_json(run / "config.json", "config.json"), str(run))
+        except AftirError as exc:
+            return f"{run_dir}: config.json is missing or not a training run's ({exc})"
+        try:  # the model too, before any benchmark work (nothing in it is unpickled)
+            load_run(run)
+        except AftirError as exc:
+            return str(exc)
     if json_path is not None:
         folder = Path(json_path).resolve().parent
         if not folder.is_dir() or not os.access(folder, os.W_OK):

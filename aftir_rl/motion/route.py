@@ -35,7 +35,7 @@ from itertools import product
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.collision import point_clearance
+from aftir_rl.collision import point_clearance, points_clear
 from aftir_rl.errors import PlanningError
 from aftir_rl.motion.ftl import Route, kappa_to_angles
 from aftir_rl.robot import ArmSpec, body_points, section_transforms, tip_position
@@ -248,37 +248,59 @@ def route_clearance(tank: Tank, arm: ArmSpec, route: Route, per_section: int = 2
     return float(point_clearance(tank, pts).min()) - arm.radius
 
 
-def _close(
-    lead: float, kappa: NDArray[np.float64], target: NDArray[np.float64], l: float,
-    theta_max: float, free: int = 3, iterations: int = 40,
-) -> NDArray[np.float64] | None:  # fmt: skip
-    """Damped least squares on the last ``free`` sections' ``κ`` until the tip is at ``target``."""
-    kap = kappa.copy()
-    m = len(kap)
+def _close_batch(
+    lead: NDArray[np.float64], kappa: NDArray[np.float64], target: NDArray[np.float64],
+    l: float, theta_max: float, free: int = 3, iterations: int = 40,
+    lead_range: tuple[float, float] | None = (-25.0, 60.0),
+) -> list[tuple[float, NDArray[np.float64]] | None]:  # fmt: skip
+    """Put each route's tip on ``target``: damped least squares on its lead and last ``κ``.
+
+    ``kappa`` is ``(C, M, 2)``: C candidate routes of one depth, solved together (one batched
+    forward kinematics per iteration). The lead moves the whole route along the panel's axis
+    (its derivative is ``(0, 0, 1)``): with sections of fixed length, a continuous lead is what
+    lets a route end exactly at any distance. Steps are bounded (0.3 rad, 10 cm), ``κ`` stays
+    within the joint limit and the lead within ``lead_range`` (None: the lead stays as given, for
+    routes already threaded through the tank by the beam). Returns ``(lead, κ)`` of each
+    candidate, or None where it did not converge to 1e-6 cm.
+    """
+    kap = np.array(kappa, dtype=np.float64)
+    lead = np.array(lead, dtype=np.float64)
+    lo, hi = lead_range if lead_range is not None else (lead, lead)
+    lead = np.clip(lead, lo, hi)
+    c, m = kap.shape[:2]
     j0 = max(0, m - free)
-    nv = 2 * (m - j0)
+    nk = 2 * (m - j0)
     eps = 1e-6
+    eye = np.eye(nk).reshape(nk, m - j0, 2)
+    unit_z = np.array([0.0, 0.0, 1.0])
     for _ in range(iterations):
         theta, phi = kappa_to_angles(kap)
-        tip = tip_position(lead, theta, phi, l)
+        tip = tip_position(lead, theta, phi, l)  # (C, 3)
         err = target - tip
-        if np.linalg.norm(err) < 1e-7:
-            return kap
-        trial = np.repeat(kap[None], nv, axis=0)
-        flat = trial[:, j0:].reshape(nv, nv)
-        flat[np.arange(nv), np.arange(nv)] += eps
-        trial[:, j0:] = flat.reshape(nv, m - j0, 2)
+        norm = np.linalg.norm(err, axis=1)
+        done = norm < 1e-7
+        if done.all():
+            break
+        trial = np.repeat(kap[:, None], nk, axis=1)  # (C, nk, M, 2)
+        trial[:, :, j0:] += eps * eye[None]
         th, ph = kappa_to_angles(trial)
-        jac = ((tip_position(lead, th, ph, l) - tip) / eps).T  # (3, nv)
-        lam = 1e-2 * l * l if np.linalg.norm(err) > 5 else 1e-4 * l * l
-        step = jac.T @ np.linalg.solve(jac @ jac.T + lam * 1e-4 * np.eye(3), err)
-        norm = np.linalg.norm(step)
-        if norm > 0.3:
-            step *= 0.3 / norm
-        kap[j0:] = _clip_kappa(kap[j0:] + step.reshape(m - j0, 2), theta_max)
+        jac_k = (tip_position(lead[:, None], th, ph, l) - tip[:, None, :]) / eps  # (C, nk, 3)
+        # the lead's column is in cm, the angles' in cm/rad: scale it like 1/l rad per cm
+        free_lead = 1.0 if lead_range is not None else 0.0
+        jac = np.concatenate([jac_k, np.broadcast_to(unit_z * l * free_lead, (c, 1, 3))], axis=1)
+        damping = np.where(norm > 5, 1e-6, 1e-8) * l * l
+        a = np.swapaxes(jac, 1, 2) @ jac + damping[:, None, None] * np.eye(3)
+        step = np.einsum("cvi,ci->cv", jac, np.linalg.solve(a, err[..., None])[..., 0])
+        step[done] = 0.0
+        dk, dlead = step[:, :nk], step[:, nk] * l
+        size = np.linalg.norm(dk, axis=1)
+        scale = np.minimum(np.minimum(1.0, 0.3 / np.maximum(size, 1e-12)),
+                           10.0 / np.maximum(np.abs(dlead), 1e-12))  # fmt: skip
+        kap[:, j0:] = _clip_kappa(kap[:, j0:] + (dk * scale[:, None]).reshape(c, -1, 2), theta_max)
+        lead = np.clip(lead + dlead * scale, lo, hi)
     theta, phi = kappa_to_angles(kap)
-    ok = np.linalg.norm(target - tip_position(lead, theta, phi, l)) < 1e-6
-    return kap if ok else None
+    ok = np.linalg.norm(target - tip_position(lead, theta, phi, l), axis=1) < 1e-6
+    return [(float(lead[i]), kap[i]) if ok[i] else None for i in range(c)]
 
 
 def plan_route(
@@ -354,6 +376,43 @@ def _beam(
     best: tuple[float, Route, float] | None = None
     expanded = 0
     max_depth = arm.max_sections
+
+    def _keep(
+        best: tuple[float, Route, float] | None,
+        kap: NDArray[np.float64],
+        lead: float,
+        cost: float,
+        extra: int,
+    ) -> tuple[float, Route, float] | None:
+        """The better of ``best`` and a closed route (``best`` if it misses the margin)."""
+        route = Route(lead, kap, l)
+        if route.min_sections() > arm.max_sections:
+            return best
+        rc = route_clearance(tank, arm, route)
+        if rc < settings.margin + 0.5 * settings.slack:
+            return best
+        dk_all = np.diff(np.vstack([np.zeros((1, 2)), kap]), axis=0)
+        change = np.hypot(dk_all[:, 0], dk_all[:, 1])
+        total = (
+            cost + extra * l
+            + settings.clearance_weight * extra * l / max(rc - settings.margin, 0.25)
+            + settings.change_weight * l * float(np.sum(change[-extra - 1 :] ** 2)) / 10
+        )  # fmt: skip
+        return (total, route, rc) if best is None or total < best[0] else best
+
+    # near targets: one to three sections from the panel, closed directly from a few shapes
+    # (bent towards the target, or an S), since the straight arm is a saddle of the tip distance
+    toward = np.array([math.cos(math.atan2(target[1], target[0])),
+                       math.sin(math.atan2(target[1], target[0]))])  # fmt: skip
+    for extra in (1, 2, 3):
+        shapes = [np.outer(np.ones(extra), toward) * a for a in (0.3, 0.8)]
+        shapes += [np.outer((-1.0) ** np.arange(extra), toward) * a for a in (0.5, 1.0)]
+        starts = np.array([shape for shape in shapes for _ in leads])
+        seeds = np.tile(leads, len(shapes))
+        closed = _close_batch(seeds, starts, target, l, arm.theta_max, extra)
+        for out in closed:
+            if out is not None:
+                best = _keep(best, out[1], out[0], max(out[0], 0.0), extra)
     for depth in range(max_depth):
         if time.perf_counter() - start > settings.max_seconds or len(cost) == 0:
             break
@@ -363,17 +422,21 @@ def _beam(
         rep = np.repeat(np.arange(b), c)
         pts, end_rot, end_pos = _section_samples(rot[rep], pos[rep], new_k, l, k)
         expanded += len(rep)
-        clear = point_clearance(tank, pts) - arm.radius  # surface clearance (B*C, k)
-        ok = clear.min(axis=1) >= need - arm.radius
         # sections needed so far: bent + straight below the floor must fit in the arm
         n_needed = depth + 1 + np.ceil(lead[rep] / l - 1e-9)
-        ok &= n_needed <= arm.max_sections
+        # the cheap bounded test first, exact distances (for the cost) only for the survivors
+        ok = (n_needed <= arm.max_sections) & points_clear(tank, pts, need)
         if not np.any(ok):
             break
         idx = np.flatnonzero(ok)
-        rep, new_k, pts, end_rot, end_pos, clear = (
-            rep[idx], new_k[idx], pts[idx], end_rot[idx], end_pos[idx], clear[idx]
-        )  # fmt: skip
+        rep, new_k, pts, end_rot, end_pos = (
+            rep[idx],
+            new_k[idx],
+            pts[idx],
+            end_rot[idx],
+            end_pos[idx],
+        )
+        clear = point_clearance(tank, pts) - arm.radius  # surface clearance (B*C, k)
         dk = new_k - (kap_hist[rep, -1, :] if depth else 0.0)
         g = (
             cost[rep]
@@ -407,27 +470,24 @@ def _beam(
         dist = np.linalg.norm(pos - target, axis=1)
         togo = h[order]  # through free space: a wall between tip and target does not count as near
         near = np.flatnonzero((dist < 1.9 * l) & (togo < 2.2 * l))
-        for i in near[np.argsort(togo[near])][: settings.closings]:
-            for extra in (1, 2) if dist[i] < 0.95 * l else (2,):
-                if depth + 1 + extra + math.ceil(lead[i] / l - 1e-9) > arm.max_sections:
-                    continue
-                start_k = np.concatenate([kap_hist[i], np.repeat(kap_hist[i][-1:], extra, 0)])
-                closed = _close(lead[i], start_k, target, l, arm.theta_max, free=extra + 1)
-                if closed is None:
-                    continue
-                route = Route(lead[i], closed, l)
-                rc = route_clearance(tank, arm, route)
-                if rc < settings.margin + 0.5 * settings.slack:
-                    continue
-                dk_all = np.diff(np.vstack([np.zeros((1, 2)), closed]), axis=0)
-                change = np.hypot(dk_all[:, 0], dk_all[:, 1])
-                total = (
-                    float(cost[i]) + extra * l
-                    + settings.clearance_weight * extra * l / max(rc - settings.margin, 0.25)
-                    + settings.change_weight * l * float(np.sum(change[-extra - 1 :] ** 2)) / 10
-                )  # fmt: skip
-                if best is None or total < best[0]:
-                    best = (total, route, rc)
+        chosen = near[np.argsort(togo[near])][: settings.closings]
+        for extra in (1, 2):
+            idx = [
+                i for i in chosen
+                if (extra == 2 or dist[i] < 0.95 * l)
+                and depth + 1 + extra + math.ceil(lead[i] / l - 1e-9) <= arm.max_sections
+            ]  # fmt: skip
+            if not idx:
+                continue
+            starts = np.concatenate(
+                [kap_hist[idx], np.repeat(kap_hist[idx][:, -1:], extra, axis=1)], axis=1
+            )
+            closed = _close_batch(
+                lead[idx], starts, target, l, arm.theta_max, free=extra + 1, lead_range=None
+            )
+            for i, out in zip(idx, closed):
+                if out is not None:
+                    best = _keep(best, out[1], out[0], float(cost[i]), extra)
     if best is None:
         return None
     total, route, rc = best
