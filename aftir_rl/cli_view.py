@@ -13,10 +13,12 @@ import sys
 from collections.abc import Sequence
 
 from aftir_rl.errors import AftirError
+from aftir_rl.safety import cli
 
 __all__ = ["main"]
 
 
+@cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.cli_view`` (and ``aftir view``)."""
     from aftir_rl.view import DEFAULT_MAX_FRAMES, write_view

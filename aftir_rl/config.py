@@ -11,6 +11,8 @@ import dataclasses
 import importlib.resources
 import math
 import os
+import re
+import reprlib
 import types
 import typing
 from pathlib import Path
@@ -50,24 +52,136 @@ DEFAULT_BRIDGE_SECONDS = 10.0
 DEFAULT_MARGIN = 1.0
 
 
+#: The largest YAML file read [bytes]; tanks and configs are a few kB.
+MAX_YAML_BYTES = 256_000
+
+#: The most nodes a YAML document may hold once its aliases are expanded (scalars, lists and
+#: mappings each count one): an alias bomb of a few hundred bytes is refused in milliseconds.
+MAX_YAML_NODES = 100_000
+
+#: The longest error message a CLI prints [characters].
+MAX_MESSAGE_CHARS = 500
+
+_BRIEF = reprlib.Repr()
+_BRIEF.maxstring, _BRIEF.maxother, _BRIEF.maxlist, _BRIEF.maxdict, _BRIEF.maxlevel = 60, 60, 6, 6, 3
+_BRIEF.maxtuple, _BRIEF.maxset, _BRIEF.maxlong = 6, 6, 40
+
+
+def brief(value: Any) -> str:
+    """``repr(value)`` cut to a sane length, for error messages about untrusted input."""
+    try:
+        text = _BRIEF.repr(value)
+    except Exception:  # a repr that fails must not hide the real error
+        text = f"<{type(value).__name__}>"
+    return shorten(text, 120)
+
+
+def shorten(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """``text`` cut to ``limit`` characters, with an ellipsis where it was cut."""
+    text = str(text)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """PyYAML's SafeLoader (no Python objects) that refuses documents too large once expanded.
+
+    Every alias is counted with the full size of the node it repeats, so nested aliases (the
+    "billion laughs") are measured without being built.
+    """
+
+    def compose_document(self) -> Any:
+        node = super().compose_document()
+        sizes: dict[int, int] = {}
+        # children before parents, without recursion (depth is not bounded by PyYAML)
+        order, stack, seen = [], [node], set()
+        while stack:
+            cur = stack.pop()
+            if id(cur) in seen:
+                continue
+            seen.add(id(cur))
+            order.append(cur)
+            if isinstance(cur, yaml.SequenceNode):
+                stack.extend(cur.value)
+            elif isinstance(cur, yaml.MappingNode):
+                for k, v in cur.value:
+                    stack.extend((k, v))
+        for cur in reversed(order):
+            if isinstance(cur, yaml.SequenceNode):
+                children = cur.value
+            elif isinstance(cur, yaml.MappingNode):
+                children = [n for pair in cur.value for n in pair]
+            else:
+                children = []
+            size = 1 + sum(sizes.get(id(c), 1) for c in children)
+            if size > MAX_YAML_NODES:
+                raise ConfigError(
+                    f"the document expands to more than {MAX_YAML_NODES:,} values (repeated "
+                    "aliases?); a tank or config has a few hundred"
+                )
+            sizes[id(cur)] = size
+        return node
+
+
+#: The deepest nesting read (flow brackets, or indentation and "- " in front of a line).
+MAX_YAML_DEPTH = 64
+
+
+def _too_deep(text: str) -> bool:
+    """A cheap upper bound of the nesting, before PyYAML's recursive parser sees the text."""
+    depth = 0
+    for char in text:
+        if char in "[{":
+            depth += 1
+            if depth > MAX_YAML_DEPTH:
+                return True
+        elif char in "]}":
+            depth -= 1
+    indent = re.compile(r"^[ \t\-?:]*")
+    return any(
+        len(indent.match(line).group()) > 4 * MAX_YAML_DEPTH  # type: ignore[union-attr]
+        for line in text.splitlines()
+    )
+
+
 def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read a YAML file that must hold a mapping.
 
+    Only plain data is built (PyYAML's safe loader); the file must be UTF-8, at most
+    :data:`MAX_YAML_BYTES` long and at most :data:`MAX_YAML_NODES` values once its aliases are
+    expanded.
+
     Raises:
-        ConfigError: the file is missing, is not valid YAML, or does not hold a mapping.
+        ConfigError: the file is missing, too large, not UTF-8, not valid YAML, or does not hold a
+            mapping.
 
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with open(path, "rb") as fh:
+            raw = fh.read(MAX_YAML_BYTES + 1)
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
+    if len(raw) > MAX_YAML_BYTES:
+        raise ConfigError(f"{path}: larger than {MAX_YAML_BYTES:,} bytes; not a tank or config")
     try:
-        data = yaml.safe_load(text)
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
+    if _too_deep(text):
+        raise ConfigError(f"{path}: not valid YAML: nested too deeply")
+    try:
+        data = yaml.load(text, Loader=_BoundedLoader)  # noqa: S506 (a SafeLoader)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
     except yaml.YAMLError as exc:
         where = getattr(exc, "problem_mark", None)
         line = f" (line {where.line + 1})" if where is not None else ""
-        raise ConfigError(f"{path}: not valid YAML{line}: {getattr(exc, 'problem', exc)}") from None
+        problem = shorten(str(getattr(exc, "problem", None) or exc), 200)
+        raise ConfigError(f"{path}: not valid YAML{line}: {problem}") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: not valid YAML: nested too deeply") from None
+    except (ValueError, TypeError, OverflowError) as exc:  # e.g. an int of 5,000 digits
+        raise ConfigError(f"{path}: not valid YAML: {shorten(str(exc), 200)}") from None
     if data is None:
         data = {}
     if not isinstance(data, dict):
@@ -77,37 +191,48 @@ def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
     return data
 
 
-def to_float(value: Any, where: str) -> float:
-    """Convert a YAML scalar to a finite float, accepting strings such as ``"1e-3"``."""
+def to_float(value: Any, where: str, limit: float | None = None) -> float:
+    """Convert a YAML scalar to a finite float, accepting strings such as ``"1e-3"``.
+
+    ``limit``: the largest magnitude accepted, if any.
+    """
     if isinstance(value, bool):
-        raise ConfigError(f"{where}: expected a number, got {value!r}")
+        raise ConfigError(f"{where}: expected a number, got {brief(value)}")
+    if isinstance(value, str) and len(value) > 100:
+        raise ConfigError(f"{where}: expected a number, got {brief(value)}")
     try:
         out = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{where}: expected a number, got {value!r}") from None
+    except (TypeError, ValueError, OverflowError):
+        raise ConfigError(f"{where}: expected a number, got {brief(value)}") from None
     if not math.isfinite(out):
-        raise ConfigError(f"{where}: expected a finite number, got {value!r}")
+        raise ConfigError(f"{where}: expected a finite number, got {brief(value)}")
+    if limit is not None and abs(out) > limit:
+        raise ConfigError(f"{where}: {out:g} is out of range; at most {limit:g} in magnitude")
     return out
 
 
-def to_int(value: Any, where: str) -> int:
+def to_int(value: Any, where: str, limit: float | None = None) -> int:
     """Convert a YAML scalar to an int; floats must be whole numbers."""
     if isinstance(value, bool):
-        raise ConfigError(f"{where}: expected an integer, got {value!r}")
+        raise ConfigError(f"{where}: expected an integer, got {brief(value)}")
     try:
         number = to_float(value, where)
     except ConfigError:
-        raise ConfigError(f"{where}: expected an integer, got {value!r}") from None
+        raise ConfigError(f"{where}: expected an integer, got {brief(value)}") from None
     if number != int(number):
-        raise ConfigError(f"{where}: expected an integer, got {value!r}")
+        raise ConfigError(f"{where}: expected an integer, got {brief(value)}")
+    if limit is not None and abs(number) > limit:
+        raise ConfigError(f"{where}: {number:g} is out of range; at most {limit:g} in magnitude")
     return int(number)
 
 
-def to_vector(value: Any, where: str, size: int = 3) -> tuple[float, ...]:
-    """Convert a YAML list to a tuple of ``size`` floats."""
+def to_vector(
+    value: Any, where: str, size: int = 3, limit: float | None = None
+) -> tuple[float, ...]:
+    """Convert a YAML list to a tuple of ``size`` floats (each at most ``limit`` in magnitude)."""
     if not isinstance(value, (list, tuple)) or len(value) != size:
-        raise ConfigError(f"{where}: expected a list of {size} numbers, got {value!r}")
-    return tuple(to_float(v, f"{where}[{i}]") for i, v in enumerate(value))
+        raise ConfigError(f"{where}: expected a list of {size} numbers, got {brief(value)}")
+    return tuple(to_float(v, f"{where}[{i}]", limit) for i, v in enumerate(value))
 
 
 def _convert(value: Any, annotation: Any, where: str) -> Any:
@@ -124,19 +249,19 @@ def _convert(value: Any, annotation: Any, where: str) -> Any:
         return to_int(value, where)
     if annotation is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+            raise ConfigError(f"{where}: expected true or false, got {brief(value)}")
         return value
     if annotation is str:
         if not isinstance(value, str):
-            raise ConfigError(f"{where}: expected a string, got {value!r}")
+            raise ConfigError(f"{where}: expected a string, got {brief(value)}")
         return value
     if origin is tuple:
         if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{where}: expected a list, got {value!r}")
+            raise ConfigError(f"{where}: expected a list, got {brief(value)}")
         if len(args) == 2 and args[1] is Ellipsis:
             return tuple(_convert(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
         if len(value) != len(args):
-            raise ConfigError(f"{where}: expected a list of {len(args)} items, got {value!r}")
+            raise ConfigError(f"{where}: expected a list of {len(args)} items, got {brief(value)}")
         return tuple(_convert(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
     return value
 
@@ -155,17 +280,16 @@ def from_mapping(cls: type[T], data: dict[str, Any], source: str) -> T:
     """
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    unknown = sorted(set(data) - set(fields))
+    unknown = sorted(set(data) - set(fields), key=str)
     if unknown:
         raise ConfigError(
-            f"{source}: unknown key {unknown[0]!r}; allowed keys are {', '.join(sorted(fields))}"
+            f"{source}: unknown key {brief(unknown[0])}; allowed keys are "
+            f"{', '.join(sorted(fields))}"
         )
     kwargs = {}
     for name, value in data.items():
         kwargs[name] = _convert(value, hints[name], f"{source}: {name}")
     try:
         return cls(**kwargs)
-    except TypeError as exc:
-        raise ConfigError(f"{source}: {exc}") from None
-    except ValueError as exc:
-        raise ConfigError(f"{source}: {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{source}: {shorten(str(exc), 300)}") from None

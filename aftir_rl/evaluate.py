@@ -15,7 +15,6 @@ seconds per target; the same numbers go to TensorBoard under ``compare/<run>/...
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections.abc import Sequence
@@ -27,6 +26,7 @@ import numpy as np
 
 from aftir_rl.config import DEFAULT_MARGIN
 from aftir_rl.errors import AftirError, CheckpointError, ConfigError
+from aftir_rl.safety import check_writable_dir, cli
 
 __all__ = ["main", "evaluate_run"]
 
@@ -84,16 +84,14 @@ def _q_table_run(
 
 
 def _sb3_run(run_dir: Path, targets: list[np.ndarray] | None) -> dict[str, Any]:
-    from aftir_rl.agents.sb3 import evaluate_policy_on_targets, evaluation_targets, load_model
+    from aftir_rl.agents.sb3 import evaluate_policy_on_targets, evaluation_targets, load_run
 
-    config = json.loads((run_dir / "config.json").read_text())
-    algo, env_id = config["algo"], config["env_id"]
-    env_id = env_id if ":" in env_id else f"aftir_rl:{env_id}"
-    model = load_model(algo, run_dir / "model.zip")
-    targets = targets or evaluation_targets(env_id, int(config.get("eval_targets", 20)))
+    # config.json checked key by key, the model loaded without unpickling (agents.sb3.load_run)
+    algo, config, env_id, model = load_run(run_dir)
+    targets = targets or evaluation_targets(env_id, config.eval_targets)
     metrics, _ = evaluate_policy_on_targets(model, env_id, targets, clearance=True)
     note = f"{metrics['collision_rate']:.0%} collided" if metrics["collision_rate"] else ""
-    return {"agent": f"{algo} ({config['env_id']})", "targets": len(targets), **metrics,
+    return {"agent": f"{algo} ({config.env_id})", "targets": len(targets), **metrics,
             "note": note}  # fmt: skip
 
 
@@ -122,6 +120,7 @@ def evaluate_run(
     )
 
 
+@cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.evaluate``."""
     parser = argparse.ArgumentParser(
@@ -142,6 +141,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if not 0 <= args.margin <= 20:
             raise ConfigError(f"--margin must be between 0 and 20 cm, got {args.margin}")
+        check_writable_dir(args.logdir)
         results = {
             Path(r).name: evaluate_run(r, targets, args.motion, args.margin) for r in args.runs
         }

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from aftir_rl.config import DEFAULT_MARGIN
 from aftir_rl.errors import AftirError, ConfigError, PlanningError
 from aftir_rl.posture.planner import METHODS, PlannedPosture, Planner
+from aftir_rl.safety import cli
 
 __all__ = ["main", "format_table"]
 
@@ -42,6 +43,7 @@ def format_table(result: PlannedPosture) -> str:
     return "\n".join(lines)
 
 
+@cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.plan``."""
     parser = argparse.ArgumentParser(

@@ -34,9 +34,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.config import CONFIG_DIR, read_yaml, to_float, to_int, to_vector
+from aftir_rl.config import CONFIG_DIR, brief, read_yaml, to_float, to_int, to_vector
 from aftir_rl.errors import AftirError, ConfigError, TargetError
 from aftir_rl.robot import ArmSpec
+from aftir_rl.safety import cli
 
 __all__ = [
     "Box",
@@ -54,6 +55,17 @@ __all__ = [
 
 Vec3 = tuple[float, float, float]
 TANK_DIR = CONFIG_DIR / "tanks"
+
+#: Largest magnitude of any coordinate or size in a tank file [cm] (100 m): beyond, python-fcl
+#: loses the precision of the arm (and crashes near 1e200).
+MAX_COORD = 1e4
+#: Most cells a raster may have (the reference tank has 750); 48 bytes of work memory each.
+MAX_CELLS = 1_000_000
+#: Most obstacles and reference targets in one tank file.
+MAX_OBSTACLES = 256
+MAX_TARGETS = 1000
+#: Most sections of an arm (the papers use at most 12).
+MAX_SECTIONS = 64
 
 
 @dataclass(frozen=True)
@@ -367,6 +379,23 @@ class Tank:
             pieces.append(Box(tuple(p_lo), tuple(p_hi), name))  # type: ignore[arg-type]
         return tuple(pieces)
 
+    @cached_property
+    def fingerprint(self) -> str:
+        """A digest of the geometry (box, raster, panel, start, solids): equal tanks, equal text.
+
+        Q-table checkpoints carry it, so a table is never resumed in another tank whose raster
+        has the same shape.
+        """
+        import hashlib
+
+        geometry = {
+            "box": [self.box_min, self.box_max], "cell_size": self.cell_size,
+            "panel": [self.panel.center, self.panel.radius], "start": self.start_point,
+            "solids": [s.to_json() for s in self.solids], "walls": self.walls,
+        }  # fmt: skip
+        text = json.dumps(geometry, sort_keys=True, default=float)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
     @property
     def solids(self) -> tuple[Solid, ...]:
         """Every solid inside the box: baffle pieces, then obstacles."""
@@ -494,11 +523,11 @@ def _overlaps_cell(solid: Solid, raster: Raster, cell: Sequence[int]) -> bool:
 def _section(data: Mapping[str, Any], key: str, allowed: Iterable[str], src: str) -> dict[str, Any]:
     value = data[key]
     if not isinstance(value, Mapping):
-        raise ConfigError(f"{src}: {key}: expected a mapping, got {value!r}")
-    unknown = sorted(set(value) - set(allowed))
+        raise ConfigError(f"{src}: {key}: expected a mapping, got {brief(value)}")
+    unknown = sorted(set(value) - set(allowed), key=str)
     if unknown:
         raise ConfigError(
-            f"{src}: {key}: unknown key {unknown[0]!r}; allowed keys are "
+            f"{src}: {key}: unknown key {brief(unknown[0])}; allowed keys are "
             f"{', '.join(sorted(allowed))}"
         )
     return dict(value)
@@ -511,7 +540,7 @@ def _require(data: Mapping[str, Any], keys: Iterable[str], where: str) -> None:
 
 
 def _positive(value: Any, where: str, allow_zero: bool = False) -> float:
-    x = to_float(value, where)
+    x = to_float(value, where, limit=MAX_COORD)
     if x < 0 or (x == 0 and not allow_zero):
         raise ConfigError(
             f"{where}: must be {'non-negative' if allow_zero else 'positive'}, got {x:g}"
@@ -521,37 +550,46 @@ def _positive(value: Any, where: str, allow_zero: bool = False) -> float:
 
 def _parse_solid(item: Any, where: str) -> Solid:
     if not isinstance(item, Mapping):
-        raise ConfigError(f"{where}: expected a mapping, got {item!r}")
+        raise ConfigError(f"{where}: expected a mapping, got {brief(item)}")
     kind = item.get("type")
+    kind = kind if isinstance(kind, str) else repr(type(kind))
     allowed = {
         "box": {"type", "name", "min", "max"},
         "cylinder": {"type", "name", "p0", "p1", "radius"},
         "sphere": {"type", "name", "center", "radius"},
     }
     if kind not in allowed:
-        raise ConfigError(f"{where}: type: expected one of box, cylinder, sphere, got {kind!r}")
-    unknown = sorted(set(item) - allowed[kind])
+        raise ConfigError(
+            f"{where}: type: expected one of box, cylinder, sphere, got {brief(kind)}"
+        )
+    unknown = sorted(set(item) - allowed[kind], key=str)
     if unknown:
         raise ConfigError(
-            f"{where}: unknown key {unknown[0]!r} for a {kind}; allowed keys are "
+            f"{where}: unknown key {brief(unknown[0])} for a {kind}; allowed keys are "
             f"{', '.join(sorted(allowed[kind]))}"
         )
     _require(item, allowed[kind] - {"name"}, where)
     name = str(item.get("name", ""))
     if kind == "box":
-        lo, hi = to_vector(item["min"], f"{where}: min"), to_vector(item["max"], f"{where}: max")
+        lo, hi = (
+            to_vector(item["min"], f"{where}: min", limit=MAX_COORD),
+            to_vector(item["max"], f"{where}: max", limit=MAX_COORD),
+        )
         if any(h <= lo_ for lo_, h in zip(lo, hi)):
             raise ConfigError(f"{where}: max must exceed min on every axis, got {lo} and {hi}")
         return Box(lo, hi, name)  # type: ignore[arg-type]
     if kind == "cylinder":
-        p0, p1 = to_vector(item["p0"], f"{where}: p0"), to_vector(item["p1"], f"{where}: p1")
+        p0, p1 = (
+            to_vector(item["p0"], f"{where}: p0", limit=MAX_COORD),
+            to_vector(item["p1"], f"{where}: p1", limit=MAX_COORD),
+        )
         if sum(a != b for a, b in zip(p0, p1)) != 1:
             raise ConfigError(
                 f"{where}: p0 and p1 must differ along exactly one axis (cylinders are "
                 f"axis-aligned), got {p0} and {p1}"
             )
         return Cylinder(p0, p1, _positive(item["radius"], f"{where}: radius"), name)  # type: ignore[arg-type]
-    centre = to_vector(item["center"], f"{where}: center")
+    centre = to_vector(item["center"], f"{where}: center", limit=MAX_COORD)
     return Sphere(centre, _positive(item["radius"], f"{where}: radius"), name)  # type: ignore[arg-type]
 
 
@@ -569,15 +607,19 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
 
     """
     src = source
-    unknown = sorted(set(data) - _TOP_KEYS)
+    unknown = sorted(set(data) - _TOP_KEYS, key=str)
     if unknown:
         raise ConfigError(
-            f"{src}: unknown key {unknown[0]!r}; allowed keys are {', '.join(sorted(_TOP_KEYS))}"
+            f"{src}: unknown key {brief(unknown[0])}; allowed keys are "
+            f"{', '.join(sorted(_TOP_KEYS))}"
         )
     _require(data, ["box"], src)
     box = _section(data, "box", {"min", "max"}, src)
     _require(box, ["min", "max"], f"{src}: box")
-    lo, hi = to_vector(box["min"], f"{src}: box.min"), to_vector(box["max"], f"{src}: box.max")
+    lo, hi = (
+        to_vector(box["min"], f"{src}: box.min", limit=MAX_COORD),
+        to_vector(box["max"], f"{src}: box.max", limit=MAX_COORD),
+    )
     if any(h <= lo_ for lo_, h in zip(lo, hi)):
         raise ConfigError(f"{src}: box: max must exceed min on every axis, got {lo} and {hi}")
     kwargs: dict[str, Any] = {"box_min": lo, "box_max": hi, "source": src}
@@ -585,7 +627,7 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
     kwargs["description"] = str(data.get("description", ""))
     walls = data.get("walls", True)
     if not isinstance(walls, bool):
-        raise ConfigError(f"{src}: walls: expected true or false, got {walls!r}")
+        raise ConfigError(f"{src}: walls: expected true or false, got {brief(walls)}")
     kwargs["walls"] = walls
     if data.get("cell_size") is not None:
         cell = _positive(data["cell_size"], f"{src}: cell_size")
@@ -596,14 +638,22 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
                     f"{src}: cell_size: {cell:g} does not divide the box extent {b - a:g} along "
                     f"{'xyz'[axis]}"
                 )
+        cells = math.prod(round((b - a) / cell) for a, b in zip(lo, hi))
+        if cells > MAX_CELLS:
+            raise ConfigError(
+                f"{src}: cell_size: {cell:g} cm splits the box into {cells:,} cells, more than the "
+                f"{MAX_CELLS:,} allowed; use a larger cell_size"
+            )
         kwargs["cell_size"] = cell
     if "panel" in data:
         panel = _section(data, "panel", {"center", "radius"}, src)
-        centre = to_vector(panel.get("center", (0, 0, 0)), f"{src}: panel.center")
+        centre = to_vector(panel.get("center", (0, 0, 0)), f"{src}: panel.center", limit=MAX_COORD)
         radius = _positive(panel.get("radius", 12), f"{src}: panel.radius")
         kwargs["panel"] = Panel(centre, radius)  # type: ignore[arg-type]
     if "start_point" in data:
-        kwargs["start_point"] = to_vector(data["start_point"], f"{src}: start_point")
+        kwargs["start_point"] = to_vector(
+            data["start_point"], f"{src}: start_point", limit=MAX_COORD
+        )
     kwargs["obstacles"] = _parse_obstacles(data, lo, hi, src)
     if data.get("baffle") is not None:
         kwargs["baffle"], kwargs["hatch"] = _parse_baffle(data, lo, hi, src)
@@ -614,10 +664,12 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
         try:
             kwargs["arm"] = ArmSpec(
                 section_length=to_float(
-                    arm.get("section_length", 50), f"{src}: arm.section_length"
+                    arm.get("section_length", 50), f"{src}: arm.section_length", limit=MAX_COORD
                 ),
-                max_sections=to_int(arm.get("max_sections", 12), f"{src}: arm.max_sections"),
-                radius=to_float(arm.get("radius", 2.5), f"{src}: arm.radius"),
+                max_sections=to_int(
+                    arm.get("max_sections", 12), f"{src}: arm.max_sections", limit=MAX_SECTIONS
+                ),
+                radius=to_float(arm.get("radius", 2.5), f"{src}: arm.radius", limit=MAX_COORD),
                 theta_max=to_float(arm.get("theta_max", math.pi / 2), f"{src}: arm.theta_max"),
             )
         except ValueError as exc:
@@ -626,8 +678,12 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
             raise ConfigError(f"{src}: arm: {exc}") from None
     targets = data.get("targets") or []
     if not isinstance(targets, list):
-        raise ConfigError(f"{src}: targets: expected a list of [x, y, z], got {targets!r}")
-    kwargs["targets"] = tuple(to_vector(t, f"{src}: targets[{i}]") for i, t in enumerate(targets))
+        raise ConfigError(f"{src}: targets: expected a list of [x, y, z], got {brief(targets)}")
+    if len(targets) > MAX_TARGETS:
+        raise ConfigError(f"{src}: targets: {len(targets)} targets, at most {MAX_TARGETS}")
+    kwargs["targets"] = tuple(
+        to_vector(t, f"{src}: targets[{i}]", limit=MAX_COORD) for i, t in enumerate(targets)
+    )
     tank = Tank(**kwargs)
     _check_points(tank, src)
     return tank
@@ -636,7 +692,9 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
 def _parse_obstacles(data: Mapping[str, Any], lo: Vec3, hi: Vec3, src: str) -> tuple[Solid, ...]:
     items = data.get("obstacles") or []
     if not isinstance(items, list):
-        raise ConfigError(f"{src}: obstacles: expected a list, got {items!r}")
+        raise ConfigError(f"{src}: obstacles: expected a list, got {brief(items)}")
+    if len(items) > MAX_OBSTACLES:
+        raise ConfigError(f"{src}: obstacles: {len(items)} obstacles, at most {MAX_OBSTACLES}")
     out = []
     for i, item in enumerate(items):
         solid = _parse_solid(item, f"{src}: obstacles[{i}]")
@@ -656,10 +714,10 @@ def _parse_baffle(
     raw = _section(data, "baffle", {"axis", "position", "thickness"}, src)
     _require(raw, ["axis", "position", "thickness"], f"{src}: baffle")
     if raw["axis"] not in ("x", "y"):
-        raise ConfigError(f"{src}: baffle.axis: expected 'x' or 'y', got {raw['axis']!r}")
+        raise ConfigError(f"{src}: baffle.axis: expected 'x' or 'y', got {brief(raw['axis'])}")
     baffle = Baffle(
         raw["axis"],
-        to_float(raw["position"], f"{src}: baffle.position"),
+        to_float(raw["position"], f"{src}: baffle.position", limit=MAX_COORD),
         _positive(raw["thickness"], f"{src}: baffle.thickness"),
     )
     k = baffle.index
@@ -675,7 +733,7 @@ def _parse_baffle(
     raw_h = _section(data, "hatch", {"center", "width", "height"}, src)
     _require(raw_h, ["center", "width", "height"], f"{src}: hatch")
     hatch = Hatch(
-        to_vector(raw_h["center"], f"{src}: hatch.center"),  # type: ignore[arg-type]
+        to_vector(raw_h["center"], f"{src}: hatch.center", limit=MAX_COORD),  # type: ignore[arg-type]
         _positive(raw_h["width"], f"{src}: hatch.width"),
         _positive(raw_h["height"], f"{src}: hatch.height"),
     )
@@ -698,7 +756,7 @@ def _parse_baffle(
 def _check_points(tank: Tank, src: str) -> None:
     if not tank.contains_point(tank.start_point):
         raise ConfigError(f"{src}: start_point: {tank.start_point} is outside the box")
-    if tank.cell_size is not None and tank.raster.obstructed[tank.start_cell]:
+    if tank.cell_size is not None and _start_cell_obstructed(tank):
         raise ConfigError(
             f"{src}: start_point: {tank.start_point} lies in obstructed cell "
             f"{list(tank.start_cell)}; the grid world must start in a free cell"
@@ -713,6 +771,18 @@ def _check_points(tank: Tank, src: str) -> None:
         hit = tank.solid_at(target)
         if hit is not None:
             raise ConfigError(f"{src}: targets[{i}]: {target} is inside {hit.name or 'a solid'}")
+
+
+def _start_cell_obstructed(tank: Tank) -> bool:
+    """Whether a solid overlaps the start cell, without building the raster (O(solids))."""
+    assert tank.cell_size is not None
+    size = tank.cell_size
+    lo, hi = np.array(tank.box_min), np.array(tank.box_max)
+    upper = np.round((hi - lo) / size).astype(int)
+    rel = (np.array(tank.start_point) - lo) / size
+    cell = np.minimum(np.floor(rel).astype(int), upper - 1)
+    c_lo = lo + cell * size
+    return any(bool(s.overlaps(c_lo, c_lo + size)) for s in tank.solids)
 
 
 def available_tanks() -> list[str]:
@@ -777,6 +847,7 @@ def _in_hatch(tank: Tank, cell: Sequence[int]) -> bool:
     return bool(lo[k] < tank.baffle.position < lo[k] + tank.raster.cell_size)
 
 
+@cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.tank``."""
     parser = argparse.ArgumentParser(

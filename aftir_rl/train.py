@@ -37,10 +37,12 @@ from aftir_rl.config import (
     CONFIG_DIR,
     DEFAULT_BRIDGE_SECONDS,
     DEFAULT_MARGIN,
+    brief,
     from_mapping,
     read_yaml,
 )
 from aftir_rl.errors import AftirError, CheckpointError, ConfigError
+from aftir_rl.safety import cli
 
 __all__ = ["main", "train_q_table", "load_q_table_config"]
 
@@ -64,11 +66,15 @@ def _run_name(algo: str, env_id: str, target: Sequence[float] | str, seed: int) 
     return f"{algo}__{env_id}__{tag}__{seed}__{stamp}"
 
 
-def _check_env_id(env_id: str, allowed: Sequence[str], algo: str) -> None:
-    if env_id.split(":")[-1] not in allowed:
+def _check_env_id(env_id: str, allowed: Sequence[str], algo: str) -> str:
+    """The bare id of ``env_id`` (``ID`` or ``aftir_rl:ID``); any other module is never imported."""
+    bare = env_id[len("aftir_rl:") :] if env_id.startswith("aftir_rl:") else env_id
+    if bare not in allowed:
         raise ConfigError(
-            f"{algo} cannot train on {env_id!r}; use one of {', '.join(allowed)} (--env or env_id)"
+            f"{algo} cannot train on {brief(env_id)}; use one of {', '.join(allowed)} "
+            "(--env or env_id)"
         )
+    return bare
 
 
 def _hyperparameter_text(params: dict[str, Any]) -> str:
@@ -176,6 +182,11 @@ def train_q_table(
                     f"{checkpoint}: trained for target cell {meta['target_cell']}, not "
                     f"{list(base.target_cell)}; resume with the same --target"
                 )
+            if meta.get("tank_fingerprint", base.tank.fingerprint) != base.tank.fingerprint:
+                raise CheckpointError(
+                    f"{checkpoint}: trained in another tank ({brief(meta.get('tank'))}) than "
+                    f"{config.tank!r}; resume with the tank it was trained in"
+                )
         else:
             agent = QLearning.from_config(env, config, seed=seed)
         name = _run_name("q_table", config.env_id, target, seed)
@@ -233,6 +244,7 @@ def train_q_table(
                 extra={
                     "env_id": config.env_id,
                     "tank": config.tank,
+                    "tank_fingerprint": base.tank.fingerprint,
                     "target": [float(v) for v in target],
                     "target_cell": list(base.target_cell),
                     "config": dataclasses.asdict(config),
@@ -390,59 +402,101 @@ def train_sb3(
     """Train PPO, SAC or TD3 on an arm env; one run directory with the model and its logs.
 
     The run directory holds ``model.zip`` (atomic), ``checkpoints/``, ``config.json``,
-    ``progress.csv`` and the TensorBoard events (``rollout/*``, ``train/*``, ``eval/*``,
-    ``paths/eval``, the hyperparameters as text).
+    ``summary.json``, ``progress.csv`` and the TensorBoard events (``rollout/*``, ``train/*``,
+    ``eval/*``, ``paths/eval``, the hyperparameters as text). It is built under a hidden
+    ``.<name>.partial`` name and renamed once ``model.zip`` is written, so an interrupted run never
+    looks finished. On Ctrl-C the model is saved to ``checkpoints/model_<steps>.zip`` of the
+    partial directory, which ``--resume`` continues from.
 
     Raises:
-        CheckpointError: ``resume`` is unreadable.
+        ConfigError: the config, ``logdir`` or the hyperparameters are refused (before any
+            training).
+        CheckpointError: ``resume`` is unreadable, or does not fit this config.
+        KeyboardInterrupt: Ctrl-C, once the model is saved; its message says where.
 
     """
+    import signal
+
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from aftir_rl.agents.sb3 import (
-        ALGORITHMS,
         ArmEvalCallback,
         AtomicCheckpoint,
+        build_model,
+        check_sb3_config,
         evaluation_targets,
         load_model,
+        newest_model,
         save_model,
     )  # fmt: skip
+    from aftir_rl.safety import check_writable_dir
 
-    _check_env_id(config.env_id, ("AFTIR-ArmReach-v0", "AFTIR-Arm-v0"), algo)
-    env_id = config.env_id if ":" in config.env_id else f"aftir_rl:{config.env_id}"
-    targets = evaluation_targets(env_id, config.eval_targets)
+    bare = _check_env_id(
+        config.env_id, ("AFTIR-ArmReach-v0", "AFTIR-Arm-v0", "AFTIR-ArmFTL-v0"), algo
+    )
+    check_sb3_config(config, algo, "config")
+    env_id = f"aftir_rl:{bare}"
+    logdir = check_writable_dir(logdir)
+    resume_path = newest_model(resume) if resume is not None else None
+    targets = evaluation_targets(env_id, config.eval_targets, env_kwargs=config.env_kwargs)
     vec_cls = SubprocVecEnv if config.n_envs > 1 else DummyVecEnv
-    venv = make_vec_env(env_id, n_envs=config.n_envs, seed=seed, vec_env_cls=vec_cls)
+    # Workers ignore Ctrl-C: the main process stops them once the model is saved.
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        if resume is not None:
-            model = load_model(algo, resume, env=venv)
+        venv = make_vec_env(env_id, n_envs=config.n_envs, seed=seed, vec_env_cls=vec_cls,
+                            env_kwargs=config.env_kwargs)  # fmt: skip
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    partial = None
+    try:
+        if resume_path is not None:
+            model = load_model(algo, resume_path, env=venv, config=config, evaluation=False)
         else:
-            model = ALGORITHMS[algo](config.policy, venv, seed=seed, verbose=0,
-                                     **config.hyperparameters)  # fmt: skip
-        name = _run_name(algo, config.env_id.split(":")[-1], "random", seed)
-        run_dir = Path(logdir) / name
-        run_dir.mkdir(parents=True, exist_ok=False)
-        logger = configure(str(run_dir), ["csv", "tensorboard"])
+            model = build_model(algo, config, venv, seed=seed)
+        name = _run_name(algo, bare, "random", seed)
+        run_dir = logdir / name
+        partial = logdir / f".{name}.partial"
+        partial.mkdir(parents=True, exist_ok=False)
+        logger = configure(str(partial), ["csv", "tensorboard"])
         model.set_logger(logger)
         params = {**dataclasses.asdict(config), "algo": algo, "seed": seed,
-                  "resume": str(resume) if resume else None}  # fmt: skip
-        write_json(run_dir / "config.json", params)
+                  "resume": str(resume_path) if resume_path else None}  # fmt: skip
+        write_json(partial / "config.json", params)
         logger.record("hyperparameters", _hyperparameter_text(params), exclude=("csv",))
-        evaluator = ArmEvalCallback(env_id, targets, config.eval_freq)
-        callbacks = [evaluator, AtomicCheckpoint(run_dir / "checkpoints", config.checkpoint_freq)]
+        evaluator = ArmEvalCallback(env_id, targets, config.eval_freq, config.env_kwargs)
+        callbacks = [evaluator, AtomicCheckpoint(partial / "checkpoints", config.checkpoint_freq)]
         start = time.perf_counter()
-        model.learn(config.total_timesteps, callback=callbacks, progress_bar=progress_bar,
-                    reset_num_timesteps=resume is None)  # fmt: skip
+        try:
+            model.learn(config.total_timesteps, callback=callbacks, progress_bar=progress_bar,
+                        reset_num_timesteps=resume_path is None)  # fmt: skip
+        except KeyboardInterrupt:
+            steps = int(model.num_timesteps)
+            save_model(model, partial / "checkpoints" / f"model_{steps}.zip")
+            logger.close()
+            raise KeyboardInterrupt(
+                f"the model at step {steps} is saved in {partial}/checkpoints; continue with "
+                f"--resume {partial}"
+            ) from None
         seconds = time.perf_counter() - start
-        save_model(model, run_dir / "model.zip")
+        save_model(model, partial / "model.zip")
         logger.close()
+        summary = {"algo": algo, "env_id": config.env_id, "timesteps": int(model.num_timesteps),
+                   "seconds": seconds, "run_dir": str(run_dir),
+                   **evaluator.last_metrics}  # fmt: skip
+        write_json(partial / "summary.json", summary)
+        partial.rename(run_dir)
+    except BaseException:
+        # Keep a partial run that holds a checkpoint (resumable); remove any other.
+        if partial is not None and not any((partial / "checkpoints").glob("model_*.zip")):
+            shutil.rmtree(partial, ignore_errors=True)
+        raise
     finally:
-        venv.close()
-    summary = {"algo": algo, "env_id": config.env_id, "timesteps": int(model.num_timesteps),
-               "seconds": seconds, "run_dir": str(run_dir), **evaluator.last_metrics}  # fmt: skip
-    write_json(run_dir / "summary.json", summary)
+        try:
+            venv.close()
+        except (OSError, EOFError):
+            pass
     return summary
 
 
@@ -464,6 +518,12 @@ def _print_summary(s: dict[str, Any]) -> None:
                 f"in {m['seconds']:.2f} s; clearance {m['min_clearance_cm']:.2f} cm, FTL deviation "
                 f"max {dev[0]:.2f} / mean {dev[1]:.2f} cm, tip error {m['tip_error_cm']:.1e} cm"
             )
+            if m["route_departure_cm"] is not None:
+                far, mean = m["route_departure_cm"]
+                print(
+                    f"  the tip passes {mean:.1f} cm from the cell centres on average "
+                    f"({far:.1f} max)"
+                )
         else:
             print(f"  motion: none in {m['seconds']:.2f} s: {m['reason']}")
     if "trajectory" in s:
@@ -579,9 +639,13 @@ def _main_sb3(args: argparse.Namespace) -> int:
     return 0
 
 
+@cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.train``."""
     args = _parser().parse_args(argv)
+    if not 0 <= args.seed < 2**32:
+        print(f"error: --seed must be from 0 to 2**32 - 1, got {args.seed}", file=sys.stderr)
+        return 2
     if args.algo != "q_table":
         try:
             return _main_sb3(args)

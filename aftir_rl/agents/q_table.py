@@ -40,11 +40,14 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from aftir_rl.atomic import atomic_open
-from aftir_rl.errors import CheckpointError
+from aftir_rl.config import brief, shorten
+from aftir_rl.errors import AftirError, CheckpointError
 
 __all__ = ["QLearningConfig", "QLearning", "greedy_rollout"]
 
 FORMAT = "aftir_rl.q_table/1"
+#: The most bytes a checkpoint may expand to (a 1e6-cell raster's table is 48 MB).
+MAX_CHECKPOINT_BYTES = 256_000_000
 
 
 @dataclass(frozen=True)
@@ -313,14 +316,27 @@ class QLearning:
         path = Path(path)
         hint = "retrain with `python -m aftir_rl.train q_table` or pass the right file"
         try:
+            with zipfile.ZipFile(path) as archive:  # refuse a zip bomb before reading it
+                if sum(i.file_size for i in archive.infolist()) > MAX_CHECKPOINT_BYTES:
+                    raise CheckpointError(f"{path}: larger than a Q-table checkpoint; {hint}")
             with np.load(path, allow_pickle=False) as data:
                 q_table = np.array(data["q_table"], dtype=np.float64)
                 meta = json.loads(str(data["metadata"]))
         except FileNotFoundError:
             raise CheckpointError(f"{path}: no such Q-table file; {hint}") from None
-        except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as exc:
+        except (
+            OSError,
+            ValueError,
+            TypeError,
+            KeyError,
+            zipfile.BadZipFile,
+            EOFError,
+            RecursionError,
+        ) as exc:
+            if isinstance(exc, CheckpointError):
+                raise
             raise CheckpointError(
-                f"{path}: not a readable Q-table checkpoint ({exc}); {hint}"
+                f"{path}: not a readable Q-table checkpoint ({shorten(str(exc), 160)}); {hint}"
             ) from None
         if not isinstance(meta, dict) or meta.get("format") != FORMAT:
             raise CheckpointError(f"{path}: not an aftir_rl Q-table checkpoint; {hint}")
@@ -328,6 +344,7 @@ class QLearning:
             raise CheckpointError(
                 f"{path}: the Q-table is malformed (shape {q_table.shape}); {hint}"
             )
+        _check_metadata(meta, f"{path}: metadata")
         return q_table, meta
 
     @classmethod
@@ -345,7 +362,7 @@ class QLearning:
                 f"{path}: the Q-table has shape {q_table.shape} but the env needs "
                 f"({n_states}, {n_actions}); load it with the env it was trained on"
             )
-        agent = cls(env, **meta["hyperparameters"])
+        agent = cls(env, **meta["hyperparameters"])  # keys and values checked on reading
         agent.q_table = q_table
         agent.episodes_done = int(meta.get("episodes_done", 0))
         agent.num_timesteps = int(meta.get("num_timesteps", 0))
@@ -354,6 +371,67 @@ class QLearning:
         agent._seeded_env = True
         agent.metadata = meta
         return agent
+
+
+_HYPERPARAMETERS = {
+    "learning_rate": (1e-12, 1.0), "gamma": (0.0, 1.0), "exploration_initial_eps": (0.0, 1.0),
+    "exploration_final_eps": (0.0, 1.0), "exploration_decay": (0.0, 1.0),
+    "initial_q": (-1e12, 1e12),
+}  # fmt: skip
+
+
+def _number(value: Any, lo: float, hi: float, where: str, integer: bool = False) -> None:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if ok and integer:
+        ok = isinstance(value, int)
+    if not ok or not (lo <= value <= hi):
+        kind = "an integer" if integer else "a number"
+        raise CheckpointError(f"{where}: expected {kind} from {lo:g} to {hi:g}, got {brief(value)}")
+
+
+def _check_metadata(meta: dict[str, Any], where: str) -> None:
+    """Check every key :meth:`QLearning.load` and the command lines read from a checkpoint.
+
+    Raises:
+        CheckpointError: a missing or malformed value; an ``env_id`` that is not this package's
+            grid world (nothing is ever imported from a checkpoint).
+
+    """
+    hyper = meta.get("hyperparameters")
+    if not isinstance(hyper, dict) or set(hyper) != {*_HYPERPARAMETERS, "seed"}:
+        raise CheckpointError(
+            f"{where}: hyperparameters must hold exactly {', '.join([*_HYPERPARAMETERS, 'seed'])}"
+        )
+    for key, (lo, hi) in _HYPERPARAMETERS.items():
+        _number(hyper[key], lo, hi, f"{where}: hyperparameters.{key}")
+    if hyper["seed"] is not None:
+        _number(hyper["seed"], 0, 2**63, f"{where}: hyperparameters.seed", integer=True)
+    for key in ("episodes_done", "num_timesteps"):
+        _number(meta.get(key, 0), 0, 10**15, f"{where}: {key}", integer=True)
+    if "rng_state" in meta:
+        try:
+            random.Random().setstate(_state_from_json(meta["rng_state"]))
+        except (TypeError, ValueError, OverflowError):
+            raise CheckpointError(f"{where}: rng_state is not a random generator's state") from None
+    if "env_id" in meta:
+        from aftir_rl.safety import registered_env_id
+
+        try:
+            registered_env_id(meta["env_id"], where, ("AFTIR-Tank-v0",))
+        except AftirError as exc:
+            raise CheckpointError(str(exc)) from None
+    if "tank" in meta and (not isinstance(meta["tank"], str) or not 0 < len(meta["tank"]) < 4096):
+        raise CheckpointError(f"{where}: tank must be a tank name or a YAML path")
+    if "tank_fingerprint" in meta and not isinstance(meta["tank_fingerprint"], str):
+        raise CheckpointError(f"{where}: tank_fingerprint must be a string")
+    for key, integer in (("target", False), ("target_cell", True)):
+        value = meta.get(key)
+        if value is None:
+            continue
+        if not isinstance(value, list) or len(value) != 3:
+            raise CheckpointError(f"{where}: {key} must be a list of 3 numbers")
+        for i, v in enumerate(value):
+            _number(v, -1e6, 1e6, f"{where}: {key}[{i}]", integer=integer)
 
 
 def greedy_rollout(
@@ -403,5 +481,9 @@ def _state_to_json(state: tuple) -> list:
 
 
 def _state_from_json(data: list) -> tuple:
+    if not isinstance(data, list) or len(data) != 3 or not isinstance(data[1], list):
+        raise ValueError("not a random generator's state")
     version, internal, gauss = data
+    if len(internal) != 625 or not all(type(v) is int for v in internal):
+        raise ValueError("not a random generator's state")
     return (version, tuple(internal), gauss)
