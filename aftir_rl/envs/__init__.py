@@ -4,10 +4,19 @@ from __future__ import annotations
 
 import gymnasium as gym
 
+from aftir_rl.envs.arm_ftl import ArmFTLEnv, ArmFTLVectorEnv
 from aftir_rl.envs.tank_goal import TankGoalEnv
 from aftir_rl.envs.tank_grid import Action, TankGridEnv
 
-__all__ = ["Action", "TankGridEnv", "TankGoalEnv", "ENV_IDS", "register_envs"]
+__all__ = [
+    "Action",
+    "TankGridEnv",
+    "TankGoalEnv",
+    "ArmFTLEnv",
+    "ArmFTLVectorEnv",
+    "ENV_IDS",
+    "register_envs",
+]
 
 #: Every environment id registered by :func:`register_envs`.
 ENV_IDS: tuple[str, ...] = (
@@ -15,6 +24,7 @@ ENV_IDS: tuple[str, ...] = (
     "AFTIR-TankGoal-v0",
     "AFTIR-Arm-v0",
     "AFTIR-ArmReach-v0",
+    "AFTIR-ArmFTL-v0",
 )
 
 #: Bay-1 reach task: targets in front of the panel that 2 sections reach, drawn per episode.
@@ -53,4 +63,11 @@ def register_envs() -> None:
             entry_point="aftir_rl.envs.arm:ArmEnv",
             max_episode_steps=100,
             kwargs={"n_sections": 2, "target_region": REACH_REGION},
+        )
+    if "AFTIR-ArmFTL-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-ArmFTL-v0",
+            entry_point="aftir_rl.envs.arm_ftl:ArmFTLEnv",
+            vector_entry_point="aftir_rl.envs.arm_ftl:ArmFTLVectorEnv",
+            max_episode_steps=300,
         )

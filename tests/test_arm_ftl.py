@@ -1,0 +1,307 @@
+"""AFTIR-ArmFTL-v0: the follow-the-leader arm env, its goal interface and its batched version."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+from aftir_rl.collision import point_clearance
+from aftir_rl.envs.arm_ftl import (
+    ArmFTLEnv,
+    TankDistance,
+    ftl_kappa_batch,
+    raster_detour_table,
+)
+from aftir_rl.errors import AftirError, ConfigError, InvalidActionError, TargetError
+from aftir_rl.motion.ftl import Route, ftl_postures, kappa_to_angles, route_points
+from aftir_rl.robot import body_points
+
+ENV_ID = "AFTIR-ArmFTL-v0"
+
+
+def rollout(env, actions, seed):
+    """Observations, rewards, flags and infos of a rollout (resetting when an episode ends)."""
+    obs, _ = env.reset(seed=seed)
+    out = []
+    for a in actions:
+        nxt, r, term, trunc, info = env.step(a)
+        out.append((obs, a, nxt, r, term, trunc, info))
+        obs = nxt
+        if term or trunc:
+            obs, _ = env.reset()
+    return out
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"bay": 2, "shaping": True}, {"n_sections": 7}])
+def test_env_checkers(kwargs):
+    env = gym.make(ENV_ID, **kwargs)
+    gym_check_env(env.unwrapped, skip_render_check=True)
+    sb3_check_env(env.unwrapped, warn=True)
+
+
+def test_spaces_and_registration():
+    env = gym.make(ENV_ID)
+    assert env.spec.max_episode_steps == 300
+    assert env.action_space == gym.spaces.Box(-1, 1, (3,), np.float32)
+    assert set(env.observation_space.spaces) == {"observation", "achieved_goal", "desired_goal"}
+    obs, info = env.reset(seed=0)
+    np.testing.assert_allclose(obs["achieved_goal"], [0, 0, 10], atol=1e-9)
+    np.testing.assert_allclose(obs["desired_goal"], info["target"], atol=1e-4)
+    assert env.unwrapped.batch.n == 12
+
+
+@pytest.mark.parametrize("shaping", [False, True])
+def test_compute_reward_matches_step_rewards_in_batches(shaping):
+    env = gym.make(ENV_ID, shaping=shaping, max_episode_steps=60)
+    rng = np.random.default_rng(1)
+    # Push in mostly, so that the rollouts bend, touch and sometimes succeed.
+    actions = rng.uniform(-1, 1, (400, 3)).astype(np.float32)
+    actions[:, 2] = np.abs(actions[:, 2])
+    steps = rollout(env, actions, seed=2)
+    achieved = np.array([s[2]["achieved_goal"] for s in steps])
+    desired = np.array([s[2]["desired_goal"] for s in steps])
+    infos = np.array([s[6] for s in steps], dtype=object)
+    rewards = np.array([s[3] for s in steps])
+    base = env.unwrapped
+    np.testing.assert_array_equal(base.compute_reward(achieved, desired, infos), rewards)
+    assert any(s[6]["contact"] for s in steps)  # the penalty is exercised
+    # Relabelled goals (what HER does): the batch equals row-by-row calls.
+    goals = achieved[rng.permutation(len(achieved))]
+    batch = base.compute_reward(achieved, goals, infos)
+    single = [base.compute_reward(a, g, i) for a, g, i in zip(achieved, goals, infos)]
+    np.testing.assert_array_equal(batch, single)
+    # A goal equal to the achieved tip is a success unless there was contact.
+    same = base.compute_reward(achieved, achieved, infos)
+    contact = np.array([i["contact"] for i in infos])
+    assert np.all(same[~contact] >= 10.0 - 1.0)
+    terminated = base.compute_terminated(achieved, desired, infos)
+    np.testing.assert_array_equal(terminated, [s[4] for s in steps])
+
+
+def test_compute_reward_without_infos_is_an_error():
+    env = gym.make(ENV_ID).unwrapped
+    with pytest.raises(AftirError, match="copy_info_dict"):
+        env.compute_reward(np.zeros((2, 3)), np.ones((2, 3)), [{}, {}])
+
+
+def test_shaping_rewards_the_way_through_the_hatch():
+    env = gym.make(ENV_ID, shaping=True).unwrapped
+    target = np.array([[-50.0, 140.0, 90.0]])  # a reference target, far corner of bay 2
+    detour = env._cells
+    # In bay 1, left of the hatch: out to the hatch and back, 2 x 6 cells (x) + 2 x 1 (z: the
+    # hatch is at mid height, c = 2, the start and target cells at c = 1 and c = 4) ...
+    assert detour(np.array([[-40.0, 0.0, 20.0]]), target)[0] == 20.0 * 12
+    # ... which shrinks as the tip goes towards the hatch and vanishes past it.
+    assert detour(np.array([[60.0, 40.0, 50.0]]), target)[0] == 20.0 * 2
+    assert detour(np.array([[90.0, 40.0, 50.0]]), target)[0] == 0.0
+    assert detour(np.array([[100.0, 70.0, 50.0]]), target)[0] == 0.0
+    # Same bay: nothing in the way.
+    assert detour(np.array([[-40.0, 0.0, 20.0]]), np.array([[200.0, 30.0, 60.0]]))[0] == 0
+
+
+def test_raster_detour_table_against_bfs(tank):
+    table = raster_detour_table(tank)
+    raster = tank.raster
+    rng = np.random.default_rng(0)
+    free = np.argwhere(~raster.obstructed)
+    cells = np.indices(raster.shape).reshape(3, -1).T
+    for src in free[rng.choice(len(free), 5, replace=False)]:
+        bfs = raster.bfs_distances(src).reshape(-1)
+        manhattan = np.abs(cells - src).sum(1)
+        ok = bfs >= 0
+        np.testing.assert_array_equal(table[raster.index(src)][ok], (bfs - manhattan)[ok])
+
+
+def test_ftl_kappa_batch_is_ftl_postures():
+    rng = np.random.default_rng(0)
+    n, l = 12, 50.0
+    for _ in range(20):
+        k = int(rng.integers(0, n))
+        kappa = rng.uniform(-0.8, 0.8, (n, 2))
+        s = rng.uniform(0, (k + 1) * l, 6)
+        _, theta, phi = ftl_postures(Route(0.0, kappa[: k + 1], l), n, s)
+        got = ftl_kappa_batch(np.repeat(kappa[None], 6, 0), np.full(6, k), s, l)
+        th, ph = kappa_to_angles(got)
+        np.testing.assert_allclose(th, theta, atol=1e-12)
+        np.testing.assert_allclose(np.where(th > 1e-9, ph, 0.0), np.where(theta > 1e-9, phi, 0))
+
+
+def test_body_at_whole_section_stages_lies_on_the_traced_route():
+    env = gym.make(ENV_ID, start_height=0.0, max_episode_steps=500).unwrapped
+    env.reset(seed=0, options={"target": (100.0, 30.0, 60.0)})
+    base = env.batch
+    stages = 0
+    for i in range(60):  # push 5 cm a step: a whole-section stage every 10 steps
+        # bend over (0.8 rad a section) under the ceiling, then straighten and turn aside
+        steer = (1.0, 0.0) if i < 8 else (-1.0, 0.2) if 20 <= i < 28 else (0.0, 0.0)
+        env.step(np.array([*steer, 1.0], dtype=np.float32))
+        if base.contact[0]:
+            break
+        s = env.insertion
+        if np.isclose(s % 50.0, 0.0) and s > 0:
+            stages += 1
+            k = int(round(s / 50.0))
+            route = Route(0.0, env.route_kappa[:k], 50.0)
+            dis, theta, phi = ftl_postures(route, 12, [s])
+            pts = body_points(dis[0], theta[0], phi[0], 50.0, 10)
+            u = dis[0] + np.arange(pts.shape[0]) * 5.0
+            np.testing.assert_allclose(pts, route_points(route, u), atol=1e-9)
+            np.testing.assert_allclose(env.body(10), pts, atol=1e-9)
+            np.testing.assert_allclose(env.tip, route.tip(), atol=1e-9)
+    assert stages == 5
+
+
+def test_shift_and_copy_and_retraction():
+    env = gym.make(ENV_ID, start_height=0.0).unwrapped
+    env.reset(seed=0, options={"target": (100.0, 30.0, 60.0)})
+    for _ in range(9):
+        env.step(np.array([0.0, 0.0, 1.0], dtype=np.float32))
+    env.step(np.array([1.0, 0.0, 1.0], dtype=np.float32))  # steer, then cross the stage
+    assert env.insertion == 50.0
+    np.testing.assert_allclose(env.route_kappa, [[0.1, 0.0], [0.1, 0.0]])  # frozen, then copied
+    env.step(np.array([0.0, 1.0, -1.0], dtype=np.float32))  # steer the new one, pull back
+    np.testing.assert_allclose(env.route_kappa, [[0.1, 0.0]])  # retracted along the route
+    assert env.insertion == 45.0
+
+
+def test_targets_per_bay_and_by_option():
+    for bay, sign in ((1, -1), (2, 1)):
+        env = gym.make(ENV_ID, bay=bay)
+        for seed in range(10):
+            _, info = env.reset(seed=seed)
+            t = info["target"]
+            assert sign * (t[1] - 60.0) > 2.0
+            assert point_clearance(env.unwrapped.tank, t[None])[0] >= 10.0
+    env = gym.make(ENV_ID)
+    obs, info = env.reset(options={"target": (230, 140, 90)})
+    np.testing.assert_allclose(obs["desired_goal"], [230, 140, 90])
+
+
+@pytest.mark.parametrize(
+    "kwargs, error",
+    [({"bay": 3}, ConfigError), ({"push_step": 80.0}, ConfigError),
+     ({"n_sections": 0}, ConfigError), ({"target": (0, 60, 50)}, TargetError),
+     ({"target": (500, 0, 10)}, TargetError)],
+)  # fmt: skip
+def test_bad_arguments(kwargs, error):
+    with pytest.raises(error):
+        gym.make(ENV_ID, **kwargs)
+
+
+def test_bad_actions_and_options():
+    env = gym.make(ENV_ID)
+    env.reset(seed=0)
+    for bad in (np.zeros(2), np.array([np.nan, 0, 0]), "up"):
+        with pytest.raises(InvalidActionError):
+            env.step(bad)
+    with pytest.raises(ConfigError, match="reset option"):
+        env.reset(options={"goal": (0, 0, 50)})
+
+
+def test_tank_distance_is_point_clearance(tank):
+    rng = np.random.default_rng(0)
+    p = rng.uniform(np.array(tank.box_min) - 40, np.array(tank.box_max) + 20, (20000, 3))
+    np.testing.assert_allclose(TankDistance(tank)(p), point_clearance(tank, p), atol=1e-9)
+
+
+def test_vector_env_matches_single_envs():
+    b, steps = 4, 120
+    rng = np.random.default_rng(5)
+    actions = rng.uniform(-1, 1, (steps, b, 3)).astype(np.float32)
+    actions[..., 2] = np.abs(actions[..., 2])
+    venv = gym.make_vec(ENV_ID, num_envs=b, vectorization_mode="vector_entry_point",
+                        max_episode_steps=40)  # fmt: skip
+    obs, _ = venv.reset(seed=10)
+    v_rows = []
+    for t in range(steps):
+        nxt, r, term, trunc, info = venv.step(actions[t])
+        v_rows.append((obs, r, term, trunc, nxt))
+        obs = nxt
+    for i in range(b):
+        env = gym.make(ENV_ID, max_episode_steps=40)
+        o, _ = env.reset(seed=10 + i)
+        done = False
+        for t in range(steps):
+            v_obs, v_r, v_term, v_trunc, v_next = v_rows[t]
+            if done:  # next-step autoreset: the vector env resets this row now
+                o, _ = env.reset()
+                assert v_r[i] == 0 and not v_term[i] and not v_trunc[i]
+                for key in o:
+                    np.testing.assert_array_equal(v_next[key][i], o[key])
+                done = False
+                continue
+            for key in o:
+                np.testing.assert_array_equal(v_obs[key][i], o[key])
+            o, r, term, trunc, _ = env.step(actions[t, i])
+            assert (r, term, trunc) == (v_r[i], v_term[i], v_trunc[i])
+            done = term or trunc
+
+
+def test_vector_env_targets_option():
+    venv = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point")
+    obs, _ = venv.reset(seed=0, options={"target": (230, 140, 90)})
+    np.testing.assert_allclose(obs["desired_goal"], [[230, 140, 90]] * 3)
+    with pytest.raises(TargetError):
+        venv.reset(options={"target": np.zeros((2, 3))})
+
+
+def test_sac_her_smoke():
+    from stable_baselines3 import SAC, HerReplayBuffer
+
+    env = gym.make(ENV_ID, shaping=True, max_episode_steps=30)
+    sac = SAC("MultiInputPolicy", env, learning_starts=60, batch_size=16, buffer_size=1000,
+              policy_kwargs={"net_arch": [16]}, replay_buffer_class=HerReplayBuffer,
+              replay_buffer_kwargs={"copy_info_dict": True, "n_sampled_goal": 2},
+              train_freq=4, seed=0)  # fmt: skip
+    sac.learn(152)  # train_freq 4
+    assert sac.num_timesteps == 152
+
+
+def test_ppo_smoke():
+    from stable_baselines3 import PPO
+
+    env = gym.make(ENV_ID, shaping=True, max_episode_steps=30)
+    ppo = PPO("MultiInputPolicy", env, n_steps=64, batch_size=32, n_epochs=1,
+              policy_kwargs={"net_arch": [16]}, seed=0)  # fmt: skip
+    ppo.learn(128)
+    assert ppo.num_timesteps == 128
+    action, _ = ppo.predict(env.reset(seed=0)[0], deterministic=True)
+    assert env.action_space.contains(action)
+
+
+def test_render_rgb_array():
+    env = gym.make(ENV_ID, render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(np.array([0.5, 0.0, 1.0], dtype=np.float32))
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3
+
+
+def test_arm_env_api_used_by_the_evaluator():
+    env: ArmFTLEnv = gym.make(ENV_ID).unwrapped
+    env.reset(seed=0)
+    assert env.tip.shape == (3,) and env.body().shape == (12 * 10 + 1, 3)
+    assert env.posture.n_sections == 12
+    np.testing.assert_allclose(env.posture.tip(50.0), env.tip, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_train_cli_sac_her(tmp_path):
+    import yaml
+
+    from aftir_rl.train import main
+
+    config = yaml.safe_load(open("configs/sac_ftl.yaml"))
+    config.update(total_timesteps=400, eval_freq=400, eval_targets=2, checkpoint_freq=400)
+    config["hyperparameters"].update(learning_starts=320, batch_size=16, buffer_size=2000,
+                                     policy_kwargs={"net_arch": [16]})  # fmt: skip
+    path = tmp_path / "sac.yaml"
+    path.write_text(yaml.safe_dump(config))
+    assert main(["sac", "--config", str(path), "--logdir", str(tmp_path), "--no-progress"]) == 0
+    runs = [p for p in tmp_path.iterdir() if p.is_dir()]
+    assert len(runs) == 1 and (runs[0] / "model.zip").is_file()
+    csv = (runs[0] / "progress.csv").read_text()
+    assert "eval/success_rate" in csv and "eval/tip_error_cm" in csv
