@@ -237,6 +237,11 @@ def train_q_table(
                 logger.record("eval/path_length_cm", length_cm)
             else:
                 logger.record("eval/success_rate", float(success))
+            if trajectory is None or getattr(trajectory, "motion", None) is None:
+                # one picture card in every run: the cell path where there is no FTL motion
+                logger.record(
+                    "paths/eval", Image(picture, "HWC"), exclude=("stdout", "log", "json", "csv")
+                )
             logger.dump(step=agent.num_timesteps)
             logger.close()
             agent.save(
@@ -398,6 +403,7 @@ def train_sb3(
     logdir: str | Path = "runs",
     resume: str | Path | None = None,
     progress_bar: bool = True,
+    on_evaluation: Any = None,
 ) -> dict[str, Any]:
     """Train PPO, SAC or TD3 on an arm env; one run directory with the model and its logs.
 
@@ -406,7 +412,8 @@ def train_sb3(
     ``eval/*``, ``paths/eval``, the hyperparameters as text). It is built under a hidden
     ``.<name>.partial`` name and renamed once ``model.zip`` is written, so an interrupted run never
     looks finished. On Ctrl-C the model is saved to ``checkpoints/model_<steps>.zip`` of the
-    partial directory, which ``--resume`` continues from.
+    partial directory, which ``--resume`` continues from. ``on_evaluation(model, metrics)``, if
+    given, is called after each evaluation is logged (``aftir tune`` reports to Ray Tune there).
 
     Raises:
         ConfigError: the config, ``logdir`` or the hyperparameters are refused (before any
@@ -416,6 +423,7 @@ def train_sb3(
 
     """
     import signal
+    import threading
 
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.logger import configure
@@ -442,13 +450,16 @@ def train_sb3(
     resume_path = newest_model(resume) if resume is not None else None
     targets = evaluation_targets(env_id, config.eval_targets, env_kwargs=config.env_kwargs)
     vec_cls = SubprocVecEnv if config.n_envs > 1 else DummyVecEnv
-    # Workers ignore Ctrl-C: the main process stops them once the model is saved.
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Workers ignore Ctrl-C: the main process stops them once the model is saved. Only the main
+    # thread may set handlers (a Ray Tune trial runs in another one).
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
     try:
         venv = make_vec_env(env_id, n_envs=config.n_envs, seed=seed, vec_env_cls=vec_cls,
                             env_kwargs=config.env_kwargs)  # fmt: skip
     finally:
-        signal.signal(signal.SIGINT, previous)
+        if main_thread:
+            signal.signal(signal.SIGINT, previous)
     partial = None
     try:
         if resume_path is not None:
@@ -465,7 +476,8 @@ def train_sb3(
                   "resume": str(resume_path) if resume_path else None}  # fmt: skip
         write_json(partial / "config.json", params)
         logger.record("hyperparameters", _hyperparameter_text(params), exclude=("csv",))
-        evaluator = ArmEvalCallback(env_id, targets, config.eval_freq, config.env_kwargs)
+        evaluator = ArmEvalCallback(env_id, targets, config.eval_freq, config.env_kwargs,
+                                    on_evaluate=on_evaluation)  # fmt: skip
         callbacks = [evaluator, AtomicCheckpoint(partial / "checkpoints", config.checkpoint_freq)]
         start = time.perf_counter()
         try:

@@ -29,7 +29,9 @@ def test_summary_counts_only_what_ran():
     assert s["min_clearance_cm"] == 1.0 and s["seconds"] == 3.0
     assert s["notes"] in ("no posture; ...", "not run; ...")
     table = format_table([row])
-    assert table.splitlines()[2].startswith("| s | m | 3 (+1 not run) | 67% | 0.2 | 1.00 | – | 200 |")
+    assert table.splitlines()[2].startswith(
+        "| s | m | 3 (+1 not run) | 67% | 0.2 | 1.00 | – | 200 |"
+    )
 
 
 def test_target_sets_are_fixed_and_free():

@@ -6,8 +6,9 @@ go to the algorithm's constructor and are checked against its signature (an unkn
 
 :class:`ArmEvalCallback` runs the deterministic policy on a fixed set of evaluation targets and
 logs ``eval/success_rate``, ``eval/tip_error_cm``, ``eval/path_length_cm``,
-``eval/collision_rate`` and a picture of the tip path and arm under ``paths/eval`` through the
-model's SB3 logger, so SB3 runs and Q-learning runs overlay in one TensorBoard.
+``eval/collision_rate``, ``eval/min_clearance_cm`` and a picture of the tip path and arm under
+``paths/eval`` through the model's SB3 logger, so SB3 runs and Q-learning runs overlay in one
+TensorBoard.
 Checkpoints are written atomically (temporary file, then rename).
 """
 
@@ -405,11 +406,14 @@ class ArmEvalCallback(BaseCallback):
         targets: list[np.ndarray],
         eval_freq: int,
         env_kwargs: dict[str, Any] | None = None,
+        on_evaluate: Any = None,
     ) -> None:
         super().__init__()
         self.env_id, self.targets, self.eval_freq = env_id, targets, eval_freq
         self.env_kwargs = dict(env_kwargs or {})
         self._next = eval_freq
+        #: ``on_evaluate(model, metrics)`` after each evaluation is logged (a sweep's report).
+        self.on_evaluate = on_evaluate
 
     def _init_callback(self) -> None:
         # A resumed model starts at its own step count: the next evaluation is the next multiple.
@@ -429,7 +433,7 @@ class ArmEvalCallback(BaseCallback):
         from aftir_rl.plotting import render_path
 
         metrics, first = evaluate_policy_on_targets(
-            self.model, self.env_id, self.targets, env_kwargs=self.env_kwargs
+            self.model, self.env_id, self.targets, clearance=True, env_kwargs=self.env_kwargs
         )
         for key, value in metrics.items():
             self.logger.record(f"eval/{key}", value)
@@ -439,6 +443,8 @@ class ArmEvalCallback(BaseCallback):
                            exclude=("stdout", "log", "json", "csv"))  # fmt: skip
         self.logger.dump(self.num_timesteps)
         self.last_metrics = metrics
+        if self.on_evaluate is not None:
+            self.on_evaluate(self.model, metrics)
         return metrics
 
 
