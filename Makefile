@@ -11,7 +11,7 @@ install: $(STAMP)
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev]" -c constraints.txt
+	$(PY) -m pip install --quiet -e ".[dev,ray]" -c constraints.txt
 	$(PY) -m ipykernel install --sys-prefix --name python3 >/dev/null
 	touch $(STAMP)
 
@@ -34,6 +34,10 @@ bench: $(STAMP)  ## every benchmark table of the README (about 20 minutes)
 	$(PY) benchmarks/bench_seed000.py
 	$(PY) benchmarks/bench_seed001.py
 	$(PY) benchmarks/bench_arm.py
+	$(PY) benchmarks/bench_motion.py
+	$(PY) benchmarks/bench_goal.py
+	$(PY) benchmarks/bench_render.py
+	$(PY) benchmarks/bench_arm_ftl.py
 	$(PY) -m aftir_rl.bench
 
 tensorboard: $(STAMP)

@@ -62,6 +62,10 @@ class RouteSettings:
         change_weight: weight of ``Σ |Δκ|²·l``.
         samples: backbone samples per section in the search.
         max_seconds: wall-clock budget of one search.
+        bin_cm, bin_heading: the beam keeps the best state per cell of this size [cm] and
+            heading bin [rad], so that it stays diverse.
+        closings: beam states per depth that are tried for closing on the target.
+        lead_shift: how far [cm] a closing may move the lead of a route the beam has built.
 
     """
 
@@ -77,6 +81,7 @@ class RouteSettings:
     max_seconds: float = 20.0
     bin_cm: float = 12.0
     closings: int = 10
+    lead_shift: float = 0.0
     bin_heading: float = 0.5
 
 
@@ -251,7 +256,7 @@ def route_clearance(tank: Tank, arm: ArmSpec, route: Route, per_section: int = 2
 def _close_batch(
     lead: NDArray[np.float64], kappa: NDArray[np.float64], target: NDArray[np.float64],
     l: float, theta_max: float, free: int = 3, iterations: int = 40,
-    lead_range: tuple[float, float] | None = (-25.0, 60.0),
+    lead_range: tuple[ArrayLike, ArrayLike] | None = (-25.0, 60.0),
 ) -> list[tuple[float, NDArray[np.float64]] | None]:  # fmt: skip
     """Put each route's tip on ``target``: damped least squares on its lead and last ``κ``.
 
@@ -482,8 +487,18 @@ def _beam(
             starts = np.concatenate(
                 [kap_hist[idx], np.repeat(kap_hist[idx][:, -1:], extra, axis=1)], axis=1
             )
+            # the lead of a route the beam has threaded through the tank stays (moving it shifts
+            # the whole route along the panel's axis), unless lead_shift allows a little
+            window = (
+                (
+                    np.maximum(lead[idx] - settings.lead_shift, -25.0),
+                    lead[idx] + settings.lead_shift,
+                )
+                if settings.lead_shift > 0
+                else None
+            )
             closed = _close_batch(
-                lead[idx], starts, target, l, arm.theta_max, free=extra + 1, lead_range=None
+                lead[idx], starts, target, l, arm.theta_max, free=extra + 1, lead_range=window
             )
             for i, out in zip(idx, closed):
                 if out is not None:
