@@ -67,7 +67,15 @@ from aftir_rl.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.errors import AftirError, PlanningError
 from aftir_rl.safety import cli
 
-__all__ = ["Outcome", "Row", "target_sets", "run_benchmark", "format_table", "main"]
+__all__ = [
+    "Outcome",
+    "Row",
+    "target_sets",
+    "method_outcome",
+    "run_benchmark",
+    "format_table",
+    "main",
+]
 
 POSTURE_METHODS = (
     "blind", "region_clipping", "tga", "tsm", "obstacle_clipping", "region_division",
@@ -203,14 +211,11 @@ def posture_outcome(planner: Any, target: ArrayLike, method: str) -> Outcome:
                    posture=p.to_dict())  # fmt: skip
 
 
-def q_table_outcome(
-    planner: Any, target: ArrayLike, seed: int = 0, bridge_seconds: float = DEFAULT_BRIDGE_SECONDS
-) -> Outcome:
-    """Seed 002's pipeline on one target: Q-learning, greedy path, postures along it."""
+def _learned_cells(planner: Any, target: ArrayLike, seed: int) -> list[Any] | Outcome:
+    """Q-learning on ``target`` and its greedy cell path, or the Outcome that says why not."""
     import gymnasium as gym
 
     from aftir_rl.agents.q_table import QLearning, greedy_rollout
-    from aftir_rl.posture.trajectory import plan_trajectory
 
     config = _q_table_config()
     start = time.perf_counter()
@@ -221,10 +226,23 @@ def q_table_outcome(
     agent = QLearning.from_config(env, config, seed=seed)
     agent.learn(config.episodes)
     states, reached = greedy_rollout(agent, env)
-    raster = env.unwrapped.raster
-    points = [raster.cell_center(raster.cell(s)) for s in states]
     if not reached:
         return Outcome(False, seconds=time.perf_counter() - start, note="greedy path fails")
+    raster = env.unwrapped.raster
+    return [raster.cell(s) for s in states]
+
+
+def q_table_outcome(
+    planner: Any, target: ArrayLike, seed: int = 0, bridge_seconds: float = DEFAULT_BRIDGE_SECONDS
+) -> Outcome:
+    """Seed 002's pipeline on one target: Q-learning, greedy path, postures along it."""
+    from aftir_rl.posture.trajectory import plan_trajectory
+
+    start = time.perf_counter()
+    cells = _learned_cells(planner, target, seed)
+    if isinstance(cells, Outcome):
+        return cells
+    points = [planner.tank.raster.cell_center(c) for c in cells]
     trajectory = plan_trajectory(planner, points, target, bridge_seconds=bridge_seconds, seed=seed)
     seconds = time.perf_counter() - start
     m = trajectory.measures(planner.scene)
@@ -242,24 +260,13 @@ def q_table_ftl_outcome(
     planner: Any, target: ArrayLike, seed: int = 0, margin: float = DEFAULT_MARGIN
 ) -> Outcome:
     """Q-learning, its greedy path, and a follow-the-leader motion along it keeping ``margin``."""
-    import gymnasium as gym
-
-    from aftir_rl.agents.q_table import QLearning, greedy_rollout
     from aftir_rl.motion.plan import plan_motion
 
-    config = _q_table_config()
     start = time.perf_counter()
-    try:
-        env = gym.make("AFTIR-Tank-v0", tank=planner.tank, target=tuple(target))
-    except AftirError as exc:
-        return Outcome(False, ran=False, note=_short(exc))
-    agent = QLearning.from_config(env, config, seed=seed)
-    agent.learn(config.episodes)
-    states, reached = greedy_rollout(agent, env)
-    if not reached:
-        return Outcome(False, seconds=time.perf_counter() - start, note="greedy path fails")
-    raster = env.unwrapped.raster
-    plan = plan_motion(planner.tank, target, [raster.cell(s) for s in states], margin=margin)
+    cells = _learned_cells(planner, target, seed)
+    if isinstance(cells, Outcome):
+        return cells
+    plan = plan_motion(planner.tank, target, cells, margin=margin)
     seconds = time.perf_counter() - start
     if not plan.complete:
         return Outcome(False, seconds=seconds, note=_short(PlanningError(plan.reason or "")))
@@ -338,6 +345,40 @@ def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray
     return rows
 
 
+def method_outcome(
+    planner: Any,
+    method: str,
+    target: ArrayLike,
+    seed: int = 0,
+    margin: float = DEFAULT_MARGIN,
+    bridge_seconds: float = DEFAULT_BRIDGE_SECONDS,
+    rrt_seconds: float = 10.0,
+) -> Outcome:
+    """One method of :data:`METHODS_FOR` on one target (one item of the benchmark).
+
+    OMPL's seed is restarted before each item that draws from it (``rrt_connect``, the bridges of
+    ``q_table+postures``), so an outcome does not depend on what ran before it in the process:
+    a serial run and a run on Ray (one task per item) give the same table.
+    """
+    if method in ("rrt_connect", "q_table+postures"):
+        _reseed_ompl(seed)
+    if method == "q_table+ftl":
+        return q_table_ftl_outcome(planner, target, seed, margin)
+    if method == "q_table+postures":
+        return q_table_outcome(planner, target, seed, bridge_seconds)
+    if method == "rrt_connect":
+        return rrt_outcome(planner, target, rrt_seconds, seed)
+    return posture_outcome(planner, target, method)
+
+
+def _reseed_ompl(seed: int) -> None:
+    """Restart OMPL's seed generator: the RNGs an item's planners create draw the same seeds."""
+    from ompl import util as ou
+
+    ou.setLogLevel(ou.LOG_NONE)  # OMPL says seeds were drawn already; rrt_connect resets the level
+    ou.RNG.setSeed(int(seed) + 1)  # OMPL takes 0 for "pick one"; rrt_connect's first seed too
+
+
 def run_benchmark(
     sets: dict[str, list[tuple[str, np.ndarray]]],
     methods: dict[str, Sequence[str]] | None = None,
@@ -347,9 +388,23 @@ def run_benchmark(
     bridge_seconds: float = DEFAULT_BRIDGE_SECONDS,
     progress: Callable[[str], None] | None = None,
     margin: float = DEFAULT_MARGIN,
+    ray: str | None = None,
+    workers: int | None = None,
 ) -> list[Row]:
-    """Run every method of ``methods`` (default :data:`METHODS_FOR`) on its target sets."""
+    """Run every method of ``methods`` (default :data:`METHODS_FOR`) on its target sets.
+
+    With ``ray`` (``local``, ``auto`` or ``HOST:PORT``), every (set, method, target) is a Ray
+    task (:func:`aftir_rl.distributed.benchmark_on_ray`; ``workers``: CPUs of a local Ray): the
+    same rows, and a task that fails is an outcome holding its error.
+    """
     methods = methods or METHODS_FOR
+    if ray is not None:
+        from aftir_rl.distributed import benchmark_on_ray, ray_session
+
+        options = {"seed": seed, "margin": margin, "bridge_seconds": bridge_seconds,
+                   "rrt_seconds": rrt_seconds}  # fmt: skip
+        with ray_session(ray, workers):
+            return benchmark_on_ray(sets, methods, options, models, progress)
     planners = _Planners()
     rows = []
     for name, items in sets.items():
@@ -359,14 +414,8 @@ def run_benchmark(
                 planner = planners(tank)
                 if progress:
                     progress(f"{name} {method} {tuple(np.round(target, 1))}")
-                if method == "q_table+ftl":
-                    row.outcomes.append(q_table_ftl_outcome(planner, target, seed, margin))
-                elif method == "q_table+postures":
-                    row.outcomes.append(q_table_outcome(planner, target, seed, bridge_seconds))
-                elif method == "rrt_connect":
-                    row.outcomes.append(rrt_outcome(planner, target, rrt_seconds, seed))
-                else:
-                    row.outcomes.append(posture_outcome(planner, target, method))
+                row.outcomes.append(method_outcome(planner, method, target, seed, margin,
+                                                   bridge_seconds, rrt_seconds))  # fmt: skip
             rows.append(row)
     for run_dir in models:
         rows += sb3_outcomes(run_dir, sets)
@@ -434,6 +483,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--margin", type=float, default=DEFAULT_MARGIN, metavar="CM",
                         help="clearance the q_table+ftl motions keep (default "
                         f"{DEFAULT_MARGIN:g} cm)")  # fmt: skip
+    parser.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="run the items as Ray tasks: local (a Ray on this machine), auto or HOST:PORT (a "
+        "cluster started with ray start); needs aftir_rl[ray]",
+    )
+    parser.add_argument(
+        "--workers", type=int, metavar="N", help="CPUs of --ray local (default: every core)"
+    )
     args = parser.parse_args(argv)
     if args.n_random < 1 or not 0 < args.rrt_seconds < math.inf:
         parser.error("--n-random must be at least 1 and --rrt-seconds positive and finite")
@@ -444,6 +502,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not 0 <= args.seed < 2**32:
         parser.error("--seed must be from 0 to 2**32 - 1")
     problem = _check_inputs(args.model, args.json)
+    if args.ray is not None or args.workers is not None:
+        from aftir_rl.distributed import check_ray_options
+
+        check_ray_options(args.ray, args.workers)  # one line and exit 2 (safety.cli)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
@@ -453,7 +515,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         progress = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
         rows = run_benchmark(sets, rrt_seconds=args.rrt_seconds, models=args.model,
                              progress=progress, bridge_seconds=args.bridge_seconds,
-                             margin=args.margin)  # fmt: skip
+                             margin=args.margin, ray=args.ray,
+                             workers=args.workers)  # fmt: skip
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
