@@ -19,7 +19,11 @@ vector ``κ`` of one route section after another:
   a curvature-change cost and the distance-to-go this ranks the beam.
 - **Closing.** A beam state whose tip is within reach of the target is closed exactly by damped
   least squares on the bending vectors of its last sections (tip error ≤ 1e-6 cm); the closed
-  route is re-checked for clearance over its whole body. The cheapest closed route wins.
+  route is re-checked for clearance over its whole body; one that misses the clearance by less
+  than 3 cm is pushed away from the tank first (gradient ascent on a soft minimum of its
+  clearance in the null space of the tip's Jacobian, the tip staying on the target). Targets
+  within reach of the panel are also closed directly: one to three sections on a continuous
+  lead. The cheapest closed route wins.
 
 Units cm and rad. All candidates of one depth are evaluated in one batched call.
 """
@@ -308,6 +312,68 @@ def _close_batch(
     return [(float(lead[i]), kap[i]) if ok[i] else None for i in range(c)]
 
 
+def _push_away(
+    tank: Tank, arm: ArmSpec, route: Route, target: NDArray[np.float64], goal: float,
+    iterations: int = 12, step: float = 0.04,
+) -> Route:  # fmt: skip
+    """Raise a route's clearance while its end stays on ``target`` (clearance as an objective).
+
+    Gradient ascent on a soft minimum of the body's clearance over every ``κ`` and the lead,
+    projected into the null space of the tip's Jacobian, then put back on the target by a few
+    Gauss-Newton steps. Stops when the clearance reaches ``goal`` [cm] or stops improving;
+    returns the best route seen (the input if nothing better).
+    """
+    l = route.section_length
+    x0 = np.concatenate([[route.lead / l], route.kappa.reshape(-1)])
+    n = len(x0)
+    eps = 1e-5
+
+    def unpack(x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        kap = _clip_kappa(x[..., 1:].reshape(x.shape[:-1] + (-1, 2)), arm.theta_max)
+        return x[..., 0] * l, kap
+
+    def evaluate(xs: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        lead, kap = unpack(xs)
+        theta, phi = kappa_to_angles(kap)
+        pts = body_points(lead, theta, phi, l, 10)
+        clear = point_clearance(tank, pts) - arm.radius  # (B, P)
+        soft = -np.log(np.sum(np.exp(-2.0 * (clear - clear.min(axis=1, keepdims=True))), axis=1))
+        return clear.min(axis=1) + soft / 2.0, pts[:, -1, :]
+
+    x, best_x, best_c = x0.copy(), x0.copy(), route_clearance(tank, arm, route)
+    for _ in range(iterations):
+        trial = x[None, :] + eps * np.vstack([np.zeros(n), np.eye(n)])
+        value, tips = evaluate(trial)
+        grad = (value[1:] - value[0]) / eps
+        jac = ((tips[1:] - tips[0]) / eps).T  # (3, n)
+        pinv = np.linalg.pinv(jac)
+        direction = grad - pinv @ (jac @ grad)
+        norm = np.linalg.norm(direction)
+        if norm < 1e-9:
+            break
+        x = x + step * direction / norm
+        for _ in range(4):  # back onto the target
+            lead, kap = unpack(x)
+            theta, phi = kappa_to_angles(kap)
+            err = target - tip_position(lead, theta, phi, l)
+            if np.linalg.norm(err) < 1e-8:
+                break
+            x = x + pinv @ err
+        lead, kap = unpack(x)
+        x = np.concatenate([[lead / l], kap.reshape(-1)])
+        theta, phi = kappa_to_angles(kap)
+        if np.linalg.norm(target - tip_position(lead, theta, phi, l)) > 1e-6 or lead < -25.0:
+            break
+        c = route_clearance(tank, arm, Route(lead, kap, l))
+        if c <= best_c + 1e-3:
+            break
+        best_x, best_c = x.copy(), c
+        if c >= goal:
+            break
+    lead, kap = unpack(best_x)
+    return Route(float(lead), kap, l)
+
+
 def plan_route(
     tank: Tank,
     target: ArrayLike,
@@ -394,7 +460,13 @@ def _beam(
         if route.min_sections() > arm.max_sections:
             return best
         rc = route_clearance(tank, arm, route)
-        if rc < settings.margin + 0.5 * settings.slack:
+        need = settings.margin + 0.5 * settings.slack
+        if need - 3.0 < rc < need:
+            # a near miss: move the body away from the tank, the tip staying on the target
+            route = _push_away(tank, arm, route, target, need)
+            rc = route_clearance(tank, arm, route)
+            kap, lead = route.kappa, route.lead
+        if rc < need:
             return best
         dk_all = np.diff(np.vstack([np.zeros((1, 2)), kap]), axis=0)
         change = np.hypot(dk_all[:, 0], dk_all[:, 1])
@@ -474,14 +546,15 @@ def _beam(
         # closing: append one or two sections to the most promising states near the target
         dist = np.linalg.norm(pos - target, axis=1)
         togo = h[order]  # through free space: a wall between tip and target does not count as near
-        near = np.flatnonzero((dist < 1.9 * l) & (togo < 2.2 * l))
-        chosen = near[np.argsort(togo[near])][: settings.closings]
-        for extra in (1, 2):
-            idx = [
-                i for i in chosen
-                if (extra == 2 or dist[i] < 0.95 * l)
-                and depth + 1 + extra + math.ceil(lead[i] / l - 1e-9) <= arm.max_sections
-            ]  # fmt: skip
+        fits = depth + 1 + np.ceil(lead / l - 1e-9) <= arm.max_sections - 1
+        for extra, band in ((1, (0.3, 0.98)), (2, (0.6, 1.95))):
+            # states from which `extra` sections of length l can end on the target: not too
+            # near (a section cannot fold back on itself) and not too far; nearest to go first
+            near = np.flatnonzero(
+                (dist > band[0] * l) & (dist < band[1] * l) & (togo < 2.2 * l) & fits
+                & (depth + 1 + extra + np.ceil(lead / l - 1e-9) <= arm.max_sections)
+            )  # fmt: skip
+            idx = list(near[np.argsort(togo[near])][: settings.closings])
             if not idx:
                 continue
             starts = np.concatenate(
