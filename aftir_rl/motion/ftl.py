@@ -44,6 +44,7 @@ __all__ = [
     "Route",
     "FTLMotion",
     "kappa_to_angles",
+    "clip_kappa",
     "ftl_postures",
     "ftl_motion",
     "ftl_deviation",
@@ -276,7 +277,7 @@ def ftl_motion(
         )
         for i, sk in enumerate(keys):
             if sk > route.lead and not on_stage[i]:
-                key_kappa[i] = _clip_norm(_fit_shape(route, n, sk, key_kappa[i]), theta_max)
+                key_kappa[i] = clip_kappa(_fit_shape(route, n, sk, key_kappa[i]), theta_max)
 
     def at(s: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
         flat = key_kappa.reshape(len(keys), -1)
@@ -299,7 +300,8 @@ def ftl_motion(
     return FTLMotion(route, n, s, dis, theta, phi, stage_index)
 
 
-def _clip_norm(kappa: NDArray[np.float64], limit: float) -> NDArray[np.float64]:
+def clip_kappa(kappa: NDArray[np.float64], limit: float) -> NDArray[np.float64]:
+    """Bending vectors ``(..., 2)`` shortened to at most ``limit`` [rad] (the joint limit)."""
     norm = np.hypot(kappa[..., 0], kappa[..., 1])
     return kappa * np.where(norm > limit, limit / np.maximum(norm, 1e-12), 1.0)[..., None]
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 import time
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import product
@@ -41,7 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.collision import point_clearance, points_clear
 from aftir_rl.errors import PlanningError
-from aftir_rl.motion.ftl import Route, kappa_to_angles
+from aftir_rl.motion.ftl import Route, clip_kappa, kappa_to_angles
 from aftir_rl.robot import ArmSpec, body_points, section_transforms, tip_position
 from aftir_rl.tank import Tank
 
@@ -192,13 +193,16 @@ def _shifted(a: NDArray[np.float64], d: NDArray[np.int64]) -> NDArray[np.float64
     return out
 
 
-_EDGE_CACHE: dict[tuple[int, float], tuple[NDArray[np.bool_], NDArray[np.bool_]]] = {}
+#: Per tank (by value, held weakly) and grid size: free grid points and edges.
+_EDGE_CACHE: weakref.WeakKeyDictionary[
+    Tank, dict[float, tuple[NDArray[np.bool_], NDArray[np.bool_]]]
+] = weakref.WeakKeyDictionary()
 
 
 def _grid_edges(tank: Tank, size: float) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """Free grid points and, per neighbour direction, whether the edge's midpoint is free."""
-    key = (id(tank), size)
-    if key not in _EDGE_CACHE:
+    cache = _EDGE_CACHE.setdefault(tank, {})
+    if size not in cache:
         shape = tuple(int(n) * 2 for n in tank.raster.shape)
         origin = np.array(tank.raster.origin, dtype=np.float64)
         centres = origin + (np.indices(shape).transpose(1, 2, 3, 0) + 0.5) * size
@@ -209,8 +213,8 @@ def _grid_edges(tank: Tank, size: float) -> tuple[NDArray[np.bool_], NDArray[np.
             mid = centres + 0.5 * size * d
             target_free = _shifted(free.astype(np.float64), -d) == 1.0
             edges[e] = free & target_free & (point_clearance(tank, mid) >= r)
-        _EDGE_CACHE[key] = (free, edges)
-    return _EDGE_CACHE[key]
+        cache[size] = (free, edges)
+    return cache[size]
 
 
 def _corridor(tank: Tank, cells: Sequence[Sequence[int]], grow: int) -> NDArray[np.bool_]:
@@ -230,12 +234,6 @@ def _changes(max_change: float) -> NDArray[np.float64]:
         for a in np.arange(8) * math.pi / 4:
             out.append((r * math.cos(a), r * math.sin(a)))
     return np.array(out)
-
-
-def _clip_kappa(kappa: NDArray[np.float64], theta_max: float) -> NDArray[np.float64]:
-    norm = np.hypot(kappa[..., 0], kappa[..., 1])
-    scale = np.where(norm > theta_max, theta_max / np.maximum(norm, 1e-12), 1.0)
-    return kappa * scale[..., None]
 
 
 def _section_samples(
@@ -305,7 +303,7 @@ def _close_batch(
         size = np.linalg.norm(dk, axis=1)
         scale = np.minimum(np.minimum(1.0, 0.3 / np.maximum(size, 1e-12)),
                            10.0 / np.maximum(np.abs(dlead), 1e-12))  # fmt: skip
-        kap[:, j0:] = _clip_kappa(kap[:, j0:] + (dk * scale[:, None]).reshape(c, -1, 2), theta_max)
+        kap[:, j0:] = clip_kappa(kap[:, j0:] + (dk * scale[:, None]).reshape(c, -1, 2), theta_max)
         lead = np.clip(lead + dlead * scale, lo, hi)
     theta, phi = kappa_to_angles(kap)
     ok = np.linalg.norm(target - tip_position(lead, theta, phi, l), axis=1) < 1e-6
@@ -329,7 +327,7 @@ def _push_away(
     eps = 1e-5
 
     def unpack(x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        kap = _clip_kappa(x[..., 1:].reshape(x.shape[:-1] + (-1, 2)), arm.theta_max)
+        kap = clip_kappa(x[..., 1:].reshape(x.shape[:-1] + (-1, 2)), arm.theta_max)
         return x[..., 0] * l, kap
 
     def evaluate(xs: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -495,7 +493,7 @@ def _beam(
             break
         last = kap_hist[:, -1, :] if depth else np.zeros((len(cost), 2))
         b, c = len(cost), len(changes)
-        new_k = _clip_kappa(last[:, None, :] + changes[None, :, :], arm.theta_max).reshape(-1, 2)
+        new_k = clip_kappa(last[:, None, :] + changes[None, :, :], arm.theta_max).reshape(-1, 2)
         rep = np.repeat(np.arange(b), c)
         pts, end_rot, end_pos = _section_samples(rot[rep], pos[rep], new_k, l, k)
         expanded += len(rep)
