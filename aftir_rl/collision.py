@@ -26,7 +26,7 @@ once before the exact fcl check of the one they return.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import fcl
@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.robot import ArmSpec, Posture, body_points
-from aftir_rl.tank import Box, Cylinder, Solid, Sphere, Tank
+from aftir_rl.tank import Box, Cylinder, Solid, Sphere, Tank, Vec3
 
 __all__ = [
     "CollisionScene",
@@ -76,7 +76,7 @@ def wall_boxes(tank: Tank) -> list[Box]:
     """The tank box's walls as solid slabs outside it, the floor open around the panel."""
     lo, hi, t = np.array(tank.box_min), np.array(tank.box_max), _WALL
     big_lo, big_hi = lo - t, hi + t
-    slabs = [
+    slabs: list[tuple[Iterable[float], Iterable[float]]] = [
         (big_lo, [lo[0], big_hi[1], big_hi[2]]),
         ([hi[0], big_lo[1], big_lo[2]], big_hi),
         ([lo[0], big_lo[1], big_lo[2]], [hi[0], lo[1], big_hi[2]]),
@@ -93,7 +93,12 @@ def wall_boxes(tank: Tank) -> list[Box]:
     ):
         if xb > xa and yb > ya:
             slabs.append(([xa, ya, z0], [xb, yb, z1]))
-    return [Box(tuple(map(float, a)), tuple(map(float, b)), "wall") for a, b in slabs]
+    return [Box(_vec3(a), _vec3(b), "wall") for a, b in slabs]
+
+
+def _vec3(values: Iterable[float]) -> Vec3:
+    x, y, z = map(float, values)
+    return (x, y, z)
 
 
 @dataclass(frozen=True)
@@ -166,7 +171,9 @@ class CollisionScene:
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__init__(state["tank"], state["arm"], state["links"], state["walls"])  # type: ignore[misc]
 
-    def _arm_links(self, n_sections: int) -> tuple[list[fcl.CollisionObject], object]:
+    def _arm_links(
+        self, n_sections: int
+    ) -> tuple[list[fcl.CollisionObject], fcl.DynamicAABBTreeCollisionManager]:
         if n_sections not in self._arms:
             length = self.arm.section_length / self.links_per_section
             links = [
@@ -179,7 +186,7 @@ class CollisionScene:
             self._arms[n_sections] = (links, manager)
         return self._arms[n_sections]
 
-    def _place(self, posture: Posture) -> object:
+    def _place(self, posture: Posture) -> fcl.DynamicAABBTreeCollisionManager:
         pts = body_points(
             posture.dis, posture.theta, posture.phi, self.arm.section_length, self.links_per_section
         )
@@ -229,7 +236,7 @@ class CollisionScene:
             clearance = min(clearance, 0.0)
         return CollisionReport(bool(data.result.is_collision) or not panel, clearance, panel, hit)
 
-    def _hit_name(self, manager: object) -> str:
+    def _hit_name(self, manager: fcl.DynamicAABBTreeCollisionManager) -> str:
         for obj in self._objects:
             data = fcl.CollisionData()
             manager.collide(obj, data, fcl.defaultCollisionCallback)

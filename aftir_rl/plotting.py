@@ -13,6 +13,7 @@ artists are drawn after the tank's spheres rather than depth-sorted with them.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -20,6 +21,10 @@ from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.tank import Box, Cylinder, Sphere, Tank
+
+if TYPE_CHECKING:
+    from mpl_toolkits.mplot3d.art3d import Path3DCollection
+    from mpl_toolkits.mplot3d.axes3d import Axes3D
 
 __all__ = ["draw_tank", "path_figure", "figure_to_rgb", "render_path", "PathRenderer"]
 
@@ -39,7 +44,7 @@ _EDGES = [
 ]
 
 
-def _box_lines(ax, lo: Sequence[float], hi: Sequence[float], **style) -> None:  # noqa: ANN001
+def _box_lines(ax: Axes3D, lo: Sequence[float], hi: Sequence[float], **style: Any) -> None:
     corners = np.array(
         [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
     )
@@ -47,7 +52,7 @@ def _box_lines(ax, lo: Sequence[float], hi: Sequence[float], **style) -> None:  
         ax.plot(*corners[[i, j]].T, **style)
 
 
-def draw_tank(ax, tank: Tank) -> None:  # noqa: ANN001
+def draw_tank(ax: Axes3D, tank: Tank) -> None:
     """Draw the tank's box, panel and solids on a 3D axes (wireframes, cm)."""
     _box_lines(ax, tank.box_min, tank.box_max, color="0.6", lw=0.6)
     t = np.linspace(0, 2 * np.pi, 40)
@@ -122,7 +127,7 @@ def path_figure(
 
 def figure_to_rgb(fig: Figure) -> NDArray[np.uint8]:
     """Rasterise a figure to an ``(H, W, 3)`` uint8 array."""
-    canvas = fig.canvas
+    canvas = cast(FigureCanvasAgg, fig.canvas)  # path_figure attaches an Agg canvas
     canvas.draw()
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
@@ -194,7 +199,7 @@ class PathRenderer:
             alpha = rgba[where][..., 3:].astype(np.float32) / 255.0
             self._overlay = (where, rgba[where][..., :3] * alpha, 1.0 - alpha)
             canvas.restore_region(self._background)
-        self._arms: list = []
+        self._arms: list[Any] = []  # the arms' Line3D artists
         self._kind = (has_points, has_target)
 
     def render(
@@ -221,6 +226,7 @@ class PathRenderer:
             line.set_color(_arm_color(i, len(arms)))
             ax.draw_artist(line)
         if has_points:
+            assert pts is not None and self._path is not None  # has_points: both are there
             self._path.set_data_3d(*pts.T)
             ax.draw_artist(self._path)
             self._draw_marker(self._start, pts[0])
@@ -232,7 +238,7 @@ class PathRenderer:
             image[where] = (premultiplied + image[where] * keep + 0.5).astype(np.uint8)
         return image
 
-    def _draw_marker(self, marker, point: NDArray[np.float64]) -> None:  # noqa: ANN001
+    def _draw_marker(self, marker: Path3DCollection, point: NDArray[np.float64]) -> None:
         marker.set_offsets(point[None, :2])
         marker.set_3d_properties(point[2:3], "z")
         marker.do_3d_projection()

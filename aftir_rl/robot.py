@@ -27,6 +27,7 @@ Python loop over the batch (only over the N ≤ 12 sections). Units: cm and rad.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,10 +88,12 @@ class Posture:
     theta: tuple[float, ...]
     phi: tuple[float, ...]
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "dis", float(self.dis))
-        object.__setattr__(self, "theta", tuple(float(t) for t in self.theta))
-        object.__setattr__(self, "phi", tuple(float(p) for p in self.phi))
+    def __init__(self, dis: float, theta: Iterable[float], phi: Iterable[float]) -> None:
+        # Written out (the dataclass keeps it) to say what it accepts: any numbers and iterables
+        # of numbers (arrays, lists), stored as a float and tuples of floats.
+        object.__setattr__(self, "dis", float(dis))
+        object.__setattr__(self, "theta", tuple(float(t) for t in theta))
+        object.__setattr__(self, "phi", tuple(float(p) for p in phi))
         if len(self.theta) != len(self.phi):
             raise ValueError(
                 f"theta and phi must have one value per section, got {len(self.theta)} and "

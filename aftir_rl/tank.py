@@ -29,10 +29,10 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.config import CONFIG_DIR, brief, read_yaml, to_float, to_int, to_vector
 from aftir_rl.errors import AftirError, ConfigError, TargetError
@@ -233,7 +233,7 @@ class Raster:
         """Whether ``cell`` is inside the raster."""
         return all(0 <= int(c) < n for c, n in zip(cell, self.shape))
 
-    def point_to_cell(self, point: Sequence[float]) -> tuple[int, int, int]:
+    def point_to_cell(self, point: ArrayLike) -> tuple[int, int, int]:
         """The cell holding ``point`` [cm]; points on the box's upper faces belong to the last cell.
 
         Raises:
@@ -263,7 +263,7 @@ class Raster:
         lo = np.array(self.origin) + idx * self.cell_size
         return lo, lo + self.cell_size
 
-    def index(self, cell: Sequence[int]) -> int:
+    def index(self, cell: Iterable[int]) -> int:
         """Flat state index ``ravel_multi_index(cell, shape)``."""
         return int(np.ravel_multi_index(tuple(int(c) for c in cell), self.shape))
 
@@ -434,12 +434,12 @@ class Tank:
         """BFS steps from the start cell to every cell, -1 where unreachable."""
         return self.raster.bfs_distances(self.start_cell)
 
-    def contains_point(self, point: Sequence[float]) -> bool:
+    def contains_point(self, point: ArrayLike) -> bool:
         """Whether ``point`` [cm] lies inside the box (faces included)."""
         p = np.asarray(point, dtype=np.float64)
         return bool(np.all(p >= self.box_min) and np.all(p <= self.box_max))
 
-    def solid_at(self, point: Sequence[float]) -> Solid | None:
+    def solid_at(self, point: ArrayLike) -> Solid | None:
         """The first solid strictly containing ``point``, if any."""
         p = np.asarray(point, dtype=np.float64)
         for solid in self.solids:
@@ -447,7 +447,7 @@ class Tank:
                 return solid
         return None
 
-    def target_cell(self, point: Sequence[float]) -> tuple[int, int, int]:
+    def target_cell(self, point: ArrayLike) -> tuple[int, int, int]:
         """The cell of a target point, checked to be a free cell reachable from the start.
 
         Raises:
@@ -617,8 +617,8 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
     box = _section(data, "box", {"min", "max"}, src)
     _require(box, ["min", "max"], f"{src}: box")
     lo, hi = (
-        to_vector(box["min"], f"{src}: box.min", limit=MAX_COORD),
-        to_vector(box["max"], f"{src}: box.max", limit=MAX_COORD),
+        cast(Vec3, to_vector(box["min"], f"{src}: box.min", limit=MAX_COORD)),
+        cast(Vec3, to_vector(box["max"], f"{src}: box.max", limit=MAX_COORD)),
     )
     if any(h <= lo_ for lo_, h in zip(lo, hi)):
         raise ConfigError(f"{src}: box: max must exceed min on every axis, got {lo} and {hi}")

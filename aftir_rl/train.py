@@ -28,7 +28,7 @@ import time
 from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -43,6 +43,9 @@ from aftir_rl.config import (
 )
 from aftir_rl.errors import AftirError, CheckpointError, ConfigError
 from aftir_rl.safety import cli
+
+if TYPE_CHECKING:
+    from aftir_rl.envs.tank_grid import TankGridEnv
 
 __all__ = ["main", "train_q_table", "load_q_table_config"]
 
@@ -82,7 +85,9 @@ def _hyperparameter_text(params: dict[str, Any]) -> str:
     return "|param|value|\n|-|-|\n" + rows
 
 
-def _greedy_path_summary(agent: Any, env: Any, target: Sequence[float], max_steps: int) -> dict:
+def _greedy_path_summary(
+    agent: Any, env: Any, target: Sequence[float], max_steps: int
+) -> dict[str, Any]:
     """The greedy path of a trained agent as ``path.json`` holds it, with its BFS optimum."""
     from aftir_rl.agents.q_table import greedy_rollout
 
@@ -173,7 +178,7 @@ def train_q_table(
             raise CheckpointError("--resume continues one run: give at most one --target")
     summaries = []
     for target, env in zip(targets, envs):
-        base = env.unwrapped
+        base = cast("TankGridEnv", env.unwrapped)  # config.env_id is AFTIR-Tank-v0 (checked above)
         if checkpoint is not None:
             agent = QLearning.load(checkpoint, env)
             meta = agent.metadata
@@ -334,6 +339,7 @@ def _log_motion(
         logger.record("eval/tip_error_cm", plan.tip_error_cm)
         logger.record("eval/path_length_cm", plan.tip_path_length_cm)
         logger.record("eval/min_clearance_cm", plan.min_clearance_cm)
+        assert plan.ftl_deviation_cm is not None  # measured with every motion
         logger.record("eval/ftl_deviation_max_cm", plan.ftl_deviation_cm[0])
         m = plan.motion
         shown = sorted(set(np.linspace(0, len(m) - 1, 7).astype(int)))

@@ -36,7 +36,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +45,9 @@ from aftir_rl.atomic import atomic_open
 from aftir_rl.errors import CheckpointError
 from aftir_rl.robot import body_points
 from aftir_rl.tank import Box, Cylinder, Sphere, Tank, load_tank
+
+if TYPE_CHECKING:
+    import plotly.graph_objects as go
 
 __all__ = ["RunData", "read_run", "build_figure", "write_view", "DEFAULT_MAX_FRAMES"]
 
@@ -276,7 +279,11 @@ def read_run(run_dir: str | Path) -> RunData:
 # Tank traces
 
 
-def _box_mesh(lo: Sequence[float], hi: Sequence[float]) -> tuple[NDArray, NDArray]:
+#: A triangle mesh: vertices ``(V, 3)`` [cm] and faces ``(F, 3)`` (vertex indices).
+_Mesh = tuple[NDArray[np.float64], NDArray[np.int64]]
+
+
+def _box_mesh(lo: Sequence[float], hi: Sequence[float]) -> _Mesh:
     """Vertices and triangles of a box."""
     v = np.array(
         [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
@@ -288,7 +295,7 @@ def _box_mesh(lo: Sequence[float], hi: Sequence[float]) -> tuple[NDArray, NDArra
     return v, faces
 
 
-def _cylinder_mesh(c: Cylinder, segments: int = 24) -> tuple[NDArray, NDArray]:
+def _cylinder_mesh(c: Cylinder, segments: int = 24) -> _Mesh:
     k = c.axis
     others = [i for i in range(3) if i != k]
     ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
@@ -307,7 +314,7 @@ def _cylinder_mesh(c: Cylinder, segments: int = 24) -> tuple[NDArray, NDArray]:
     return v, np.vstack([side, caps])
 
 
-def _sphere_mesh(s: Sphere, n_u: int = 16, n_v: int = 9) -> tuple[NDArray, NDArray]:
+def _sphere_mesh(s: Sphere, n_u: int = 16, n_v: int = 9) -> _Mesh:
     u = np.linspace(0, 2 * np.pi, n_u, endpoint=False)
     w = np.linspace(0, np.pi, n_v)
     uu, ww = np.meshgrid(u, w, indexing="ij")
@@ -322,7 +329,7 @@ def _sphere_mesh(s: Sphere, n_u: int = 16, n_v: int = 9) -> tuple[NDArray, NDArr
     return v, np.array(faces)
 
 
-def _mesh_trace(parts: list[tuple[NDArray, NDArray]], name: str, color: str, opacity: float):
+def _mesh_trace(parts: list[_Mesh], name: str, color: str, opacity: float) -> go.Mesh3d:
     import plotly.graph_objects as go
 
     verts, faces, offset = [], [], 0
@@ -351,7 +358,7 @@ def _edges(lo: Sequence[float], hi: Sequence[float]) -> NDArray[np.float64]:
     return out
 
 
-def _line(points: NDArray[np.float64], **kwargs: Any):
+def _line(points: NDArray[np.float64], **kwargs: Any) -> go.Scatter3d:
     import plotly.graph_objects as go
 
     p = np.round(np.asarray(points, dtype=np.float64), 2)

@@ -475,12 +475,12 @@ def greedy_rollout(
     return states, False
 
 
-def _state_to_json(state: tuple) -> list:
+def _state_to_json(state: tuple[Any, ...]) -> list[Any]:
     version, internal, gauss = state
     return [version, list(internal), gauss]
 
 
-def _state_from_json(data: list) -> tuple:
+def _state_from_json(data: list[Any]) -> tuple[Any, ...]:
     if not isinstance(data, list) or len(data) != 3 or not isinstance(data[1], list):
         raise ValueError("not a random generator's state")
     version, internal, gauss = data

@@ -302,9 +302,8 @@ class GoalQLearning:
                     bar.update(len(ended))
                 keep = ep < episodes
                 if not keep.all():
-                    lanes, goal, s, t, ret, ep, eps = (
-                        x[keep] for x in (lanes, goal, s, t, ret, ep, eps)
-                    )
+                    lanes, goal, s, t = lanes[keep], goal[keep], s[keep], t[keep]
+                    ret, ep, eps = ret[keep], ep[keep], eps[keep]
                 if total_eps >= next_log and len(lanes):
                     next_log += log_interval * n_goals
                     self.num_timesteps += steps
@@ -540,7 +539,7 @@ class GoalQLearning:
 
 
 def train_all_targets(
-    tank: str | os.PathLike[str] | Tank | None = None,
+    tank: str | Path | Tank | None = None,
     episodes: int | None = None,
     seed: int | None = 0,
     *,

@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import io
 import math
 import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -366,7 +367,7 @@ def evaluate_policy_on_targets(
 
     """
     env = gym.make(env_id, **(env_kwargs or {}))
-    arm = env.unwrapped
+    arm: Any = env.unwrapped  # an arm env: tip, posture, scene, body(), tank
     rows, smallest, first = [], np.inf, {}
     for i, target in enumerate(targets):
         start = time.perf_counter()
@@ -470,7 +471,7 @@ class AtomicCheckpoint(BaseCallback):
 def save_model(model: BaseAlgorithm, path: Path) -> Path:
     """``model.save`` to a temporary file, then rename."""
     with atomic_open(path, "wb") as fh:
-        model.save(fh)
+        model.save(cast(io.BufferedIOBase, fh))  # a binary file: an io.BufferedWriter
     return path
 
 
@@ -524,7 +525,8 @@ def _pickle_globals(raw: bytes) -> list[tuple[str, str]] | None:
         name = op.name
         if name in ("PUT", "BINPUT", "LONG_BINPUT", "MEMOIZE"):  # the stack is left as it is
             if stack:
-                memo[len(memo) if name == "MEMOIZE" else int(arg)] = stack[-1]
+                # typeshed: arg is Any | None; the PUT and GET opcodes always carry an int
+                memo[len(memo) if name == "MEMOIZE" else int(cast(int, arg))] = stack[-1]
             continue
         if name in ("GLOBAL", "INST"):
             module, _, attr = str(arg).partition(" ")
@@ -546,7 +548,7 @@ def _pickle_globals(raw: bytes) -> list[tuple[str, str]] | None:
             elif isinstance(arg, str) and ("UNICODE" in name or "STRING" in name):
                 stack.append(arg)
             elif name in ("GET", "BINGET", "LONG_BINGET"):
-                stack.append(memo.get(int(arg), unknown))
+                stack.append(memo.get(int(cast(int, arg)), unknown))
             else:
                 stack.append(unknown)
     return found
@@ -639,7 +641,9 @@ def build_model(
         ) from None
 
 
-def _read_archive(path: Path, names: set[str], variables: set[str]) -> tuple[dict, dict, dict]:
+def _read_archive(
+    path: Path, names: set[str], variables: set[str]
+) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
     """``(data, state_dicts, variables)`` of an SB3 ``.zip`` without unpickling anything.
 
     ``data`` is parsed as JSON; SB3's base64 cloudpickle entries in it are never decoded. Tensors
@@ -758,7 +762,7 @@ def load_model(
     for name, tensor in extra.items():
         if tensor is None:
             continue
-        current = model
+        current: Any = model
         for part in name.split("."):
             current = getattr(current, part, None)
         if (not isinstance(tensor, torch.Tensor) or not isinstance(current, torch.Tensor)

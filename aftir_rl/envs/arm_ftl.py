@@ -206,7 +206,7 @@ class TankDistance:
         flat = p.reshape(-1, 3)
         if self.tank.walls:
             near = np.flatnonzero(flat[:, 2] > self._lo[2] - self._panel_r)
-            best = np.full(len(flat), np.inf)
+            best: NDArray[np.float64] = np.full(len(flat), np.inf)
             best[near] = self._solids(flat[near])
             best = best.reshape(p.shape[:-1])
         else:
@@ -599,7 +599,7 @@ class _Setup:
             )
         return t
 
-    def _spaces(self) -> tuple[spaces.Box, spaces.Dict]:
+    def _spaces(self) -> tuple[spaces.Box[np.float32], spaces.Dict]:
         action = spaces.Box(-1.0, 1.0, (3,), np.float32)
         goal = self._goal_space()  # type: ignore[attr-defined]
         obs = spaces.Dict(
@@ -619,7 +619,7 @@ class _Setup:
             "desired_goal": b.target[rows].astype(np.float32),
         }
 
-    def _check_action(self, action: Any, shape: tuple[int, ...]) -> NDArray[np.float64]:
+    def _check_action(self, action: Any, shape: tuple[int, ...] | None) -> NDArray[np.float64]:
         try:
             a = np.asarray(action, dtype=np.float64)
         except (TypeError, ValueError):
@@ -705,7 +705,8 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
                     margin, kappa_step, push_step, start_height, samples_per_section,
                     shaping)  # fmt: skip
         self.arm = self.tank.arm
-        self.action_space, self.observation_space = self._spaces()
+        # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
+        self.action_space, self.observation_space = self._spaces()  # type: ignore[assignment]
         self._tips: list[NDArray[np.float64]] = []
 
     @property
@@ -876,8 +877,8 @@ class ArmFTLVectorEnv(
                 raise TargetError(f"target must be (3,) or ({self.num_envs}, 3), got {t.shape}")
             checked = np.array([self._check_target(r) for r in rows])
             self._targets_option = np.broadcast_to(checked, (self.num_envs, 3)).copy()
-        rows = np.arange(self.num_envs)
-        self.batch.reset_rows(rows, self._new_targets(rows))
+        every = np.arange(self.num_envs)
+        self.batch.reset_rows(every, self._new_targets(every))
         self.steps[:] = 0
         self.prev_done[:] = False
         return self._obs_dict(slice(None)), {"target": self.batch.target.copy()}

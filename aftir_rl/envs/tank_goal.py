@@ -41,7 +41,7 @@ from __future__ import annotations
 import copy
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, SupportsFloat
+from typing import Any, SupportsFloat, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -112,12 +112,13 @@ class TankGoalEnv(TankGridEnv):
         if len(self.goal_cells) == 0:
             raise TargetError(f"tank {loaded.name}: no free cell is reachable from the start")
         #: Flat state index of each of :attr:`goal_cells`.
-        self.goal_states: NDArray[np.int64] = np.ravel_multi_index(
-            tuple(self.goal_cells.T), reach.shape
+        self.goal_states: NDArray[np.int64] = cast(  # numpy types it a scalar (a tuple of Any)
+            NDArray[np.int64], np.ravel_multi_index(tuple(self.goal_cells.T), reach.shape)
         ).astype(np.int64)
         self._fixed_goal = target is not None or target_cell is not None
         if not self._fixed_goal:
-            target_cell = tuple(int(c) for c in self.goal_cells[0])  # replaced at every reset
+            a, b, c = (int(v) for v in self.goal_cells[0])
+            target_cell = (a, b, c)  # replaced at every reset
         super().__init__(loaded, target, target_cell, step_penalty, render_mode)
         self._fixed = (self.target_point.copy(), self.target_cell)
         shape = self.raster.shape

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import operator
+from collections.abc import Sequence
 from enum import IntEnum
 from pathlib import Path
 from typing import Any, SupportsFloat
@@ -78,6 +79,10 @@ class TankGridEnv(gym.Env[int, int]):
     """
 
     metadata = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
+    # gymnasium types a Discrete space as Space[np.int64] while the states here are plain ints,
+    # and TankGoalEnv's observation space is a Dict of cells.
+    observation_space: spaces.Space[Any]
+    action_space: spaces.Space[Any]
 
     def __init__(
         self,
@@ -112,7 +117,7 @@ class TankGridEnv(gym.Env[int, int]):
 
     # ---------------------------------------------------------------- target and model
     def _set_target(
-        self, target: tuple[float, float, float] | None, target_cell: tuple[int, int, int] | None
+        self, target: tuple[float, float, float] | None, target_cell: Sequence[int] | None
     ) -> None:
         if target is not None and target_cell is not None:
             raise TargetError("give either target (a point in cm) or target_cell, not both")

@@ -152,6 +152,7 @@ def plan_motion(
     h0 = min(float(tank.start_point[2]) if start_height is None else float(start_height), 20.0)
     reasons: list[str] = []
     best: MotionPlan | None = None
+    best_deviation = float("inf")  # the largest FTL deviation of best [cm]
     for settings in SEARCH_VARIANTS:
         try:
             found = plan_route(tank, target, cells, replace(settings, margin=margin), arm)
@@ -166,6 +167,7 @@ def plan_motion(
             reasons.append(f"a deployment kept only {clearance:.2f} cm")
             continue
         tips = motion.tips()
+        deviation = ftl_deviation(motion)
         plan = MotionPlan(
             target=target,
             margin_cm=margin,
@@ -174,16 +176,16 @@ def plan_motion(
             seconds=0.0,
             motion=motion,
             min_clearance_cm=clearance,
-            ftl_deviation_cm=ftl_deviation(motion),
+            ftl_deviation_cm=deviation,
             tip_error_cm=float(np.linalg.norm(tips[-1] - target)),
             tip_path_length_cm=float(np.linalg.norm(np.diff(tips, axis=0), axis=1).sum()),
             corridor=found.corridor,
         )
         if cells is not None and tank.cell_size is not None:
             plan.waypoint_index, plan.route_departure_cm = _waypoints(tank, cells, tips)
-        if best is None or plan.ftl_deviation_cm[0] < best.ftl_deviation_cm[0]:
-            best = plan
-        if best.ftl_deviation_cm[0] <= DEVIATION_GOAL:
+        if best is None or deviation[0] < best_deviation:
+            best, best_deviation = plan, deviation[0]
+        if best_deviation <= DEVIATION_GOAL:
             break
     if best is not None:
         best.seconds = time.perf_counter() - start

@@ -362,7 +362,7 @@ def _push_away(
         theta, phi = kappa_to_angles(kap)
         if np.linalg.norm(target - tip_position(lead, theta, phi, l)) > 1e-6 or lead < -25.0:
             break
-        c = route_clearance(tank, arm, Route(lead, kap, l))
+        c = route_clearance(tank, arm, Route(float(lead), kap, l))
         if c <= best_c + 1e-3:
             break
         best_x, best_c = x.copy(), c
@@ -552,26 +552,26 @@ def _beam(
                 (dist > band[0] * l) & (dist < band[1] * l) & (togo < 2.2 * l) & fits
                 & (depth + 1 + extra + np.ceil(lead / l - 1e-9) <= arm.max_sections)
             )  # fmt: skip
-            idx = list(near[np.argsort(togo[near])][: settings.closings])
-            if not idx:
+            picks = list(near[np.argsort(togo[near])][: settings.closings])
+            if not picks:
                 continue
             starts = np.concatenate(
-                [kap_hist[idx], np.repeat(kap_hist[idx][:, -1:], extra, axis=1)], axis=1
+                [kap_hist[picks], np.repeat(kap_hist[picks][:, -1:], extra, axis=1)], axis=1
             )
             # the lead of a route the beam has threaded through the tank stays (moving it shifts
             # the whole route along the panel's axis), unless lead_shift allows a little
             window = (
                 (
-                    np.maximum(lead[idx] - settings.lead_shift, -25.0),
-                    lead[idx] + settings.lead_shift,
+                    np.maximum(lead[picks] - settings.lead_shift, -25.0),
+                    lead[picks] + settings.lead_shift,
                 )
                 if settings.lead_shift > 0
                 else None
             )
             closed = _close_batch(
-                lead[idx], starts, target, l, arm.theta_max, free=extra + 1, lead_range=window
+                lead[picks], starts, target, l, arm.theta_max, free=extra + 1, lead_range=window
             )
-            for i, out in zip(idx, closed):
+            for i, out in zip(picks, closed):
                 if out is not None:
                     best = _keep(best, out[1], out[0], float(cost[i]), extra)
     if best is None:

@@ -435,12 +435,12 @@ def obstacle_clipping(
             f"every θ and φ searches at most {_MAX_SECTIONS} sections (with more, even its "
             f"coarsest grid, 3^{2 * (_MAX_SECTIONS + 1)} combinations a loop, is too large)"
         )
-    zones = ""
+    keeps_out = ""
     if len(r_oba):
-        zones = f" that keeps out of the obstacle zones (r_oba = {_radii(r_oba)} cm) and"
+        keeps_out = f" that keeps out of the obstacle zones (r_oba = {_radii(r_oba)} cm) and"
     raise PlanningError(
         f"Cannot reach the target: region clipping found no posture of {n_min} to {n_max} "
-        f"sections{zones} reaches ({where}) cm"
+        f"sections{keeps_out} reaches ({where}) cm"
     )
 
 

@@ -49,6 +49,7 @@ from aftir_rl.collision import CollisionScene, point_clearance, points_clear
 from aftir_rl.errors import PlanningError
 from aftir_rl.posture.planar import planar_points, to_frame
 from aftir_rl.posture.search import (
+    Feasible,
     PlanarProblem,
     SearchResult,
     blind_search,
@@ -345,11 +346,13 @@ class Planner:
             )
         return t
 
-    def _feasible(self, frame: _Frame):  # noqa: ANN202
+    def _feasible(self, frame: _Frame) -> Feasible:
         l, k, tank = self.arm.section_length, self._check_points, self.tank
         limit = self.arm.radius + self.margin
 
-        def check(th: NDArray[np.float64], d: NDArray[np.float64], points: int, clear: float):
+        def check(
+            th: NDArray[np.float64], d: NDArray[np.float64], points: int, clear: float
+        ) -> NDArray[np.bool_]:
             rho, z = planar_points(th, l, points)
             z = z + d[:, None]
             ok = np.ones(len(th), dtype=bool)
@@ -389,12 +392,13 @@ class Planner:
             # the body by less than the pre-filter's margin (postures hugging the reference line
             # are often that close to an edge).
             zone = min(self.zone, self.tolerance) if refine_tip else self.zone
+            feasible = self._feasible(frame)
             problem = PlanarProblem(
                 rho, z, n, self.arm.section_length, self.arm.theta_max, zone=zone,
                 end_heading=heading,
                 dis_range=dis_range or (-n * self.arm.section_length, 0.0),
                 dis_limits=dis_limits,
-                feasible=self._feasible(frame),
+                feasible=feasible,
             )  # fmt: skip
             if search == "blind":
                 size = len(np.arange(-self.arm.theta_max, self.arm.theta_max + 1e-12, self.dtheta))
@@ -412,13 +416,14 @@ class Planner:
                 result = region_clipping(problem, num=num, dtheta=self.dtheta)
             if result is None:
                 continue
+            dis: float | None
             for theta in [result.theta, *result.candidates]:
                 if refine_tip:
                     fixed = refine(problem, theta)
                     if fixed is None:
                         continue
                     theta, dis = fixed
-                    if not problem.feasible(theta[None], np.array([dis]))[0]:
+                    if not feasible(theta[None], np.array([dis]))[0]:
                         continue
                 else:
                     dis = result.dis if theta is result.theta else None

@@ -39,9 +39,9 @@ their length, which is the same arm: the linear module pushes a new section out.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -205,7 +205,7 @@ def continue_posture(
     goal = np.asarray(target, dtype=np.float64)
     x = _solve_tip(planner, start.to_vector(), goal, tolerance * 0.1, iterations, damping)
     posture = Posture.from_vector(x)
-    if np.linalg.norm(posture.tip(planner.arm.section_length) - target) >= tolerance:
+    if np.linalg.norm(posture.tip(planner.arm.section_length) - goal) >= tolerance:
         return None
     return posture
 
@@ -293,7 +293,7 @@ def repair_posture(
 
 def plan_trajectory(
     planner: Planner,
-    points: Sequence[ArrayLike],
+    points: Iterable[Iterable[float]],
     target: ArrayLike,
     interpolation_steps: int = 4,
     bridge_seconds: float = DEFAULT_BRIDGE_SECONDS,
@@ -312,7 +312,8 @@ def plan_trajectory(
         seed: OMPL's seed for the bridges (OMPL takes only the first seed of a process).
 
     """
-    waypoints = [list(map(float, p)) for p in points] + [list(map(float, target))]
+    end = cast("Iterable[float]", target)  # a point (x, y, z), which ArrayLike does not say
+    waypoints = [list(map(float, p)) for p in points] + [list(map(float, end))]
     planned: list[PlannedPosture | None] = []
     failures: list[tuple[int, list[float], str]] = []
     for i, point in enumerate(waypoints):
@@ -340,7 +341,9 @@ def plan_trajectory(
             via = chain.vias.get(previous, [])
             hit = chain.blocked.get(previous)
             if hit is not None:
-                via = _bridge_move(planner, chain.postures[previous], via, posture, previous,
+                before = chain.postures[previous]
+                assert before is not None  # previous is the last waypoint with a posture
+                via = _bridge_move(planner, before, via, posture, previous,
                                    hit, bridge_seconds, seed, out)  # fmt: skip
             out.moves.append((previous, via))
         out.postures.append(planner.checked(posture, points_arr[i], chain.methods[i]))
@@ -384,7 +387,9 @@ def _build_chain(
     prev: int | None = None
     for i in range(len(points)):
         if prev is not None:
-            chosen, via = _continue(planner, chain.postures[prev], points[i], steps, insert=insert)
+            before = chain.postures[prev]
+            assert before is not None  # prev is the last waypoint with a posture
+            chosen, via = _continue(planner, before, points[i], steps, insert=insert)
             if chosen is not None:
                 chain.postures[i], chain.vias[prev], prev = chosen, via, i
                 continue
@@ -392,13 +397,15 @@ def _build_chain(
         if own is None:
             continue
         chain.methods[i] = own.method
-        chain.postures[i] = pad_sections(own.posture, n, l)
+        chain.postures[i] = posture = pad_sections(own.posture, n, l)
         if prev is not None:
             # Continued moves were checked sub-step by sub-step; a fallback's move is checked here.
+            before = chain.postures[prev]
+            assert before is not None  # prev is the last waypoint with a posture
             chain.fallbacks.append(i)
-            chain.postures[i] = align(chain.postures[i], chain.postures[prev])
+            chain.postures[i] = posture = align(posture, before)
             chain.vias[prev] = []
-            dense = densify([chain.postures[prev], chain.postures[i]])
+            dense = densify([before, posture])
             hit = first_collision(planner.scene, dense)
             if hit is not None:
                 chain.blocked[prev] = hit / (len(dense) - 1)
