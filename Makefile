@@ -27,6 +27,7 @@ test-all: $(STAMP)
 lint: $(STAMP)
 	$(PY) -m ruff check aftir_rl tests benchmarks
 	$(PY) -m ruff format --check aftir_rl tests benchmarks
+	$(PY) -m mypy
 
 bench: $(STAMP)  ## every benchmark table of the README (about 20 minutes)
 	$(PY) benchmarks/bench_tank.py

@@ -57,7 +57,7 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -66,6 +66,10 @@ from aftir_rl.atomic import write_json
 from aftir_rl.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.errors import AftirError, PlanningError
 from aftir_rl.safety import cli
+
+if TYPE_CHECKING:
+    from aftir_rl.envs.arm import ArmEnv
+    from aftir_rl.envs.tank_grid import TankGridEnv
 
 __all__ = [
     "Outcome",
@@ -220,7 +224,9 @@ def _learned_cells(planner: Any, target: ArrayLike, seed: int) -> list[Any] | Ou
     config = _q_table_config()
     start = time.perf_counter()
     try:
-        env = gym.make("AFTIR-Tank-v0", tank=planner.tank, target=tuple(target))
+        env = gym.make(
+            "AFTIR-Tank-v0", tank=planner.tank, target=tuple(np.asarray(target, dtype=float))
+        )
     except AftirError as exc:
         return Outcome(False, ran=False, note=_short(exc))
     agent = QLearning.from_config(env, config, seed=seed)
@@ -228,7 +234,7 @@ def _learned_cells(planner: Any, target: ArrayLike, seed: int) -> list[Any] | Ou
     states, reached = greedy_rollout(agent, env)
     if not reached:
         return Outcome(False, seconds=time.perf_counter() - start, note="greedy path fails")
-    raster = env.unwrapped.raster
+    raster = cast("TankGridEnv", env.unwrapped).raster
     return [raster.cell(s) for s in states]
 
 
@@ -270,6 +276,8 @@ def q_table_ftl_outcome(
     seconds = time.perf_counter() - start
     if not plan.complete:
         return Outcome(False, seconds=seconds, note=_short(PlanningError(plan.reason or "")))
+    assert plan.tip_error_cm is not None and plan.min_clearance_cm is not None
+    assert plan.tip_path_length_cm is not None and plan.ftl_deviation_cm is not None
     return Outcome(
         True, plan.tip_error_cm, plan.min_clearance_cm, plan.tip_path_length_cm, seconds,
         deviation_cm=plan.ftl_deviation_cm[0],
@@ -323,7 +331,7 @@ def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray
     # config.json checked key by key, the model loaded without unpickling (agents.sb3.load_run)
     algo, run_config, env_id, model = load_run(run_dir)
     config = {"env_id": run_config.env_id}
-    lo, hi = gym.make(env_id).unwrapped.target_region
+    lo, hi = cast("ArmEnv", gym.make(env_id).unwrapped).target_region
     rows = []
     for name in ("seed002", "bay1", "bay2"):
         targets = [t for tank, t in sets.get(name, []) if tank == "b737_center"]
@@ -397,18 +405,18 @@ def run_benchmark(
     task (:func:`aftir_rl.distributed.benchmark_on_ray`; ``workers``: CPUs of a local Ray): the
     same rows, and a task that fails is an outcome holding its error.
     """
-    methods = methods or METHODS_FOR
+    table: dict[str, Sequence[str]] = dict(methods or METHODS_FOR)
     if ray is not None:
         from aftir_rl.distributed import benchmark_on_ray, ray_session
 
         options = {"seed": seed, "margin": margin, "bridge_seconds": bridge_seconds,
                    "rrt_seconds": rrt_seconds}  # fmt: skip
         with ray_session(ray, workers):
-            return benchmark_on_ray(sets, methods, options, models, progress)
+            return benchmark_on_ray(sets, table, options, models, progress)
     planners = _Planners()
     rows = []
     for name, items in sets.items():
-        for method in methods.get(name, ()):
+        for method in table.get(name, ()):
             row = Row(name, method)
             for tank, target in items:
                 planner = planners(tank)

@@ -21,6 +21,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("aftir_rl.evaluate", "one table for trained runs of every kind"),
     "bench": ("aftir_rl.bench", "every method on the same fixed target sets"),
     "view": ("aftir_rl.cli_view", "an interactive 3D HTML page of one or more runs"),
+    "tune": ("aftir_rl.tune", "a hyperparameter sweep on Ray Tune (needs aftir_rl[ray])"),
 }
 
 

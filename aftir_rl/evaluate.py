@@ -20,13 +20,16 @@ import time
 from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from aftir_rl.config import DEFAULT_MARGIN
 from aftir_rl.errors import AftirError, CheckpointError, ConfigError
 from aftir_rl.safety import check_writable_dir, cli
+
+if TYPE_CHECKING:
+    from aftir_rl.envs.tank_grid import TankGridEnv
 
 __all__ = ["main", "evaluate_run"]
 
@@ -49,13 +52,14 @@ def _q_table_run(
     agent = QLearning.load(run_dir / "q_table.npz", env)
     start = time.perf_counter()
     states, reached = greedy_rollout(agent, env)
-    raster = env.unwrapped.raster
+    grid = cast("TankGridEnv", env.unwrapped)
+    raster = grid.raster
     points = [raster.cell_center(raster.cell(s)) for s in states]
     if motion == "ftl":
         from aftir_rl.motion.plan import plan_motion
 
         cells = [raster.cell(s) for s in states]
-        plan = plan_motion(env.unwrapped.tank, target, cells, margin=margin)
+        plan = plan_motion(grid.tank, target, cells, margin=margin)
         nan = float("nan")
         return {
             "agent": "q_table + FTL motion",
@@ -67,7 +71,7 @@ def _q_table_run(
             "seconds_per_target": time.perf_counter() - start,
             "note": "" if plan.complete else (plan.reason or "")[:80],
         }
-    planner = Planner(env.unwrapped.tank)
+    planner = Planner(grid.tank)
     trajectory = plan_trajectory(planner, points, target)
     seconds = time.perf_counter() - start
     m = trajectory.measures(planner.scene)
@@ -136,15 +140,32 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "postures per cell")  # fmt: skip
     parser.add_argument("--margin", type=float, default=DEFAULT_MARGIN, metavar="CM",
                         help=f"clearance the arm keeps ({DEFAULT_MARGIN:g} cm)")  # fmt: skip
+    parser.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="evaluate the runs as Ray tasks: local (a Ray on this machine), auto or HOST:PORT (a "
+        "cluster started with ray start); needs aftir_rl[ray]",
+    )
+    parser.add_argument(
+        "--workers", type=int, metavar="N", help="CPUs of --ray local (default: every core)"
+    )
     args = parser.parse_args(argv)
     targets = [np.array(t) for t in args.target] if args.target else None
     try:
         if not 0 <= args.margin <= 20:
             raise ConfigError(f"--margin must be between 0 and 20 cm, got {args.margin}")
         check_writable_dir(args.logdir)
-        results = {
-            Path(r).name: evaluate_run(r, targets, args.motion, args.margin) for r in args.runs
-        }
+        if args.ray is not None or args.workers is not None:
+            from aftir_rl.distributed import check_ray_options, evaluate_on_ray, ray_session
+
+            check_ray_options(args.ray, args.workers)
+            with ray_session(args.ray, args.workers):
+                rows = evaluate_on_ray(args.runs, targets, args.motion, args.margin)
+            results = {Path(r).name: row for r, row in zip(args.runs, rows)}
+        else:
+            results = {
+                Path(r).name: evaluate_run(r, targets, args.motion, args.margin) for r in args.runs
+            }
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -342,6 +342,19 @@ def evaluation_targets(
     return targets
 
 
+def _clearance(arm: Any) -> float:
+    """The arm's surface clearance [cm].
+
+    python-fcl where the env has a collision scene, else the numpy signed distance of its
+    backbone samples (the FTL env's own contact test).
+    """
+    if hasattr(arm, "scene"):
+        return float(arm.scene.check(arm.posture).clearance_cm)
+    from aftir_rl.collision import point_clearance
+
+    return float(point_clearance(arm.tank, arm.body()).min()) - arm.arm.radius
+
+
 def evaluate_policy_on_targets(
     model: Any,
     env_id: str,
@@ -378,7 +391,7 @@ def evaluate_policy_on_targets(
             obs, _, terminated, truncated, info = env.step(action)
             tips.append(arm.tip)
             if clearance:
-                smallest = min(smallest, arm.scene.check(arm.posture).clearance_cm)
+                smallest = min(smallest, _clearance(arm))
             done = terminated or truncated
         path = np.array(tips)
         rows.append((
