@@ -235,9 +235,10 @@ def rrt_connect(
         start: the start posture; ``goal`` must have as many sections.
         goal: the goal posture (aligned to ``start`` here, see :func:`align`).
         time_limit: planning time budget [s].
-        seed: OMPL's random seed. OMPL seeds its generators once per process, so this takes
-            effect at the first call only (later seeds are ignored); a fresh process making the
-            same calls repeats its results.
+        seed: OMPL's random seed, set at the first call of the process only: each generator
+            OMPL creates later draws its seed from that sequence, so a fresh process making the
+            same calls repeats its results (``ou.RNG.setSeed`` again restarts the sequence, as
+            ``bench`` does per item, although OMPL logs an error about it).
         simplify: shortcut the path with OMPL's simplifier.
         resolution: OMPL's edge-check resolution, a fraction of the space's extent.
         plane: plan in this one bending plane [rad]: every ``φ_i`` is held at ``plane`` and
