@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import json
 import pickle
 from collections import deque
 
@@ -334,6 +335,23 @@ def test_bad_checkpoints(tmp_path):
     path = GoalQLearning(env).save(tmp_path / "q.npz")
     with pytest.raises(CheckpointError, match="tank it was trained on"):
         GoalQLearning.load(path, TankGoalEnv(tank=str(other)))
+    # Metadata from a file is checked key by key before it reaches the constructor.
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in ("q_table", "goal_cells")}
+        meta = json.loads(str(data["metadata"]))
+    for change, message in (
+        ({"evil": 1}, "hyperparameters must hold exactly"),
+        ({"max_episode_steps": 10**12}, "max_episode_steps"),
+        ({"gamma": 7}, "gamma"),
+    ):
+        hostile = {**meta, "hyperparameters": {**meta["hyperparameters"], **change}}
+        tampered = tmp_path / "tampered.npz"
+        np.savez(tampered, **arrays, metadata=np.array(json.dumps(hostile)))
+        with pytest.raises(CheckpointError, match=message):
+            GoalQLearning.load(tampered, env)
+    np.savez(tampered, **arrays, metadata=np.array(json.dumps({**meta, "rng_state": [1, 2]})))
+    with pytest.raises(CheckpointError, match="rng_state"):
+        GoalQLearning.load(tampered, env)
 
 
 def test_needs_the_goal_env():

@@ -29,7 +29,7 @@ import random
 import time
 import zipfile
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -315,31 +315,8 @@ class QLearning:
         """
         path = Path(path)
         hint = "retrain with `python -m aftir_rl.train q_table` or pass the right file"
-        try:
-            with zipfile.ZipFile(path) as archive:  # refuse a zip bomb before reading it
-                if sum(i.file_size for i in archive.infolist()) > MAX_CHECKPOINT_BYTES:
-                    raise CheckpointError(f"{path}: larger than a Q-table checkpoint; {hint}")
-            with np.load(path, allow_pickle=False) as data:
-                q_table = np.array(data["q_table"], dtype=np.float64)
-                meta = json.loads(str(data["metadata"]))
-        except FileNotFoundError:
-            raise CheckpointError(f"{path}: no such Q-table file; {hint}") from None
-        except (
-            OSError,
-            ValueError,
-            TypeError,
-            KeyError,
-            zipfile.BadZipFile,
-            EOFError,
-            RecursionError,
-        ) as exc:
-            if isinstance(exc, CheckpointError):
-                raise
-            raise CheckpointError(
-                f"{path}: not a readable Q-table checkpoint ({shorten(str(exc), 160)}); {hint}"
-            ) from None
-        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-            raise CheckpointError(f"{path}: not an aftir_rl Q-table checkpoint; {hint}")
+        arrays, meta = read_npz_checkpoint(path, ("q_table",), FORMAT, "Q-table", hint)
+        q_table = np.asarray(arrays["q_table"], dtype=np.float64)
         if q_table.ndim != 2 or not np.all(np.isfinite(q_table)):
             raise CheckpointError(
                 f"{path}: the Q-table is malformed (shape {q_table.shape}); {hint}"
@@ -389,6 +366,68 @@ def _number(value: Any, lo: float, hi: float, where: str, integer: bool = False)
         raise CheckpointError(f"{where}: expected {kind} from {lo:g} to {hi:g}, got {brief(value)}")
 
 
+def read_npz_checkpoint(
+    path: Path, names: Sequence[str], fmt: str, what: str, hint: str
+) -> tuple[dict[str, NDArray[Any]], dict[str, Any]]:
+    """The arrays ``names`` and the JSON metadata of an ``.npz`` checkpoint, read safely.
+
+    Nothing is unpickled (``allow_pickle=False``), an archive that would expand beyond
+    :data:`MAX_CHECKPOINT_BYTES` is refused before reading, and the metadata must be a mapping
+    whose ``format`` is ``fmt``.
+
+    Raises:
+        CheckpointError: missing, oversized, corrupt or of another format (one line, ``hint``).
+
+    """
+    try:
+        with zipfile.ZipFile(path) as archive:  # refuse a zip bomb before reading it
+            if sum(i.file_size for i in archive.infolist()) > MAX_CHECKPOINT_BYTES:
+                raise CheckpointError(f"{path}: larger than a {what} checkpoint; {hint}")
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {name: np.array(data[name]) for name in names}
+            meta = json.loads(str(data["metadata"]))
+    except FileNotFoundError:
+        raise CheckpointError(f"{path}: no such {what} file; {hint}") from None
+    except (
+        OSError, ValueError, TypeError, KeyError, zipfile.BadZipFile, EOFError, RecursionError,
+    ) as exc:  # fmt: skip
+        if isinstance(exc, CheckpointError):
+            raise
+        raise CheckpointError(
+            f"{path}: not a readable {what} checkpoint ({shorten(str(exc), 160)}); {hint}"
+        ) from None
+    if not isinstance(meta, dict) or meta.get("format") != fmt:
+        raise CheckpointError(f"{path}: not an aftir_rl {what} checkpoint; {hint}")
+    return arrays, meta
+
+
+def check_hyperparameters(
+    meta: dict[str, Any], where: str, integers: dict[str, tuple[int, int]] | None = None
+) -> None:
+    """Check a checkpoint's ``hyperparameters`` (exactly the constructor's keywords) and counters.
+
+    ``integers`` adds integer keywords with their bounds (e.g. the goal-conditioned agent's
+    ``max_episode_steps``), so that loading never passes an unknown or unbounded keyword.
+
+    Raises:
+        CheckpointError: a missing, unknown or out-of-range value.
+
+    """
+    integers = integers or {}
+    keys = [*_HYPERPARAMETERS, *integers, "seed"]
+    hyper = meta.get("hyperparameters")
+    if not isinstance(hyper, dict) or set(hyper) != set(keys):
+        raise CheckpointError(f"{where}: hyperparameters must hold exactly {', '.join(keys)}")
+    for key, (lo, hi) in _HYPERPARAMETERS.items():
+        _number(hyper[key], lo, hi, f"{where}: hyperparameters.{key}")
+    for key, (ilo, ihi) in integers.items():
+        _number(hyper[key], ilo, ihi, f"{where}: hyperparameters.{key}", integer=True)
+    if hyper["seed"] is not None:
+        _number(hyper["seed"], 0, 2**63, f"{where}: hyperparameters.seed", integer=True)
+    for key in ("episodes_done", "num_timesteps"):
+        _number(meta.get(key, 0), 0, 10**15, f"{where}: {key}", integer=True)
+
+
 def _check_metadata(meta: dict[str, Any], where: str) -> None:
     """Check every key :meth:`QLearning.load` and the command lines read from a checkpoint.
 
@@ -397,17 +436,7 @@ def _check_metadata(meta: dict[str, Any], where: str) -> None:
             grid world (nothing is ever imported from a checkpoint).
 
     """
-    hyper = meta.get("hyperparameters")
-    if not isinstance(hyper, dict) or set(hyper) != {*_HYPERPARAMETERS, "seed"}:
-        raise CheckpointError(
-            f"{where}: hyperparameters must hold exactly {', '.join([*_HYPERPARAMETERS, 'seed'])}"
-        )
-    for key, (lo, hi) in _HYPERPARAMETERS.items():
-        _number(hyper[key], lo, hi, f"{where}: hyperparameters.{key}")
-    if hyper["seed"] is not None:
-        _number(hyper["seed"], 0, 2**63, f"{where}: hyperparameters.seed", integer=True)
-    for key in ("episodes_done", "num_timesteps"):
-        _number(meta.get(key, 0), 0, 10**15, f"{where}: {key}", integer=True)
+    check_hyperparameters(meta, where)
     if "rng_state" in meta:
         try:
             random.Random().setstate(_state_from_json(meta["rng_state"]))

@@ -50,7 +50,6 @@ from __future__ import annotations
 import json
 import os
 import time
-import zipfile
 from collections import deque
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -60,7 +59,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.agents.q_table import QLearningConfig
+from aftir_rl.agents.q_table import QLearningConfig, check_hyperparameters, read_npz_checkpoint
 from aftir_rl.atomic import atomic_open
 from aftir_rl.envs.tank_goal import TankGoalEnv
 from aftir_rl.envs.tank_grid import OBSTACLE_REWARD, TARGET_REWARD
@@ -489,19 +488,21 @@ class GoalQLearning:
         """
         path = Path(path)
         hint = "retrain with aftir_rl.agents.train_all_targets or pass the right file"
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                q_table = np.array(data["q_table"], dtype=np.float64)
-                goal_cells = np.array(data["goal_cells"], dtype=np.int64)
-                meta = json.loads(str(data["metadata"]))
-        except FileNotFoundError:
-            raise CheckpointError(f"{path}: no such goal Q-table file; {hint}") from None
-        except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as exc:
-            raise CheckpointError(
-                f"{path}: not a readable goal Q-table checkpoint ({exc}); {hint}"
-            ) from None
-        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-            raise CheckpointError(f"{path}: not an aftir_rl goal Q-table checkpoint; {hint}")
+        arrays, meta = read_npz_checkpoint(
+            path, ("q_table", "goal_cells"), FORMAT, "goal Q-table", hint
+        )
+        q_table = np.asarray(arrays["q_table"], dtype=np.float64)
+        goal_cells = np.asarray(arrays["goal_cells"])
+        if not np.issubdtype(goal_cells.dtype, np.integer):
+            raise CheckpointError(f"{path}: goal_cells must be integers; {hint}")
+        goal_cells = goal_cells.astype(np.int64)
+        where = f"{path}: metadata"
+        check_hyperparameters(meta, where, {"max_episode_steps": (1, 1_000_000)})
+        if "rng_state" in meta:
+            try:
+                np.random.default_rng().bit_generator.state = meta["rng_state"]
+            except (TypeError, ValueError, KeyError, OverflowError):
+                raise CheckpointError(f"{where}: rng_state is not a generator's state") from None
         if (
             q_table.ndim != 3
             or goal_cells.shape != (q_table.shape[1], 3)
