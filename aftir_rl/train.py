@@ -445,6 +445,7 @@ def train_sb3(
         newest_model,
         save_model,
     )  # fmt: skip
+    from aftir_rl.agents.vec_adapter import make_batched_vec_env
     from aftir_rl.safety import check_writable_dir
 
     bare = _check_env_id(
@@ -461,8 +462,11 @@ def train_sb3(
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
     try:
-        venv = make_vec_env(env_id, n_envs=config.n_envs, seed=seed, vec_env_cls=vec_cls,
-                            env_kwargs=config.env_kwargs)  # fmt: skip
+        # a batched env (one numpy pass for all rows) when the env has one, else copies
+        venv = make_batched_vec_env(env_id, config.n_envs, seed, config.env_kwargs)
+        if venv is None:
+            venv = make_vec_env(env_id, n_envs=config.n_envs, seed=seed, vec_env_cls=vec_cls,
+                                env_kwargs=config.env_kwargs)  # fmt: skip
     finally:
         if main_thread:
             signal.signal(signal.SIGINT, previous)

@@ -57,6 +57,7 @@ single env seeded ``seed + i`` under the same actions.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, SupportsFloat
@@ -70,6 +71,7 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.collision import point_clearance
+from aftir_rl.envs.ftl_batch import GRID_SPACING, ClearanceGrid, RasterGuide, draw_targets
 from aftir_rl.errors import AftirError, ConfigError, InvalidActionError, TargetError
 from aftir_rl.motion.ftl import kappa_to_angles
 from aftir_rl.robot import Posture, body_points
@@ -225,6 +227,30 @@ class TankDistance:
         return best
 
 
+_GRIDS: weakref.WeakKeyDictionary[Tank, ClearanceGrid] = weakref.WeakKeyDictionary()
+
+
+def clearance_grid(tank: Tank, distance: TankDistance) -> ClearanceGrid:
+    """The :class:`ClearanceGrid` of a tank, built once per tank.
+
+    The grids cover only where the signed distance is 1-Lipschitz, as their bound needs: the
+    tank's box grown by 10 cm sideways and above (not below the floor, where the distance jumps
+    at the guide's wall), and a column around the guide's axis below the floor, narrow enough
+    that no node or point of it reaches the wall, down to the deepest base of the longest arm.
+    Everything else is computed exactly.
+    """
+    grid = _GRIDS.get(tank)
+    if grid is None:
+        lo, hi = np.asarray(tank.box_min, float) - 10.0, np.asarray(tank.box_max, float) + 10.0
+        lo[2] = tank.box_min[2]
+        c, r = np.asarray(tank.panel.center, float), float(tank.panel.radius)
+        half = max((r - 2.0 * GRID_SPACING) / math.sqrt(2.0), 0.0)
+        depth = tank.arm.max_sections * tank.arm.section_length + 10.0
+        column = (c - [half, half, depth], c + [half, half, 0.0])
+        grid = _GRIDS[tank] = ClearanceGrid(distance, [(lo, hi), column])
+    return grid
+
+
 _DETOUR_CACHE: dict[int, NDArray[np.int32]] = {}
 
 
@@ -291,6 +317,7 @@ class FTLBatch:
         margin: clearance the arm's surface keeps; less is a contact [cm].
         success_tolerance: tip-to-target distance of a success [cm].
         shaping: whether the raster-detour potential term is in the reward.
+        guide: whether the observation holds the goal-dependent guide (see :class:`ArmFTLEnv`).
 
     """
 
@@ -306,6 +333,7 @@ class FTLBatch:
         margin: float,
         success_tolerance: float,
         shaping: bool,
+        guide: bool = False,
     ) -> None:
         self.tank, self.arm = tank, tank.arm
         self.n, self.b, self.k_samples = int(n_sections), int(batch), int(samples_per_section)
@@ -316,11 +344,15 @@ class FTLBatch:
         self.s_max = self.n * self.l
         self.detour = raster_detour_table(tank) if shaping else None
         self.distance = TankDistance(tank)
+        self.grid = clearance_grid(tank, self.distance)
+        self._deep = tank.box_min[2] - tank.panel.radius - 1.0
         self.kappa = np.zeros((self.b, self.n, 2))
         self.k = np.zeros(self.b, dtype=np.int64)
         self.s = np.full(self.b, self.start_height)
         self.target = np.zeros((self.b, 3))
         self.obs_size = 14 + 3 * self.n + (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)
+        self.guide = RasterGuide(tank) if guide else None
+        self.obs_size += 7 if guide else 0
         self.refresh()
 
     # -- geometry
@@ -340,13 +372,15 @@ class FTLBatch:
             [heading[:, None, :], np.broadcast_to(_RAY_AXES, (self.b,) + _RAY_AXES.shape)], 1
         )
         rays = tip[:, None, None, :] + axes[:, :, None, :] * np.asarray(RAY_DISTANCES)[:, None]
-        probe = np.concatenate([pts, rays.reshape(self.b, -1, 3)], axis=1)
-        clear = self.distance(probe)
-        npts = pts.shape[1]
         self.theta, self.phi, self.dis = theta, phi, dis
         self.points, self.tip, self.heading = pts, tip, heading
-        self.body_clearance = clear[:, :npts].min(axis=1) - self.arm.radius  # surface [cm]
-        self.ray_clearance = clear[:, npts:]
+        # Below the floor the body is straight on the guide's axis (the route starts at the
+        # floor), where the distance does not change with depth: the base stands for every
+        # sample deeper than the opening's rim can reach.
+        use = pts[..., 2] > self._deep
+        use[:, 0] = True
+        self.body_clearance = self.grid.row_min(pts, use) - self.arm.radius  # surface [cm]
+        self.ray_clearance = self.grid.approx(rays.reshape(self.b, -1, 3))
         self.contact = self.body_clearance < self.margin
 
     def observation(self) -> NDArray[np.float32]:
@@ -365,6 +399,9 @@ class FTLBatch:
             np.clip(self.ray_clearance / _CLEAR_SCALE, -1.0, 1.0),
             self.points[:, self.k_samples :: self.k_samples, 2][:, -3:] / 100.0,
         ]
+        if self.guide is not None:
+            to_go, direction = self.guide(self.tip, self.target)
+            parts += [(to_go / 100.0)[:, None], direction, (self.target - self.tip) / 100.0]
         return np.concatenate(parts, axis=1).astype(np.float32)
 
     # -- dynamics
@@ -497,24 +534,6 @@ class _GoalReward:
         return np.clip(points, lo, hi).astype(np.float32)
 
 
-def _draw_target(
-    rng: np.random.Generator,
-    distance: TankDistance,
-    region: tuple[NDArray[np.float64], NDArray[np.float64]],
-    clearance: float,
-    start: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """A point of ``region`` at least ``clearance`` [cm] from every surface, 20 cm from start."""
-    lo, hi = region
-    for _ in range(200):
-        cand = rng.uniform(lo, hi, (64, 3))
-        ok = distance(cand) >= clearance
-        ok &= np.linalg.norm(cand - start, axis=1) >= 20.0
-        if ok.any():
-            return cand[int(np.argmax(ok))]
-    raise TargetError(f"no free point {clearance:g} cm from every surface in the target region")
-
-
 def _check_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
     options = dict(options or {})
     unknown = sorted(set(options) - {"target"})
@@ -541,6 +560,7 @@ class _Setup:
         start_height: float,
         samples_per_section: int,
         shaping: bool,
+        guide: bool = False,
     ) -> None:
         self.tank = load_tank(tank)
         arm = self.tank.arm
@@ -562,8 +582,10 @@ class _Setup:
         self.region = self._bay_region(bay)
         self.bay = bay
         self.target_clearance = float(target_clearance)
-        self.batch = FTLBatch(self.tank, n, batch, samples_per_section, kappa_step, push_step,
-                              start_height, margin, success_tolerance, shaping)  # fmt: skip
+        self.batch = FTLBatch(
+            self.tank, n, batch, samples_per_section, kappa_step, push_step, start_height,
+            margin, success_tolerance, shaping, guide,
+        )
         self.start_tip = np.array([0.0, 0.0, float(start_height)])
         self.fixed_target = None if target is None else self._check_target(target)
 
@@ -672,6 +694,10 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
       20 cm from the start, in ``bay`` (1, 2, or None for the whole tank).
     - ``success_tolerance`` (2 cm), ``margin`` (1 cm), ``kappa_step`` (0.1 rad), ``push_step``
       (5 cm), ``start_height`` (10 cm), ``samples_per_section`` (10), ``shaping`` (False).
+    - ``guide`` (False): append to ``observation`` what the way to *this* target looks like: the
+      distance-to-go through the tank's raster (cm/100) and the unit direction in which it falls
+      (:class:`~aftir_rl.envs.ftl_batch.RasterGuide`), and ``(target − tip)/100``. These depend
+      on the goal, so HER's relabelled goals would not match them: use it with PPO, not HER.
     - ``render_mode``: ``"rgb_array"``.
 
     ``reset(options={"target": (x, y, z)})`` sets the target of one episode.
@@ -696,6 +722,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         start_height: float = 10.0,
         samples_per_section: int = 10,
         shaping: bool = False,
+        guide: bool = False,
         render_mode: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -703,7 +730,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         self.render_mode = render_mode
         self._setup(tank, n_sections, 1, target, bay, target_clearance, success_tolerance,
                     margin, kappa_step, push_step, start_height, samples_per_section,
-                    shaping)  # fmt: skip
+                    shaping, guide)  # fmt: skip
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
         self.action_space, self.observation_space = self._spaces()  # type: ignore[assignment]
@@ -751,8 +778,10 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         elif self.fixed_target is not None:
             target = self.fixed_target
         else:
-            target = _draw_target(self.np_random, self.batch.distance, self.region,
-                                  self.target_clearance, self.start_tip)  # fmt: skip
+            target = draw_targets(
+                [self.np_random], self.batch.grid, self.region, self.target_clearance,
+                self.start_tip,
+            )[0]
         self.batch.reset_rows(np.array([0]), target[None])
         self._tips = [self.tip]
         info = {"distance_cm": float(np.linalg.norm(self.tip - target)), "target": target.copy()}
@@ -800,7 +829,10 @@ class ArmFTLVectorEnv(
     first observation with reward 0 and no termination, ignoring that row's action).
     ``reset(options={"target": ...})`` takes one target for all rows or one per row ``(B, 3)``.
     ``info`` holds per-row arrays ``prev_achieved_goal``, ``contact``, ``is_success``,
-    ``distance_cm`` and ``min_clearance_cm``.
+    ``distance_cm`` and ``min_clearance_cm``. With ``autoreset_mode="SameStep"`` rows that end are
+    reset within the step instead: their last observations are in ``info["final_obs"]`` (the
+    batched ``Dict``, valid where ``info["_final_obs"]``) and the step returns their first ones
+    (what SB3's ``VecEnv`` adapter :class:`aftir_rl.agents.vec_adapter.SB3VectorEnv` wants).
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -821,6 +853,8 @@ class ArmFTLVectorEnv(
         start_height: float = 10.0,
         samples_per_section: int = 10,
         shaping: bool = False,
+        guide: bool = False,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
     ) -> None:
         if render_mode is not None:
@@ -832,7 +866,16 @@ class ArmFTLVectorEnv(
         self.render_mode = None
         self._setup(tank, n_sections, self.num_envs, target, bay, target_clearance,
                     success_tolerance, margin, kappa_step, push_step, start_height,
-                    samples_per_section, shaping)  # fmt: skip
+                    samples_per_section, shaping, guide)  # fmt: skip
+        try:
+            self.autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ConfigError(
+                f"autoreset_mode must be 'NextStep' or 'SameStep', got {autoreset_mode!r}"
+            ) from None
+        if self.autoreset_mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+            raise ConfigError("autoreset_mode must be 'NextStep' or 'SameStep'")
+        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         self.single_action_space, self.single_observation_space = self._spaces()
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -846,17 +889,9 @@ class ArmFTLVectorEnv(
             return self._targets_option[rows]
         if self.fixed_target is not None:
             return np.repeat(self.fixed_target[None], len(rows), axis=0)
-        draw = [
-            _draw_target(
-                self._rngs[i],
-                self.batch.distance,
-                self.region,
-                self.target_clearance,
-                self.start_tip,
-            )  # fmt: skip
-            for i in rows
-        ]
-        return np.array(draw)
+        rngs = [self._rngs[i] for i in rows]
+        return draw_targets(rngs, self.batch.grid, self.region, self.target_clearance,
+                            self.start_tip)
 
     def reset(
         self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
@@ -917,7 +952,15 @@ class ArmFTLVectorEnv(
         terminated[done_rows] = False
         truncated[done_rows] = False
         self.steps[done_rows] = 0
-        self.prev_done = terminated | truncated
         info.update(is_success=success, collision=contact, distance_cm=distance,
                     min_clearance_cm=b.body_clearance.copy())  # fmt: skip
+        done = terminated | truncated
+        if self.autoreset_mode is AutoresetMode.NEXT_STEP:
+            self.prev_done = done
+        elif done.any():  # SAME_STEP: the last observations go to info, the rows start again
+            rows = np.flatnonzero(done)
+            info.update(final_obs={k: v.copy() for k, v in obs.items()}, _final_obs=done)
+            b.reset_rows(rows, self._new_targets(rows))
+            self.steps[rows] = 0
+            obs = self._obs_dict(slice(None))
         return obs, reward, terminated, truncated, info

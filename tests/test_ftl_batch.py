@@ -1,0 +1,154 @@
+"""AFTIR-ArmFTL-v0's batched kernels: exact grid-pruned clearances, raster guide, SB3 adapter."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from aftir_rl.collision import point_clearance
+from aftir_rl.envs.arm_ftl import ArmFTLEnv, ArmFTLVectorEnv, clearance_grid
+from aftir_rl.envs.ftl_batch import RasterGuide, draw_targets, raster_distance_table
+from aftir_rl.robot import body_points
+from aftir_rl.tank import load_tank
+
+ENV_ID = "AFTIR-ArmFTL-v0"
+
+
+def random_arms(tank, rng, b):
+    """Backbone samples of ``b`` random 12-section postures, deployed 0..600 cm."""
+    theta = rng.uniform(0, tank.arm.theta_max, (b, 12))
+    phi = rng.uniform(-np.pi, np.pi, (b, 12))
+    dis = rng.uniform(-600, 0, b)
+    return body_points(dis, theta, phi, tank.arm.section_length, 10)
+
+
+@pytest.mark.parametrize("name", ["b737_center", "single_cabin", "open_space_obstacles1"])
+def test_grid_row_min_is_the_exact_minimum(name):
+    tank = load_tank(name)
+    rng = np.random.default_rng(1)
+    pts = random_arms(tank, rng, 2000)
+    grid = clearance_grid(tank, ArmFTLEnv(tank=tank).batch.distance)
+    exact = point_clearance(tank, pts.reshape(-1, 3)).reshape(pts.shape[:2])
+    np.testing.assert_allclose(grid.row_min(pts), exact.min(1), atol=1e-9)
+    use = rng.random(pts.shape[:2]) < 0.5
+    use[:, 0] = True
+    np.testing.assert_allclose(grid.row_min(pts, use), np.where(use, exact, np.inf).min(1),
+                               atol=1e-9)  # fmt: skip
+    approx = grid.approx(pts[:200])
+    assert np.abs(approx - exact[:200]).max() <= grid.slack + 1e-9
+
+
+def test_body_clearance_below_the_floor_uses_the_base():
+    """Samples deep in the guide are skipped; the env's clearance is still the exact minimum."""
+    env = ArmFTLEnv()
+    rng = np.random.default_rng(3)
+    env.reset(seed=0)
+    for _ in range(60):
+        env.step(np.array([*rng.uniform(-1, 1, 2), 1.0], dtype=np.float32))
+        exact = point_clearance(env.tank, env.batch.points[0]).min() - env.tank.arm.radius
+        assert env.batch.body_clearance[0] == pytest.approx(exact, abs=1e-9)
+
+
+def test_raster_distance_table_against_bfs():
+    tank = load_tank("b737_center")
+    table = raster_distance_table(tank)
+    raster = tank.raster
+    free = np.flatnonzero(~raster.obstructed.reshape(-1))
+    for start in free[:: max(1, len(free) // 7)]:
+        cell = np.unravel_index(start, raster.shape)
+        bfs = raster.bfs_distances(tuple(int(c) for c in cell)).reshape(-1)
+        reach = (bfs >= 0) & ~raster.obstructed.reshape(-1)
+        np.testing.assert_array_equal(table[start][reach], bfs[reach])
+
+
+def test_guide_points_through_the_hatch():
+    tank = load_tank("b737_center")
+    guide = RasterGuide(tank)
+    target = np.array([[200.0, 120.0, 50.0]])  # bay 2
+    tip = np.array([[100.0, 20.0, 20.0]])  # bay 1, low, away from the hatch
+    to_go, direction = guide(tip, target)
+    assert to_go[0] > np.linalg.norm(target - tip)  # the way is longer than the straight line
+    # descending the interpolated potential by small steps never increases it, reaches bay 2
+    p = tip.copy()
+    values = [to_go[0]]
+    for _ in range(400):
+        v, d = guide(p, target)
+        p = p + 2.0 * d
+        values.append(guide(p, target)[0][0])
+    baffle = tank.baffle
+    assert p[0, baffle.index] > baffle.position
+    assert values[-1] < 0.2 * values[0]
+    # finite differences agree with the direction where the potential is smooth
+    q = np.array([[30.0, 10.0, 30.0]])
+    v0 = guide(q, target)[0][0]
+    grad = np.array([(guide(q + e, target)[0][0] - v0) / 1e-4 for e in np.eye(3)[:, None] * 1e-4])
+    np.testing.assert_allclose(-grad / np.linalg.norm(grad), guide(q, target)[1][0], atol=1e-3)
+
+
+def test_draw_targets_are_free_and_reproducible():
+    env = ArmFTLEnv(bay=2)
+    rngs = [np.random.default_rng(i) for i in range(50)]
+    t = draw_targets(rngs, env.batch.grid, env.region, 10.0, env.start_tip)
+    assert (point_clearance(env.tank, t) >= 10.0).all()
+    assert (t[:, env.tank.baffle.index] > env.tank.baffle.position).all()
+    again = draw_targets([np.random.default_rng(i) for i in range(50)], env.batch.grid,
+                         env.region, 10.0, env.start_tip)  # fmt: skip
+    np.testing.assert_array_equal(t, again)
+
+
+def test_guide_observation():
+    env = gym.make(ENV_ID, guide=True)
+    plain = gym.make(ENV_ID)
+    obs, _ = env.reset(seed=0)
+    assert obs["observation"].shape[0] == plain.observation_space["observation"].shape[0] + 7
+    tail = obs["observation"][-3:]
+    np.testing.assert_allclose(tail, (obs["desired_goal"] - obs["achieved_goal"]) / 100, atol=1e-5)
+    from gymnasium.utils.env_checker import check_env
+
+    check_env(env.unwrapped, skip_render_check=True)
+
+
+def test_same_step_autoreset_keeps_the_transitions():
+    """SameStep rows see the transitions of NextStep rows, minus the extra reset step."""
+    b, steps = 3, 90
+    rng = np.random.default_rng(2)
+    actions = rng.uniform(-1, 1, (steps, b, 3)).astype(np.float32)
+    actions[..., 2] = np.abs(actions[..., 2])
+    same = ArmFTLVectorEnv(num_envs=b, max_episode_steps=25, autoreset_mode="SameStep")
+    single = [ArmFTLEnv() for _ in range(b)]
+    obs, _ = same.reset(seed=4)
+    for i, env in enumerate(single):
+        env.reset(seed=4 + i)
+    for t in range(steps):
+        nxt, r, term, trunc, info = same.step(actions[t])
+        for i, env in enumerate(single):
+            o, r1, te, _, _ = env.step(actions[t, i])
+            assert r1 == r[i] and te == term[i]
+            if term[i] or trunc[i]:
+                for key in o:
+                    np.testing.assert_array_equal(info["final_obs"][key][i], o[key])
+                o, _ = env.reset()
+            for key in o:
+                np.testing.assert_array_equal(nxt[key][i], o[key])
+
+
+def test_sb3_adapter_trains_ppo_and_sac_her():
+    from stable_baselines3 import PPO, SAC, HerReplayBuffer
+    from stable_baselines3.common.vec_env import VecEnv
+
+    from aftir_rl.agents.vec_adapter import make_batched_vec_env
+
+    venv = make_batched_vec_env(f"aftir_rl:{ENV_ID}", 8, 0, {"guide": True, "shaping": True})
+    assert isinstance(venv, VecEnv)
+    ppo = PPO("MultiInputPolicy", venv, n_steps=16, batch_size=64, n_epochs=1,
+              policy_kwargs={"net_arch": [16]}, seed=0)  # fmt: skip
+    ppo.learn(256)
+    assert ppo.num_timesteps == 256
+    venv = make_batched_vec_env(f"aftir_rl:{ENV_ID}", 4, 0, {"max_episode_steps": 20})
+    sac = SAC("MultiInputPolicy", venv, learning_starts=80, batch_size=16, buffer_size=1000,
+              policy_kwargs={"net_arch": [16]}, replay_buffer_class=HerReplayBuffer,
+              replay_buffer_kwargs={"copy_info_dict": True, "n_sampled_goal": 2},
+              train_freq=1, seed=0)  # fmt: skip
+    sac.learn(160)
+    assert sac.num_timesteps == 160
