@@ -31,13 +31,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run directories to overlay")
     parser.add_argument("-o", "--output", default="view.html", help="HTML file (default view.html)")
     parser.add_argument(
-        "--tank", default=None,
+        "--tank",
+        default=None,
         help="tank name or YAML path (default: the one a run names, else b737_center)",
-    )  # fmt: skip
+    )
     parser.add_argument(
-        "--max-frames", type=int, default=DEFAULT_MAX_FRAMES,
+        "--max-frames",
+        type=int,
+        default=DEFAULT_MAX_FRAMES,
         help=f"most animation frames per page (default {DEFAULT_MAX_FRAMES})",
-    )  # fmt: skip
+    )
     args = parser.parse_args(argv)
     if args.max_frames < 2:
         parser.error("--max-frames must be at least 2")

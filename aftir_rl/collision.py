@@ -19,14 +19,15 @@ The access-panel rule (design.md §1): every backbone point below the floor (``z
 within the panel radius of the ``z`` axis, i.e. inside the linear module's guide.
 
 :func:`point_clearance` is the vectorised numpy counterpart on backbone points (signed distance to
-the nearest solid or wall), used by the planners to pre-filter thousands of candidate postures at
-once before the exact fcl check of the one they return.
+the nearest solid or wall, :class:`~aftir_rl.tank.distance.TankDistance`), used by the planners to
+pre-filter thousands of candidate postures at once before the exact fcl check of the one they
+return.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import fcl
@@ -34,7 +35,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.robot import ArmSpec, Posture, body_points
-from aftir_rl.tank import Box, Cylinder, Solid, Sphere, Tank, Vec3
+from aftir_rl.tank import Solid, Tank, TankDistance
+from aftir_rl.tank.solids import rotation_z_to
 
 __all__ = [
     "CollisionScene",
@@ -43,62 +45,6 @@ __all__ = [
     "points_clear",
     "panel_violation",
 ]
-
-_WALL = 50.0  # thickness of the wall slabs around the box [cm]
-
-
-def _fcl_solid(solid: Solid) -> fcl.CollisionObject:
-    if isinstance(solid, Box):
-        lo, hi = np.array(solid.min), np.array(solid.max)
-        return fcl.CollisionObject(fcl.Box(*(hi - lo)), fcl.Transform((lo + hi) / 2))
-    if isinstance(solid, Cylinder):
-        p0, p1 = np.array(solid.p0, float), np.array(solid.p1, float)
-        return fcl.CollisionObject(
-            fcl.Cylinder(solid.radius, float(np.linalg.norm(p1 - p0))),
-            fcl.Transform(_z_to(p1 - p0), (p0 + p1) / 2),
-        )
-    if isinstance(solid, Sphere):
-        return fcl.CollisionObject(fcl.Sphere(solid.radius), fcl.Transform(np.array(solid.center)))
-    raise TypeError(f"unsupported solid {solid!r}")
-
-
-def _z_to(direction: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotation matrices taking +z to ``direction`` (shape ``(..., 3)``)."""
-    d = direction / np.linalg.norm(direction, axis=-1, keepdims=True)
-    helper = np.where(np.abs(d[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    x = helper - np.sum(helper * d, axis=-1, keepdims=True) * d
-    x /= np.linalg.norm(x, axis=-1, keepdims=True)
-    y = np.cross(d, x)
-    return np.stack([x, y, d], axis=-1)
-
-
-def wall_boxes(tank: Tank) -> list[Box]:
-    """The tank box's walls as solid slabs outside it, the floor open around the panel."""
-    lo, hi, t = np.array(tank.box_min), np.array(tank.box_max), _WALL
-    big_lo, big_hi = lo - t, hi + t
-    slabs: list[tuple[Iterable[float], Iterable[float]]] = [
-        (big_lo, [lo[0], big_hi[1], big_hi[2]]),
-        ([hi[0], big_lo[1], big_lo[2]], big_hi),
-        ([lo[0], big_lo[1], big_lo[2]], [hi[0], lo[1], big_hi[2]]),
-        ([lo[0], hi[1], big_lo[2]], [hi[0], big_hi[1], big_hi[2]]),
-        ([lo[0], lo[1], hi[2]], [hi[0], hi[1], big_hi[2]]),
-    ]
-    c, r = np.array(tank.panel.center), tank.panel.radius
-    z0, z1 = lo[2] - t, lo[2]
-    for xa, xb, ya, yb in (
-        (lo[0], c[0] - r, lo[1], hi[1]),
-        (c[0] + r, hi[0], lo[1], hi[1]),
-        (c[0] - r, c[0] + r, lo[1], c[1] - r),
-        (c[0] - r, c[0] + r, c[1] + r, hi[1]),
-    ):
-        if xb > xa and yb > ya:
-            slabs.append(([xa, ya, z0], [xb, yb, z1]))
-    return [Box(_vec3(a), _vec3(b), "wall") for a, b in slabs]
-
-
-def _vec3(values: Iterable[float]) -> Vec3:
-    x, y, z = map(float, values)
-    return (x, y, z)
 
 
 @dataclass(frozen=True)
@@ -142,11 +88,11 @@ class CollisionScene:
         self.arm = arm or tank.arm
         self.links_per_section = int(links_per_section)
         self.walls = tank.walls if walls is None else walls
-        solids = list(tank.solids) + (wall_boxes(tank) if self.walls else [])
+        solids = list(tank.solids) + (tank.enclosure.slabs() if self.walls else [])
         self._names = {}
         objects = []
         for solid in solids:
-            obj = _fcl_solid(solid)
+            obj = solid.fcl_object()
             self._names[id(obj)] = solid.name or type(solid).__name__.lower()
             objects.append(obj)
         self._objects = objects  # keep the Python objects alive for the manager
@@ -165,8 +111,7 @@ class CollisionScene:
 
     def __getstate__(self) -> dict[str, object]:
         # fcl objects do not pickle; a copy rebuilds them (envs are pickled by vector wrappers).
-        return {"tank": self.tank, "arm": self.arm, "links": self.links_per_section,
-                "walls": self.walls}  # fmt: skip
+        return dict(tank=self.tank, arm=self.arm, links=self.links_per_section, walls=self.walls)
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__init__(state["tank"], state["arm"], state["links"], state["walls"])  # type: ignore[misc]
@@ -192,7 +137,7 @@ class CollisionScene:
         )
         links, manager = self._arm_links(posture.n_sections)
         chords = pts[1:] - pts[:-1]
-        rotations = _z_to(chords)
+        rotations = rotation_z_to(chords)
         centres = (pts[1:] + pts[:-1]) / 2
         for link, rot, centre in zip(links, rotations, centres):
             link.setTransform(fcl.Transform(rot, centre))
@@ -259,11 +204,8 @@ class CollisionScene:
         lo, hi = self._box_lo, self._box_hi
         if (points[:, :2] <= lo[:2] + clear).any() or (points >= hi - clear).any():
             return False
-        c, r = self.tank.panel.center, self.tank.panel.radius
-        radial = np.hypot(points[:, 0] - c[0], points[:, 1] - c[1])
-        height = points[:, 2] - lo[2]
-        rim = np.where(height >= 0, np.hypot(r - radial, height), r - radial)
-        return bool(np.all(np.where(radial > r, height, rim) > clear))
+        floor = self.tank.enclosure.floor_distance_xyz(points[:, 0], points[:, 1], points[:, 2])
+        return bool(np.all(floor > clear))
 
     def sample_margin(self, samples_per_section: int) -> float:
         """How far [cm] a point of the capsules' axes can be from the nearest backbone sample.
@@ -321,44 +263,10 @@ def point_clearance(
 
     The floor has a round opening of the panel's radius, continued below the floor as the guide
     tube (the fcl floor slab's opening is the square around that circle, so this is stricter).
+    This is :attr:`Tank.distance <aftir_rl.tank.geometry.Tank.distance>` (built once per tank),
+    or with ``solids`` a :class:`~aftir_rl.tank.distance.TankDistance` of those solids.
     """
-    pts = np.asarray(points, dtype=np.float64)
-    best = np.full(pts.shape[:-1], np.inf)
-    for solid in tank.solids if solids is None else solids:
-        best = np.minimum(best, _sdf(solid, pts))
-    if tank.walls:
-        lo, hi = np.array(tank.box_min), np.array(tank.box_max)
-        inner = np.minimum(pts - lo, hi - pts)
-        side = np.min(inner[..., :2], axis=-1)
-        ceiling = hi[2] - pts[..., 2]
-        # The floor has a round opening of the panel's radius; below it the guide is a tube.
-        c, r = np.array(tank.panel.center), tank.panel.radius
-        radial = np.hypot(pts[..., 0] - c[0], pts[..., 1] - c[1])
-        height = pts[..., 2] - lo[2]
-        rim = np.where(height >= 0, np.hypot(r - radial, height), r - radial)
-        floor = np.where(radial > r, height, rim)
-        best = np.minimum(best, np.minimum(np.minimum(side, ceiling), floor))
-    return best
-
-
-def _sdf(solid: Solid, p: NDArray[np.float64]) -> NDArray[np.float64]:
-    if isinstance(solid, Box):
-        lo, hi = np.array(solid.min), np.array(solid.max)
-        centre, half = (lo + hi) / 2, (hi - lo) / 2
-        q = np.abs(p - centre) - half
-        outside = np.linalg.norm(np.maximum(q, 0.0), axis=-1)
-        return outside + np.minimum(np.max(q, axis=-1), 0.0)
-    if isinstance(solid, Cylinder):
-        k = solid.axis
-        others = [i for i in range(3) if i != k]
-        a0, a1 = sorted((solid.p0[k], solid.p1[k]))
-        radial = np.linalg.norm(p[..., others] - np.array(solid.p0)[others], axis=-1) - solid.radius
-        axial = np.abs(p[..., k] - (a0 + a1) / 2) - (a1 - a0) / 2
-        q = np.stack([radial, axial], axis=-1)
-        return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(np.max(q, axis=-1), 0.0)
-    if isinstance(solid, Sphere):
-        return np.linalg.norm(p - np.array(solid.center), axis=-1) - solid.radius
-    raise TypeError(f"unsupported solid {solid!r}")
+    return (tank.distance if solids is None else TankDistance(tank, solids))(points)
 
 
 def points_clear(tank: Tank, points: NDArray[np.float64], limit: float) -> NDArray[np.bool_]:
@@ -373,17 +281,7 @@ def points_clear(tank: Tank, points: NDArray[np.float64], limit: float) -> NDArr
     x, y, z = points[..., 0], points[..., 1], points[..., 2]
     ok = np.ones(points.shape[0], dtype=bool)
     if tank.walls:
-        lo, hi = tank.box_min, tank.box_max
-        ok &= np.all(
-            (x > lo[0] + limit) & (x < hi[0] - limit) & (y > lo[1] + limit) & (y < hi[1] - limit)
-            & (z < hi[2] - limit),
-            axis=1,
-        )  # fmt: skip
-        c, r = tank.panel.center, tank.panel.radius
-        radial = np.hypot(x - c[0], y - c[1])
-        height = z - lo[2]
-        rim = np.where(height >= 0, np.hypot(r - radial, height), r - radial)
-        ok &= np.all(np.where(radial > r, height, rim) > limit, axis=1)
+        ok &= np.all(tank.enclosure.signed_distance_xyz(x, y, z) > limit, axis=1)
     for solid in tank.solids:
         idx = np.flatnonzero(ok)
         if len(idx) == 0:
@@ -391,36 +289,13 @@ def points_clear(tank: Tank, points: NDArray[np.float64], limit: float) -> NDArr
         sx, sy, sz = x[idx], y[idx], z[idx]
         a, b = solid.aabb()
         if (
-            sx.min() > b[0] + limit or sx.max() < a[0] - limit or sy.min() > b[1] + limit
-            or sy.max() < a[1] - limit or sz.min() > b[2] + limit or sz.max() < a[2] - limit
-        ):  # fmt: skip
+            sx.min() > b[0] + limit
+            or sx.max() < a[0] - limit
+            or sy.min() > b[1] + limit
+            or sy.max() < a[1] - limit
+            or sz.min() > b[2] + limit
+            or sz.max() < a[2] - limit
+        ):
             continue
-        ok[idx] = np.all(_sdf_xyz(solid, sx, sy, sz) > limit, axis=1)
+        ok[idx] = np.all(solid.signed_distance_xyz(sx, sy, sz) > limit, axis=1)
     return ok
-
-
-def _sdf_xyz(
-    solid: Solid, x: NDArray[np.float64], y: NDArray[np.float64], z: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """:func:`_sdf` on separate coordinate arrays (no reductions over a length-3 axis)."""
-    if isinstance(solid, Box):
-        qx = np.abs(x - (solid.min[0] + solid.max[0]) / 2) - (solid.max[0] - solid.min[0]) / 2
-        qy = np.abs(y - (solid.min[1] + solid.max[1]) / 2) - (solid.max[1] - solid.min[1]) / 2
-        qz = np.abs(z - (solid.min[2] + solid.max[2]) / 2) - (solid.max[2] - solid.min[2]) / 2
-        outside = np.sqrt(
-            np.maximum(qx, 0.0) ** 2 + np.maximum(qy, 0.0) ** 2 + np.maximum(qz, 0.0) ** 2
-        )
-        return outside + np.minimum(np.maximum(np.maximum(qx, qy), qz), 0.0)
-    if isinstance(solid, Cylinder):
-        coords = (x, y, z)
-        k = solid.axis
-        u, v = (coords[i] - solid.p0[i] for i in range(3) if i != k)
-        a0, a1 = sorted((solid.p0[k], solid.p1[k]))
-        radial = np.hypot(u, v) - solid.radius
-        axial = np.abs(coords[k] - (a0 + a1) / 2) - (a1 - a0) / 2
-        outside = np.hypot(np.maximum(radial, 0.0), np.maximum(axial, 0.0))
-        return outside + np.minimum(np.maximum(radial, axial), 0.0)
-    if isinstance(solid, Sphere):
-        cx, cy, cz = solid.center
-        return np.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2) - solid.radius
-    raise TypeError(f"unsupported solid {solid!r}")

@@ -20,7 +20,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.tank import Box, Cylinder, Sphere, Tank
+from aftir_rl.tank import Box, Tank
 
 if TYPE_CHECKING:
     from mpl_toolkits.mplot3d.art3d import Path3DCollection
@@ -28,59 +28,24 @@ if TYPE_CHECKING:
 
 __all__ = ["draw_tank", "path_figure", "figure_to_rgb", "render_path", "PathRenderer"]
 
-_EDGES = [
-    (0, 1),
-    (1, 3),
-    (3, 2),
-    (2, 0),
-    (4, 5),
-    (5, 7),
-    (7, 6),
-    (6, 4),
-    (0, 4),
-    (1, 5),
-    (2, 6),
-    (3, 7),
-]
-
-
-def _box_lines(ax: Axes3D, lo: Sequence[float], hi: Sequence[float], **style: Any) -> None:
-    corners = np.array(
-        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-    )
-    for i, j in _EDGES:
-        ax.plot(*corners[[i, j]].T, **style)
+#: Wireframe style of each kind of solid.
+_SOLID_STYLE: dict[str, dict[str, Any]] = {
+    "box": {"color": "tab:brown", "lw": 0.8},
+    "cylinder": {"color": "tab:gray", "lw": 0.8},
+    "sphere": {"color": "tab:red", "lw": 0.5},
+}
 
 
 def draw_tank(ax: Axes3D, tank: Tank) -> None:
     """Draw the tank's box, panel and solids on a 3D axes (wireframes, cm)."""
-    _box_lines(ax, tank.box_min, tank.box_max, color="0.6", lw=0.6)
+    for edge in Box(tank.box_min, tank.box_max).wireframe():
+        ax.plot(*edge.T, color="0.6", lw=0.6)
     t = np.linspace(0, 2 * np.pi, 40)
     c, r = tank.panel.center, tank.panel.radius
     ax.plot(c[0] + r * np.cos(t), c[1] + r * np.sin(t), np.full_like(t, c[2]), color="k", lw=1.0)
     for solid in tank.solids:
-        if isinstance(solid, Box):
-            _box_lines(ax, solid.min, solid.max, color="tab:brown", lw=0.8)
-        elif isinstance(solid, Cylinder):
-            k = solid.axis
-            others = [i for i in range(3) if i != k]
-            for ang in np.linspace(0, 2 * np.pi, 6, endpoint=False):
-                p0, p1 = np.array(solid.p0, float), np.array(solid.p1, float)
-                off = np.zeros(3)
-                off[others[0]], off[others[1]] = (
-                    solid.radius * np.cos(ang),
-                    solid.radius * np.sin(ang),
-                )
-                ax.plot(*np.stack([p0 + off, p1 + off]).T, color="tab:gray", lw=0.8)
-        elif isinstance(solid, Sphere):
-            u, v = np.mgrid[0 : 2 * np.pi : 12j, 0 : np.pi : 7j]
-            ax.plot_wireframe(
-                solid.center[0] + solid.radius * np.cos(u) * np.sin(v),
-                solid.center[1] + solid.radius * np.sin(u) * np.sin(v),
-                solid.center[2] + solid.radius * np.cos(v),
-                color="tab:red",
-                lw=0.5,
-            )
+        for line in solid.wireframe():
+            ax.plot(*line.T, **_SOLID_STYLE[solid.kind])
     ax.set_xlim(tank.box_min[0], tank.box_max[0])
     ax.set_ylim(tank.box_min[1], tank.box_max[1])
     ax.set_zlim(min(tank.box_min[2], -10), tank.box_max[2])
@@ -170,8 +135,9 @@ class PathRenderer:
         anchor = np.array(self.tank.box_min, dtype=float)  # placeholder data; limits are fixed
         self._path = self._start = self._target = None
         if has_points:
-            (self._path,) = ax.plot(*anchor[:, None], color="tab:blue", marker="o", ms=3,
-                                    lw=1.5, label="tip path")  # fmt: skip
+            (self._path,) = ax.plot(
+                *anchor[:, None], color="tab:blue", marker="o", ms=3, lw=1.5, label="tip path"
+            )
             self._start = ax.scatter(*anchor, color="tab:green", s=40, label="start")
         if has_target:
             self._target = ax.scatter(*anchor, color="tab:red", marker="*", s=120, label="target")

@@ -38,8 +38,10 @@ def ppo_rate(env_id: str, steps: int) -> float:
 
 
 def main() -> None:
-    print(f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python "
-          f"{platform.python_version()}, numpy {np.__version__}")  # fmt: skip
+    print(
+        f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}, numpy {np.__version__}"
+    )
     print()
     lake = rate("FrozenLake-v1", 50_000, map_name="8x8", is_slippery=False)
     print("| env | env steps/s | vs FrozenLake 8x8 | PPO steps/s | env share of PPO's step |")
@@ -49,8 +51,10 @@ def main() -> None:
         env_rate = rate(env_id, 5_000)
         train_rate = ppo_rate(env_id, 4_096)
         share = train_rate / env_rate
-        print(f"| {env_id} | {env_rate:,.0f} | {env_rate / lake:.3f}x | {train_rate:,.0f} | "
-              f"{share:.0%} |")  # fmt: skip
+        print(
+            f"| {env_id} | {env_rate:,.0f} | {env_rate / lake:.3f}x | {train_rate:,.0f} | "
+            f"{share:.0%} |"
+        )
 
 
 if __name__ == "__main__":

@@ -45,8 +45,9 @@ def single_rate(env_id: str, steps: int, **kwargs) -> float:
 
 
 def vector_rate(num_envs: int, steps: int, **kwargs) -> float:
-    venv = gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
-                        **kwargs)  # fmt: skip
+    venv = gym.make_vec(
+        ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs
+    )
     venv.reset(seed=0)
     acts = actions((num_envs, 3), max(1, steps // num_envs))
     start = time.perf_counter()
@@ -55,22 +56,70 @@ def vector_rate(num_envs: int, steps: int, **kwargs) -> float:
     return len(acts) * num_envs / (time.perf_counter() - start)
 
 
+def ppo_env_share(num_envs: int, steps: int) -> tuple[float, float]:
+    """PPO (SB3) on the batched env through the VecEnv adapter: steps/s and the env's share."""
+    from stable_baselines3 import PPO
+
+    from aftir_rl.agents.vec_adapter import make_batched_vec_env
+
+    venv = make_batched_vec_env(f"aftir_rl:{ENV_ID}", num_envs, 0, {"guide": True, "shaping": True})
+    inner = venv.venv  # VecMonitor -> SB3VectorEnv
+    spent = [0.0]
+    step_wait = inner.step_wait
+
+    def timed():
+        start = time.perf_counter()
+        out = step_wait()
+        spent[0] += time.perf_counter() - start
+        return out
+
+    inner.step_wait = timed
+    model = PPO("MultiInputPolicy", venv, n_steps=64, batch_size=4096, n_epochs=5, seed=0,
+                policy_kwargs={"net_arch": [256, 256]})  # fmt: skip
+    start = time.perf_counter()
+    model.learn(steps)
+    total = time.perf_counter() - start
+    return model.num_timesteps / total, spent[0] / total
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=20_000, help="env steps per row")
     args = parser.parse_args()
-    rows = [("FrozenLake-v1 8x8 (single)", single_rate("FrozenLake-v1", args.steps,
-                                                       map_name="8x8"))]  # fmt: skip
+    rows = [
+        ("FrozenLake-v1 8x8 (single)", single_rate("FrozenLake-v1", args.steps, map_name="8x8"))
+    ]
     single = single_rate(ENV_ID, args.steps)
     rows.append((f"{ENV_ID} single env", single))
     rows.append((f"{ENV_ID} single env, shaping", single_rate(ENV_ID, args.steps, shaping=True)))
+    rows.append(
+        (
+            "AFTIR-Arm-v0 single env (raw joints, 4 sections)",
+            single_rate("AFTIR-Arm-v0", args.steps // 4),
+        )
+    )
+    rows.append(
+        (
+            "AFTIR-ArmFull-v0 single env (raw joints, 12 sections)",
+            single_rate("AFTIR-ArmFull-v0", args.steps // 4),
+        )
+    )
     for b in (16, 64, 256, 1024):
-        rows.append((f"{ENV_ID} vector env, {b} envs", vector_rate(b, 4 * args.steps)))
+        rows.append((f"{ENV_ID} vector env, {b} envs", vector_rate(b, 20 * args.steps)))
+    rows.append(
+        (f"{ENV_ID} vector env, 256 envs, guide", vector_rate(256, 20 * args.steps, guide=True))
+    )
+    ppo_rate, share = ppo_env_share(256, 10 * args.steps)
     print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, one process\n")
     print("| env | steps/s | vs single ArmFTL |")
     print("|---|---:|---:|")
     for name, rate in rows:
         print(f"| {name} | {rate:,.0f} | {rate / single:.1f}x |")
+    print(
+        f"\nPPO (SB3 2.x, MultiInputPolicy 256x256, n_steps 64, batch 4096, 5 epochs) on the "
+        f"256-env batched env with the guide: {ppo_rate:,.0f} steps/s; the env's share of the "
+        f"time: {100 * share:.1f}%"
+    )
 
 
 if __name__ == "__main__":

@@ -1,12 +1,12 @@
-"""Posture generation measured against the papers' tables (seeds 004 and 002).
+"""Posture generation measured against the papers' tables (jace and filomat2018).
 
 Run: ``python benchmarks/bench_posture.py``. Prints markdown tables measured in this one run:
 
-1. Seed 004 Table II: blind search against region clipping for 2, 3 and 4 sections (l = 25 cm,
+1. jace Table II: blind search against region clipping for 2, 3 and 4 sections (l = 25 cm,
    Δθ = 1°, target zone 0.5 cm, open space), our speed-up beside the paper's. The 4-section blind
    search (181⁴ = 1.07e9 combinations) runs on an evenly strided sample and its time is
    extrapolated to the whole grid; the table says so.
-2. Seed 002 Table 2 analogues: TSM to the four bay-2 corner targets of the reference tank.
+2. filomat2018 Table 2 analogues: TSM to the four bay-2 corner targets of the reference tank.
 3. Planner timing against the goals (TGA with 4 sections under 50 ms, TSM under 100 ms) and
    success on 50 random free targets (25 in bay 1, 25 beyond the hatch, seed 7).
 """
@@ -22,22 +22,14 @@ import time
 import numpy as np
 
 from aftir_rl.errors import PlanningError
-from aftir_rl.posture import PlanarProblem, Planner, blind_search, region_clipping
-from aftir_rl.posture.planner import random_free_targets
-
-SEED004 = [  # N, target, paper A (blind) and B (region clipping): theta, d, loops, seconds
-    (2, (11, 31, 31), ((1.27, -0.82), -3.51, 8.8e3, 0.58), ((1.22, -0.64), -3.58, 3.0e2, 0.09)),
-    (3, (30, 19, 50), ((0.53, 0.17, -0.12), -14.18, 3.3e5, 26.62),
-     ((0.53, 0.21, -0.25), -14.39, 6.0e3, 0.96)),
-    (4, (30, 29, 67), ((0.24, 0.54, -0.42, 0.40), -20.91, 1.7e7, 31 * 60),
-     ((0.21, 0.66, -0.55, 0.46), -20.61, 4.0e4, 6.88)),
-]  # fmt: skip
-SEED002 = {  # target: N, error cm, seconds (paper Table 2, targets 5 cm from the corners)
-    (230, 140, 90): (8, 1.33, 2.441),
-    (-50, 140, 10): (9, 2.45, 3.452),
-    (-50, 72, 90): (8, 1.11, 2.427),
-    (230, 72, 10): (7, 0.82, 1.853),
-}
+from aftir_rl.papers import FILOMAT2018_TABLE2, JACE_TABLE2
+from aftir_rl.posture import (
+    PlanarProblem,
+    Planner,
+    blind_search,
+    random_free_targets,
+    region_clipping,
+)
 
 
 def best_time(fn, repeats):
@@ -53,17 +45,36 @@ def fmt_theta(theta):
     return "{" + ", ".join(f"{t:.2f}" for t in theta) + "}"
 
 
-def seed004_table(blind_sample: int, repeats: int) -> None:
-    print("Seed 004 Table II: blind search (A) against region clipping (B), l = 25 cm, "
-          "dtheta = 1 deg, zone 0.5 cm, open space")  # fmt: skip
+def jace_table(blind_sample: int, repeats: int) -> None:
+    print(
+        "jace Table II: blind search (A) against region clipping (B), l = 25 cm, "
+        "dtheta = 1 deg, zone 0.5 cm, open space"
+    )
     print()
-    print("| N | target | T | theta (rad), ours | d (cm) | loops | time, ours | theta, paper | "
-          "d, paper | loops, paper | time, paper |")  # fmt: skip
+    print(
+        "| N | target | T | theta (rad), ours | d (cm) | loops | time, ours | theta, paper | "
+        "d, paper | loops, paper | time, paper |"
+    )
     print("|---|---|---|---|---:|---:|---:|---|---:|---:|---:|")
     ratios = []
-    for n, target, paper_a, paper_b in SEED004:
-        problem = PlanarProblem(math.hypot(target[0], target[1]), target[2], n, 25.0,
-                                math.pi / 2, zone=0.5, dis_range=(-n * 25.0, 0.0))  # fmt: skip
+    for row in JACE_TABLE2:
+        n, target = row.sections, row.target
+        paper_a = (row.blind.theta, row.blind.dis, row.blind.evaluations, row.blind.seconds)
+        paper_b = (
+            row.clipping.theta,
+            row.clipping.dis,
+            row.clipping.evaluations,
+            row.clipping.seconds,
+        )
+        problem = PlanarProblem(
+            math.hypot(target[0], target[1]),
+            target[2],
+            n,
+            25.0,
+            math.pi / 2,
+            zone=0.5,
+            dis_range=(-n * 25.0, 0.0),
+        )
         sample = None if n < 4 else blind_sample
         t_a, a = best_time(lambda p=problem, s=sample: blind_search(p, math.radians(1), s), 1)
         if a is not None and a.sampled:
@@ -84,21 +95,28 @@ def seed004_table(blind_sample: int, repeats: int) -> None:
     print()
     print("| N | speed-up A/B, ours | speed-up A/B, paper |")
     print("|---|---:|---:|")
-    for (n, *_), (ours, paper) in zip(SEED004, ratios):
-        print(f"| {n} | {ours:.0f}x | {paper:.1f}x |")
+    for row, (ours, paper) in zip(JACE_TABLE2, ratios):
+        print(f"| {row.sections} | {ours:.0f}x | {paper:.1f}x |")
     print()
 
 
-def seed002_table(planner: Planner, repeats: int) -> None:
-    print("Seed 002 Table 2 analogues: TSM to the bay-2 corner targets of b737_center (l = 50 cm)")
+def filomat2018_table(planner: Planner, repeats: int) -> None:
+    print(
+        "filomat2018 Table 2 analogues: TSM to the bay-2 corner targets of b737_center (l = 50 cm)"
+    )
     print()
-    print("| target (cm) | N | tip error (cm) | seconds | clearance (cm) | N, paper | "
-          "error, paper (cm) | seconds, paper |")  # fmt: skip
+    print(
+        "| target (cm) | N | tip error (cm) | seconds | clearance (cm) | N, paper | "
+        "error, paper (cm) | seconds, paper |"
+    )
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
-    for target, (pn, perr, psec) in SEED002.items():
+    for row in FILOMAT2018_TABLE2:
+        target, pn, perr, psec = row.target, row.sections, row.error_cm, row.seconds
         t, r = best_time(lambda t=target: planner.plan(t), repeats)
-        print(f"| {target} | {r.posture.n_sections} | {r.error_cm:.1e} | {t:.3f} | "
-              f"{r.clearance_cm:.2f} | {pn} | {perr} | {psec} |")  # fmt: skip
+        print(
+            f"| {target} | {r.posture.n_sections} | {r.error_cm:.1e} | {t:.3f} | "
+            f"{r.clearance_cm:.2f} | {pn} | {perr} | {psec} |"
+        )
     print()
 
 
@@ -107,8 +125,10 @@ def random_targets(planner: Planner, n_each: int, seed: int) -> None:
     bays = {"bay 1 (TGA)": drawn["bay1"], "beyond the hatch (TSM)": drawn["bay2"]}
     print(f"Random free targets (seed {seed}, at least 5 cm from any surface):")
     print()
-    print("| targets | reached | tip error, max (cm) | seconds, median | seconds, max | "
-          "sections, median |")  # fmt: skip
+    print(
+        "| targets | reached | tip error, max (cm) | seconds, median | seconds, max | "
+        "sections, median |"
+    )
     print("|---|---:|---:|---:|---:|---:|")
     for key, points in bays.items():
         times, errors, sections, ok = [], [], [], 0
@@ -122,8 +142,10 @@ def random_targets(planner: Planner, n_each: int, seed: int) -> None:
             except PlanningError:
                 pass
             times.append(time.perf_counter() - start)
-        print(f"| {key} | {ok}/{len(points)} | {max(errors):.1e} | {np.median(times):.3f} | "
-              f"{max(times):.3f} | {np.median(sections):.0f} |")  # fmt: skip
+        print(
+            f"| {key} | {ok}/{len(points)} | {max(errors):.1e} | {np.median(times):.3f} | "
+            f"{max(times):.3f} | {np.median(sections):.0f} |"
+        )
     print()
 
 
@@ -133,13 +155,13 @@ def goals(planner: Planner, open_planner: Planner, repeats: int) -> None:
     print("| case | sections | best of runs (ms) | tip error (cm) |")
     print("|---|---:|---:|---:|")
     for name, p, target in (
-        ("TGA, seed 004 [30, 29, 67], open space", open_planner, (30, 29, 67)),
+        ("TGA, jace [30, 29, 67], open space", open_planner, (30, 29, 67)),
         ("TGA, tank (118, 18, 39)", planner, (118, 18, 39)),
         ("TGA, tank (179, -4, 5)", planner, (179, -4, 5)),
     ):
         t, r = best_time(lambda p=p, x=target: p.plan(x), repeats)
         print(f"| {name} | {r.posture.n_sections} | {t * 1e3:.1f} | {r.error_cm:.1e} |")
-    for target in SEED002:
+    for target in (row.target for row in FILOMAT2018_TABLE2):
         t, r = best_time(lambda x=target: planner.plan(x), repeats)
         print(f"| TSM, tank {target} | {r.posture.n_sections} | {t * 1e3:.1f} | {r.error_cm:.1e} |")
     print()
@@ -148,18 +170,22 @@ def goals(planner: Planner, open_planner: Planner, repeats: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--blind-sample", type=int, default=20_000_000,
+        "--blind-sample",
+        type=int,
+        default=20_000_000,
         help="combinations of the 4-section blind search actually evaluated",
-    )  # fmt: skip
+    )
     parser.add_argument("--repeats", type=int, default=3, help="best of this many runs")
     parser.add_argument("--random", type=int, default=25, help="random targets per bay")
     args = parser.parse_args()
-    print(f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python "
-          f"{platform.python_version()}, numpy {np.__version__}")  # fmt: skip
+    print(
+        f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}, numpy {np.__version__}"
+    )
     print()
     planner, open_planner = Planner("b737_center"), Planner("open_space")
-    seed004_table(args.blind_sample, args.repeats)
-    seed002_table(planner, args.repeats)
+    jace_table(args.blind_sample, args.repeats)
+    filomat2018_table(planner, args.repeats)
     goals(planner, open_planner, args.repeats)
     random_targets(planner, args.random, seed=7)
 

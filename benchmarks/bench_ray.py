@@ -1,6 +1,6 @@
 """The benchmark serially and on a local Ray with 2 workers: wall time, speed-up, same table.
 
-    python benchmarks/bench_ray.py [--sets seed004 seed002 bay1] [--n-random 3] [--workers 2]
+    python benchmarks/bench_ray.py [--sets jace filomat2018 bay1] [--n-random 3] [--workers 2]
 
 Runs ``python -m aftir_rl.bench`` twice with the same arguments, once serially and once with
 ``--ray local --workers N``, and prints one markdown table. Rows are compared cell by cell but for
@@ -23,8 +23,9 @@ TIMED = ("rrt_connect", "q_table+postures")
 
 def run(args: list[str]) -> tuple[float, str]:
     start = time.perf_counter()
-    out = subprocess.run([sys.executable, "-m", "aftir_rl.bench", *args], capture_output=True,
-                         text=True, check=False)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-m", "aftir_rl.bench", *args], capture_output=True, text=True, check=False
+    )
     seconds = time.perf_counter() - start
     if out.returncode != 0:
         sys.exit(f"bench {' '.join(args)} failed (exit {out.returncode}):\n{out.stderr[-3000:]}")
@@ -59,7 +60,7 @@ def compare(a: list[list[str]], b: list[list[str]]) -> tuple[int, int, int]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sets", nargs="+", default=["seed004", "seed002", "bay1"])
+    parser.add_argument("--sets", nargs="+", default=["jace", "filomat2018", "bay1"])
     parser.add_argument("--n-random", default="3")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--show-table", action="store_true", help="print the bench table too")
@@ -70,16 +71,20 @@ def main() -> None:
     ray_s, on_ray = run([*common, "--ray", "local", "--workers", str(args.workers)])
     a, b = rows(serial), rows(on_ray)
     same, timed, differ = compare(a, b)
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
-          f"{platform.python_version()}; load average before the runs {load:.2f}; "
-          f"bench {' '.join(common)}")  # fmt: skip
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}; load average before the runs {load:.2f}; "
+        f"bench {' '.join(common)}"
+    )
     print()
     print("| run | wall time (s) | speed-up | rows | same as serial |")
     print("|---|---:|---:|---:|---|")
     print(f"| serial | {serial_s:.1f} | 1.00x | {len(a)} | – |")
     verdict = f"{same} identical, {timed} identical but for OMPL-timed cells, {differ} differ"
-    print(f"| --ray local --workers {args.workers} | {ray_s:.1f} | {serial_s / ray_s:.2f}x | "
-          f"{len(b)} | {verdict} |")  # fmt: skip
+    print(
+        f"| --ray local --workers {args.workers} | {ray_s:.1f} | {serial_s / ray_s:.2f}x | "
+        f"{len(b)} | {verdict} |"
+    )
     if args.show_table:
         print()
         print(on_ray.split("\n\n", 1)[-1].rstrip())

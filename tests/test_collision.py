@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import math
 
+import fcl
 import numpy as np
 import pytest
 
@@ -123,3 +124,28 @@ def test_batch_and_vectorised_helpers(tank, scene):
         )
     below = np.array([[[0, 0, -5.0], [5, 0, -1.0]], [[0, 0, -5.0], [13, 0, -1.0]]])
     np.testing.assert_array_equal(panel_violation(tank, below), [False, True])
+
+
+def test_point_clearance_is_the_fcl_distance_to_the_scene(tank, scene):
+    # Away from the floor's opening (round here, square in fcl), the signed distance to every
+    # solid and wall is python-fcl's distance from a tiny ball to the scene.
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(tank.box_min, tank.box_max, (300, 3))
+    pts = pts[np.hypot(pts[:, 0], pts[:, 1]) > 40]
+    d = point_clearance(tank, pts)
+    eps, checked = 1e-3, 0
+    for p, expected in zip(pts, d):
+        if expected < 0.01:
+            continue
+        ball = fcl.CollisionObject(fcl.Sphere(eps), fcl.Transform(p))
+        data = fcl.DistanceData()
+        scene._scene.distance(ball, data, fcl.defaultDistanceCallback)
+        assert data.result.min_distance + eps == pytest.approx(expected, abs=1e-4), p
+        checked += 1
+    assert checked > 150
+    # with solids given, only those and the walls count
+    pipe = [s for s in tank.solids if s.name == "fuel_pipe_bay1"]
+    np.testing.assert_array_equal(
+        point_clearance(tank, pts, pipe),
+        np.minimum(pipe[0].signed_distance(pts), tank.enclosure.signed_distance_xyz(*pts.T)),
+    )

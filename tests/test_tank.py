@@ -1,13 +1,16 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
+import fcl
 import numpy as np
 import pytest
 
 from aftir_rl import tank as tank_module
 from aftir_rl.errors import ConfigError, TargetError
-from aftir_rl.tank import load_tank
+from aftir_rl.tank import Box, Cylinder, SolidStack, Sphere, load_tank
 
 REF_YAML = tank_module.TANK_DIR / "b737_center.yaml"
 
@@ -139,3 +142,82 @@ def test_not_yaml_and_unknown_name(tmp_path, capsys):
     assert tank_module.main(["--tank", str(path)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error:") and "Traceback" not in err
+
+
+# ------------------------------------------------------------------------------ solids
+SOLIDS = [
+    Box((-3.0, 1.0, 2.0), (5.0, 4.0, 9.0)),
+    Cylinder((1.0, 2.0, -4.0), (1.0, 2.0, 6.0), 3.0),
+    Cylinder((9.0, 2.0, 3.0), (-1.0, 2.0, 3.0), 2.0),
+    Cylinder((0.0, -5.0, 1.0), (0.0, 7.0, 1.0), 2.5),
+    Sphere((1.0, 2.0, 3.0), 4.0),
+]
+
+
+@pytest.mark.parametrize("solid", SOLIDS, ids=lambda s: f"{s.kind}")
+def test_signed_distance_matches_fcl(solid):
+    # Outside: the distance python-fcl finds to a tiny ball at the point. Inside: negative
+    # exactly where python-fcl and contains() find the point inside.
+    rng = np.random.default_rng(3)
+    lo, hi = solid.aabb()
+    pts = rng.uniform(lo - 2, hi + 2, (400, 3))
+    d = solid.signed_distance(pts)
+    np.testing.assert_array_equal(d, solid.signed_distance_xyz(*pts.T))
+    obj, eps = solid.fcl_object(), 1e-3
+    outside = inside = 0
+    for p, expected in zip(pts, d):
+        ball = fcl.CollisionObject(fcl.Sphere(eps), fcl.Transform(p))
+        if expected > 0.01:
+            found = fcl.distance(obj, ball, fcl.DistanceRequest(), fcl.DistanceResult())
+            assert found + eps == pytest.approx(expected, abs=1e-4), p
+            outside += 1
+        elif expected < -0.01:
+            result = fcl.CollisionResult()
+            assert fcl.collide(obj, ball, fcl.CollisionRequest(), result) and solid.contains(p)
+            inside += 1
+    assert outside > 50 and inside > 20
+    # The depth inside: the point is within |d| of the surface, and no nearer to it.
+    deep = pts[d < -0.01]
+    depth = -solid.signed_distance(deep)
+    directions = rng.normal(size=(64, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    for p, r in zip(deep, depth):
+        assert np.all(solid.contains(p + 0.999 * r * directions))
+    assert np.all(solid.signed_distance(deep + depth[:, None] * 1e-9) <= 0)
+
+
+def test_solid_stack_is_the_nearest_solid(tank):
+    solids = list(tank.solids) + SOLIDS
+    rng = np.random.default_rng(4)
+    pts = rng.uniform([-70, -60, -10], [250, 160, 110], (2000, 3))
+    nearest = np.min([s.signed_distance(pts) for s in solids], axis=0)
+    np.testing.assert_array_equal(SolidStack(solids).signed_distance_xyz(*pts.T), nearest)
+    assert np.all(SolidStack([]).signed_distance_xyz(*pts.T) == np.inf)
+
+
+@pytest.mark.parametrize("solid", SOLIDS, ids=lambda s: f"{s.kind}")
+def test_drawings_lie_on_the_surface(solid):
+    vertices, faces = solid.mesh()
+    assert faces.min() == 0 and faces.max() == len(vertices) - 1
+    np.testing.assert_allclose(solid.signed_distance(vertices), 0, atol=1e-9)
+    for line in solid.wireframe():
+        np.testing.assert_allclose(solid.signed_distance(line), 0, atol=1e-9)
+
+
+def test_enclosure_distance(tank):
+    # the panel's axis 30 cm up (the floor's rim), in the guide, under the floor beside the panel,
+    # above the floor, beside the wall at x = 240
+    pts = np.array([[0, 0, 30.0], [0, 0, -30.0], [20, 0, -1.0], [100, 100, 3.0], [239, 0, 50.0]])
+    expected = [np.hypot(12, 30), 12, -1, 3, 1]
+    np.testing.assert_allclose(tank.enclosure.signed_distance_xyz(*pts.T), expected)
+    np.testing.assert_allclose(tank.enclosure.floor_distance_xyz(*pts.T)[:4], expected[:4])
+
+
+def test_python_m_tank_runs_the_cli():
+    proc = subprocess.run(
+        [sys.executable, "-m", "aftir_rl.tank", "--tank", "single_cabin", "--json"],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0 and proc.stderr == ""
+    assert json.loads(proc.stdout)["units"] == "cm"

@@ -98,7 +98,7 @@ def test_read_run_and_figure(tmp_path, tank):
 
 def test_frames_are_bounded_and_keep_the_ends(tmp_path, tank):
     run = read_run(_q_table_run(tmp_path, tank))
-    from aftir_rl.view import _frame_indices
+    from aftir_rl.view_figure import _frame_indices
 
     idx = _frame_indices(run, 30)
     assert len(idx) <= 30 and idx[0] == 0 and idx[-1] == run.n_motion - 1
@@ -146,12 +146,14 @@ def test_cli(tmp_path, tank):
     run = _q_table_run(tmp_path, tank)
     cmd = [sys.executable, "-m", "aftir_rl.cli_view"]
     out = tmp_path / "page" / "v.html"
-    proc = subprocess.run([*cmd, str(run), "-o", str(out), "--max-frames", "10"],
-                          capture_output=True, text=True)  # fmt: skip
+    proc = subprocess.run(
+        [*cmd, str(run), "-o", str(out), "--max-frames", "10"], capture_output=True, text=True
+    )
     assert proc.returncode == 0, proc.stderr
     assert out.stat().st_size < 6e6 and "aftir-view" in out.read_text()
-    bad = subprocess.run([*cmd, str(tmp_path / "missing"), "-o", str(out)],
-                         capture_output=True, text=True)  # fmt: skip
+    bad = subprocess.run(
+        [*cmd, str(tmp_path / "missing"), "-o", str(out)], capture_output=True, text=True
+    )
     assert (
         bad.returncode == 2 and bad.stderr.startswith("error: ") and "Traceback" not in bad.stderr
     )
@@ -173,12 +175,21 @@ class _DevTools:
             "os.dup2(a, 3)\nos.dup2(b, 4)\nos.execv(sys.argv[3], sys.argv[3:])\n"
         )
         args = [
-            str(CHROMIUM), "--headless", "--no-sandbox", "--remote-debugging-pipe",
-            "--disable-gpu", "--enable-unsafe-swiftshader", "--disable-background-networking",
-            "--disable-component-update", "--disable-sync", "--no-first-run",
-            "--no-default-browser-check", "--window-size=1280,1000",
-            f"--user-data-dir={user_dir}", "about:blank",
-        ]  # fmt: skip
+            str(CHROMIUM),
+            "--headless",
+            "--no-sandbox",
+            "--remote-debugging-pipe",
+            "--disable-gpu",
+            "--enable-unsafe-swiftshader",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--no-first-run",
+            "--no-default-browser-check",
+            "--window-size=1280,1000",
+            f"--user-data-dir={user_dir}",
+            "about:blank",
+        ]
         self.proc = subprocess.Popen(
             [sys.executable, "-c", shim, str(to_chrome[0]), str(from_chrome[1]), *args],
             pass_fds=(to_chrome[0], from_chrome[1]),
@@ -214,8 +225,11 @@ class _DevTools:
             self.events.append(reply)
 
     def evaluate(self, session: str, expression: str):
-        result = self.send("Runtime.evaluate", {"expression": expression, "awaitPromise": True,
-                                                "returnByValue": True}, session)  # fmt: skip
+        result = self.send(
+            "Runtime.evaluate",
+            {"expression": expression, "awaitPromise": True, "returnByValue": True},
+            session,
+        )
         assert "exceptionDetails" not in result, result["exceptionDetails"]
         return result["result"].get("value")
 
@@ -228,8 +242,9 @@ class _DevTools:
                 details = params["exceptionDetails"]
                 out.append(details.get("exception", {}).get("description") or details["text"])
             elif method == "Runtime.consoleAPICalled" and params["type"] in ("error", "assert"):
-                out.append(" ".join(str(a.get("value", a.get("description"))) for a in
-                                    params["args"]))  # fmt: skip
+                out.append(
+                    " ".join(str(a.get("value", a.get("description"))) for a in params["args"])
+                )
             elif method == "Log.entryAdded" and params["entry"]["level"] == "error":
                 out.append(params["entry"]["text"])
         return out
