@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 
 import yaml
 
-from aftir_rl.errors import ConfigError
+from aftir_rl.errors import AftirError, ConfigError
 
 T = TypeVar("T")
 
@@ -143,6 +143,25 @@ def _too_deep(text: str) -> bool:
     )
 
 
+def read_limited(
+    path: Path, limit: int, error: type[AftirError], what: str = "file", kind: str = "file"
+) -> bytes:
+    """The bytes of the file ``path``, refused when larger than ``limit``.
+
+    Raises:
+        error: "cannot read the <what>" (missing, a folder...) or "larger than ... not a <kind>".
+
+    """
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(limit + 1)
+    except OSError as exc:
+        raise error(f"{path}: cannot read the {what} ({exc.strerror or exc})") from None
+    if len(raw) > limit:
+        raise error(f"{path}: larger than {limit:,} bytes; not a {kind}")
+    return raw
+
+
 def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read a YAML file that must hold a mapping.
 
@@ -156,13 +175,7 @@ def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
 
     """
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read(MAX_YAML_BYTES + 1)
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
-    if len(raw) > MAX_YAML_BYTES:
-        raise ConfigError(f"{path}: larger than {MAX_YAML_BYTES:,} bytes; not a tank or config")
+    raw = read_limited(path, MAX_YAML_BYTES, ConfigError, "file", "tank or config")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

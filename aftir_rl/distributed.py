@@ -157,8 +157,11 @@ def ray_session(
         yield ray
         return
     os.environ.setdefault("RAY_DEDUP_LOGS", "0")
-    kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": log_to_driver,
-                              "logging_level": "error"}  # fmt: skip
+    kwargs: dict[str, Any] = {
+        "include_dashboard": False,
+        "log_to_driver": log_to_driver,
+        "logging_level": "error",
+    }
     if address not in ("local", "auto"):
         _check_reachable(address)
     try:
@@ -299,8 +302,12 @@ def benchmark_on_ray(
     """
     from aftir_rl.bench import Row, sb3_outcomes
 
-    items = [(name, method, tank, target) for name, items_ in sets.items()
-             for method in methods.get(name, ()) for tank, target in items_]  # fmt: skip
+    items = [
+        (name, method, tank, target)
+        for name, items_ in sets.items()
+        for method in methods.get(name, ())
+        for tank, target in items_
+    ]
     # The longest items first (the time-budgeted OMPL ones, then Q-learning), so no long task
     # starts last while the other workers idle; results are put back in the serial order.
     order = sorted(range(len(items)), key=lambda i: _SLOW_FIRST.get(items[i][1], 9))
@@ -351,9 +358,16 @@ def _call(fn: Callable[..., Any], args: tuple[Any, ...]) -> Any:
 def failed_evaluation(error: str) -> dict[str, Any]:
     """A row of ``evaluate``'s table for a run whose evaluation failed."""
     nan = math.nan
-    return {"agent": "-", "targets": 0, "success_rate": nan, "tip_error_cm": nan,
-            "path_length_cm": nan, "min_clearance_cm": nan, "seconds_per_target": nan,
-            "note": f"task failed: {error}"}  # fmt: skip
+    return {
+        "agent": "-",
+        "targets": 0,
+        "success_rate": nan,
+        "tip_error_cm": nan,
+        "path_length_cm": nan,
+        "min_clearance_cm": nan,
+        "seconds_per_target": nan,
+        "note": f"task failed: {error}",
+    }
 
 
 def evaluate_on_ray(
@@ -373,8 +387,10 @@ def evaluate_on_ray(
 
     for r in runs:  # a path that is no run directory is the user's error, before any task
         run = Path(r)
-        if not ((run / "q_table.npz").exists()
-                or ((run / "model.zip").exists() and (run / "config.json").exists())):  # fmt: skip
+        if not (
+            (run / "q_table.npz").exists()
+            or ((run / "model.zip").exists() and (run / "config.json").exists())
+        ):
             raise CheckpointError(
                 f"{r}: not a run directory (no q_table.npz, nor model.zip with config.json)"
             )

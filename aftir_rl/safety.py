@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from aftir_rl.config import shorten
+from aftir_rl.config import read_limited, shorten
 from aftir_rl.errors import AftirError, CheckpointError, ConfigError
 
 __all__ = ["MAX_JSON_BYTES", "registered_env_id", "read_json", "cli", "check_writable_dir"]
@@ -60,13 +60,7 @@ def registered_env_id(value: Any, where: str, allowed: Iterable[str] | None = No
 def read_json(path: str | os.PathLike[str], what: str = "file") -> Any:
     """Parse a JSON file of at most :data:`MAX_JSON_BYTES`, or raise :class:`CheckpointError`."""
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read(MAX_JSON_BYTES + 1)
-    except OSError as exc:
-        raise CheckpointError(f"{path}: cannot read the {what} ({exc.strerror or exc})") from None
-    if len(raw) > MAX_JSON_BYTES:
-        raise CheckpointError(f"{path}: larger than {MAX_JSON_BYTES:,} bytes; not a {what}")
+    raw = read_limited(path, MAX_JSON_BYTES, CheckpointError, what, what)
     try:
         return json.loads(raw.decode("utf-8"))
     except (UnicodeDecodeError, ValueError, RecursionError) as exc:

@@ -1,9 +1,9 @@
 """``aftir tune ALGO``: a hyperparameter sweep of PPO, SAC or TD3 on Ray Tune.
 
 Optuna (``OptunaSearch``) samples the algorithm's search space
-(``configs/search_spaces/<algo>.yaml``, :func:`load_search_space`); ASHA stops the trials that
-trail on ``eval/success_rate`` at each evaluation. Every trial is a normal run of
-:func:`aftir_rl.train.train_sb3` (its own run directory: ``model.zip``, ``config.json``,
+(``configs/search_spaces/<algo>.yaml``, :func:`aftir_rl.search_space.load_search_space`); ASHA
+stops the trials that trail on ``eval/success_rate`` at each evaluation. Every trial is a normal
+run of :func:`aftir_rl.train.train_sb3` (its own run directory: ``model.zip``, ``config.json``,
 ``summary.json``, ``progress.csv``, TensorBoard events), so ``evaluate``, ``bench --model`` and
 ``view`` take it as they take any run. A sweep writes ``LOGDIR/tune__<algo>__<env>__<time>/``:
 
@@ -33,17 +33,14 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from aftir_rl.config import CONFIG_DIR, brief, read_yaml, to_float
+from aftir_rl.config import CONFIG_DIR
 from aftir_rl.errors import AftirError, ConfigError
 from aftir_rl.safety import cli
+from aftir_rl.search_space import DISTRIBUTIONS, Dimension, load_search_space
 
 __all__ = ["DISTRIBUTIONS", "Dimension", "TuneError", "load_search_space", "run_sweep", "main"]
 
 ALGOS = ("ppo", "sac", "td3")
-#: The distributions a search space may use, as ``{name: [arguments]}``.
-DISTRIBUTIONS = ("loguniform", "uniform", "randint", "choice")
-#: The most hyperparameters a search space may name, and the most values of one ``choice``.
-MAX_KEYS, MAX_CHOICES = 32, 64
 #: Bounds of the command line's numbers.
 MAX_TRIALS, MAX_EVALUATIONS = 10_000, 100
 METRIC = "eval/success_rate"
@@ -51,122 +48,6 @@ METRIC = "eval/success_rate"
 
 class TuneError(AftirError, RuntimeError):
     """A sweep produced no trial to take a config from."""
-
-
-@dataclasses.dataclass(frozen=True)
-class Dimension:
-    """One hyperparameter of a search space.
-
-    Attributes:
-        key: the hyperparameter (an argument of the algorithm's constructor).
-        kind: one of :data:`DISTRIBUTIONS`.
-        values: ``(low, high)`` for the ranges, the values for ``choice``.
-
-    """
-
-    key: str
-    kind: str
-    values: tuple[Any, ...]
-
-    def extremes(self) -> tuple[Any, ...]:
-        """The values that bound what this dimension can sample (each is checked)."""
-        return self.values
-
-    def to_tune(self) -> Any:
-        """The Ray Tune domain (``tune.loguniform``...)."""
-        from ray import tune
-
-        if self.kind == "loguniform":
-            return tune.loguniform(*self.values)
-        if self.kind == "uniform":
-            return tune.uniform(*self.values)
-        if self.kind == "randint":
-            return tune.randint(self.values[0], self.values[1] + 1)  # tune's upper is excluded
-        return tune.choice(list(self.values))
-
-
-def _number(value: Any, where: str, integer: bool) -> float | int:
-    number = to_float(value, where)
-    if integer:
-        if not float(number).is_integer():
-            raise ConfigError(f"{where}: expected an integer, got {brief(value)}")
-        return int(number)
-    return number
-
-
-def _dimension(key: str, spec: Any, where: str) -> Dimension:
-    if not isinstance(spec, dict) or len(spec) != 1:
-        raise ConfigError(
-            f"{where}: expected one distribution ({', '.join(DISTRIBUTIONS)}), e.g. "
-            f"{{loguniform: [1.0e-5, 1.0e-3]}}, got {brief(spec)}"
-        )
-    (kind, args), = spec.items()  # fmt: skip
-    if kind not in DISTRIBUTIONS:
-        raise ConfigError(
-            f"{where}: unknown distribution {brief(kind)}; use one of {', '.join(DISTRIBUTIONS)}"
-        )
-    if not isinstance(args, list):
-        raise ConfigError(f"{where}.{kind}: expected a list, got {brief(args)}")
-    if kind == "choice":
-        if not 1 <= len(args) <= MAX_CHOICES:
-            raise ConfigError(f"{where}.choice: expected 1 to {MAX_CHOICES} values")
-        values = []
-        for i, v in enumerate(args):
-            if v is not None and not isinstance(v, (bool, int, float, str)):
-                raise ConfigError(f"{where}.choice[{i}]: expected a plain value, got {brief(v)}")
-            if isinstance(v, str):
-                try:
-                    v = to_float(v, where)
-                except ConfigError:
-                    pass
-            values.append(v)
-        if len(set(map(repr, values))) != len(values):
-            raise ConfigError(f"{where}.choice: a value is repeated")
-        return Dimension(key, kind, tuple(values))
-    if len(args) != 2:
-        raise ConfigError(f"{where}.{kind}: expected [LOW, HIGH], got {brief(args)}")
-    lo, hi = (_number(v, f"{where}.{kind}", kind == "randint") for v in args)
-    if lo > hi or (lo == hi and kind != "randint"):
-        raise ConfigError(f"{where}.{kind}: LOW must be below HIGH, got {brief(args)}")
-    if kind == "loguniform" and lo <= 0:
-        raise ConfigError(f"{where}.loguniform: LOW must be above 0, got {brief(args)}")
-    return Dimension(key, kind, (lo, hi))
-
-
-def load_search_space(path: str | os.PathLike[str], algo: str, base: Any) -> list[Dimension]:
-    """Read and check a search space YAML for ``algo`` against the base config ``base``.
-
-    Every bound (``LOW``, ``HIGH``, each ``choice``) is put into ``base`` and checked as a config
-    value would be (:func:`aftir_rl.agents.sb3.check_sb3_config`), so no trial can ask for what a
-    config file could not.
-
-    Raises:
-        ConfigError: naming the file and the key.
-
-    """
-    from aftir_rl.agents.sb3 import _OBJECTS, _constructor_keys, check_sb3_config
-
-    data = read_yaml(path)
-    unknown = sorted(set(data) - {"hyperparameters"}, key=str)
-    if unknown:
-        raise ConfigError(f"{path}: unknown key {brief(unknown[0])}; allowed key: hyperparameters")
-    hyper = data.get("hyperparameters")
-    if not isinstance(hyper, dict) or not 1 <= len(hyper) <= MAX_KEYS:
-        raise ConfigError(f"{path}: hyperparameters: expected a mapping of 1 to {MAX_KEYS} keys")
-    allowed = _constructor_keys(algo) - set(_OBJECTS) - {"policy_kwargs", "device"}
-    space = []
-    for key, spec in hyper.items():
-        if not isinstance(key, str) or key not in allowed:
-            raise ConfigError(
-                f"{path}: hyperparameters: unknown key {brief(key)} for {algo.upper()}; allowed "
-                f"keys are {', '.join(sorted(allowed))}"
-            )
-        dim = _dimension(key, spec, f"{path}: hyperparameters.{key}")
-        for value in dim.extremes():
-            trial = dataclasses.replace(base, hyperparameters={**base.hyperparameters, key: value})
-            check_sb3_config(trial, algo, f"{path} ({dim.kind} bound)")
-        space.append(dim)
-    return space
 
 
 # ---------------------------------------------------------------- one trial (a Ray worker)
@@ -186,7 +67,7 @@ def _trial(params: dict[str, Any], algo: str, base: Any, logdir: str, seed: int)
     """Train one trial with ``params`` and report every evaluation to Ray Tune."""
     from ray import tune
 
-    from aftir_rl.agents.sb3 import save_model
+    from aftir_rl.agents.sb3_eval import save_model
     from aftir_rl.train import train_sb3
 
     hyper = {**base.hyperparameters, **{k: _plain(v) for k, v in params.items()}}
@@ -194,8 +75,11 @@ def _trial(params: dict[str, Any], algo: str, base: Any, logdir: str, seed: int)
     total = config.total_timesteps
 
     def metrics_of(model: Any, metrics: dict[str, float], run_dir: Path) -> dict[str, Any]:
-        return {**{f"eval/{k}": float(v) for k, v in metrics.items()},
-                "timesteps": int(model.num_timesteps), "run_dir": str(run_dir)}  # fmt: skip
+        return {
+            **{f"eval/{k}": float(v) for k, v in metrics.items()},
+            "timesteps": int(model.num_timesteps),
+            "run_dir": str(run_dir),
+        }
 
     last: dict[str, Any] = {}
 
@@ -208,8 +92,9 @@ def _trial(params: dict[str, Any], algo: str, base: Any, logdir: str, seed: int)
         save_model(model, partial / "model.zip")
         tune.report(metrics_of(model, metrics, _final_name(partial)))
 
-    summary = train_sb3(algo, config, seed=seed, logdir=logdir, progress_bar=False,
-                        on_evaluation=report)  # fmt: skip
+    summary = train_sb3(
+        algo, config, seed=seed, logdir=logdir, progress_bar=False, on_evaluation=report
+    )
     tune.report({**last, "run_dir": summary["run_dir"], "completed": 1})
 
 
@@ -221,11 +106,18 @@ def _finish_stopped(run_dir: Path, result: dict[str, Any], algo: str, env_id: st
     if run_dir.exists() or not (partial / "model.zip").exists():
         return
     metrics = {k[len("eval/") :]: v for k, v in result.items() if k.startswith("eval/")}
-    write_json(partial / "summary.json", {
-        "algo": algo, "env_id": env_id, "timesteps": int(result.get("timesteps", 0)),
-        "seconds": float(result.get("time_total_s", math.nan)), "run_dir": str(run_dir),
-        "stopped_early": True, **metrics,
-    })  # fmt: skip
+    write_json(
+        partial / "summary.json",
+        {
+            "algo": algo,
+            "env_id": env_id,
+            "timesteps": int(result.get("timesteps", 0)),
+            "seconds": float(result.get("time_total_s", math.nan)),
+            "run_dir": str(run_dir),
+            "stopped_early": True,
+            **metrics,
+        },
+    )
     partial.rename(run_dir)
 
 
@@ -289,9 +181,12 @@ def run_sweep(
             {"cpu": base.n_envs},
         )
         rungs = max(1, base.total_timesteps // base.eval_freq)
-        scheduler = ASHAScheduler(time_attr="timesteps", max_t=base.total_timesteps,
-                                  grace_period=min(base.eval_freq, base.total_timesteps),
-                                  reduction_factor=2 if rungs < 8 else 3)  # fmt: skip
+        scheduler = ASHAScheduler(
+            time_attr="timesteps",
+            max_t=base.total_timesteps,
+            grace_period=min(base.eval_freq, base.total_timesteps),
+            reduction_factor=2 if rungs < 8 else 3,
+        )
         tuner = tune.Tuner(
             trainable,
             param_space={d.key: d.to_tune() for d in space},
@@ -301,10 +196,10 @@ def run_sweep(
                 num_samples=trials,
                 scheduler=scheduler,
                 search_alg=OptunaSearch(seed=seed),
-            ),  # fmt: skip
+            ),
             run_config=tune.RunConfig(
                 name="ray", storage_path=str(sweep), verbose=verbose, log_to_file=True
-            ),  # fmt: skip
+            ),
         )
         grid = tuner.fit()
         rows = []
@@ -321,15 +216,17 @@ def run_sweep(
                 cause = getattr(result.error, "cause", None) or result.error
                 text = " ".join(str(cause).split()[-40:])
                 error = f"{type(cause).__name__}: {text}"[-200:]
-            rows.append({
-                **params,
-                "success_rate": metrics.get(METRIC, math.nan),
-                "tip_error_cm": metrics.get("eval/tip_error_cm", math.nan),
-                "timesteps": metrics.get("timesteps", 0),
-                "stopped_early": stopped,
-                "run_dir": str(run_dir) if run_dir else "",
-                "error": error,
-            })  # fmt: skip
+            rows.append(
+                {
+                    **params,
+                    "success_rate": metrics.get(METRIC, math.nan),
+                    "tip_error_cm": metrics.get("eval/tip_error_cm", math.nan),
+                    "timesteps": metrics.get("timesteps", 0),
+                    "stopped_early": stopped,
+                    "run_dir": str(run_dir) if run_dir else "",
+                    "error": error,
+                }
+            )
     with open(sweep / "trials.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["error"])
         writer.writeheader()
@@ -381,26 +278,46 @@ def _parser() -> argparse.ArgumentParser:
         'pip install "aftir_rl[ray]".',
     )
     parser.add_argument("algo", choices=ALGOS, metavar="ALGO", help="ppo, sac or td3")
-    parser.add_argument("--env", help="environment id (default: the config's), e.g. "
-                        "AFTIR-ArmReach-v0")  # fmt: skip
-    parser.add_argument("--trials", type=int, default=8, metavar="N",
-                        help="number of trials (default 8)")  # fmt: skip
-    parser.add_argument("--ray", default="local", metavar="ADDRESS",
-                        help="local (a Ray on this machine, the default), auto or HOST:PORT (a "
-                        "cluster started with ray start)")  # fmt: skip
-    parser.add_argument("--workers", type=int, metavar="N",
-                        help="CPUs of --ray local (default: every core)")  # fmt: skip
-    parser.add_argument("--logdir", default="runs",
-                        help="parent of the sweep folder (default runs/)")  # fmt: skip
-    parser.add_argument("--total-timesteps", type=int, metavar="T",
-                        help="training steps of each trial (default: the config's)")  # fmt: skip
-    parser.add_argument("--evaluations", type=int, default=4, metavar="K",
-                        help="evaluations per trial, ASHA's rungs (default 4)")  # fmt: skip
-    parser.add_argument("--n-envs", type=int, metavar="N",
-                        help="envs (and CPUs) of each trial (default: the config's)")  # fmt: skip
+    parser.add_argument(
+        "--env", help="environment id (default: the config's), e.g. AFTIR-ArmReach-v0"
+    )
+    parser.add_argument(
+        "--trials", type=int, default=8, metavar="N", help="number of trials (default 8)"
+    )
+    parser.add_argument(
+        "--ray",
+        default="local",
+        metavar="ADDRESS",
+        help="local (a Ray on this machine, the default), auto or HOST:PORT (a "
+        "cluster started with ray start)",
+    )
+    parser.add_argument(
+        "--workers", type=int, metavar="N", help="CPUs of --ray local (default: every core)"
+    )
+    parser.add_argument(
+        "--logdir", default="runs", help="parent of the sweep folder (default runs/)"
+    )
+    parser.add_argument(
+        "--total-timesteps",
+        type=int,
+        metavar="T",
+        help="training steps of each trial (default: the config's)",
+    )
+    parser.add_argument(
+        "--evaluations",
+        type=int,
+        default=4,
+        metavar="K",
+        help="evaluations per trial, ASHA's rungs (default 4)",
+    )
+    parser.add_argument(
+        "--n-envs",
+        type=int,
+        metavar="N",
+        help="envs (and CPUs) of each trial (default: the config's)",
+    )
     parser.add_argument("--config", help="base config (default: configs/ALGO.yaml)")
-    parser.add_argument("--space",
-                        help="search space (default: configs/search_spaces/ALGO.yaml)")  # fmt: skip
+    parser.add_argument("--space", help="search space (default: configs/search_spaces/ALGO.yaml)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every trial (default 0)")
     parser.add_argument("--quiet", action="store_true", help="no Ray Tune status tables")
     return parser
@@ -411,9 +328,12 @@ def _base_config(args: argparse.Namespace) -> Any:
     from aftir_rl.agents.sb3 import check_sb3_config, load_sb3_config
 
     config = load_sb3_config(args.config or CONFIG_DIR / f"{args.algo}.yaml", args.algo)
-    for flag, value in (("--trials", args.trials), ("--evaluations", args.evaluations),
-                        ("--total-timesteps", args.total_timesteps),
-                        ("--n-envs", args.n_envs)):  # fmt: skip
+    for flag, value in (
+        ("--trials", args.trials),
+        ("--evaluations", args.evaluations),
+        ("--total-timesteps", args.total_timesteps),
+        ("--n-envs", args.n_envs),
+    ):
         if value is not None and value < 1:
             raise ConfigError(f"{flag} must be at least 1, got {value}")
     if args.trials > MAX_TRIALS or args.evaluations > MAX_EVALUATIONS:
@@ -433,10 +353,10 @@ def _base_config(args: argparse.Namespace) -> Any:
     total = config.total_timesteps
     config = dataclasses.replace(config, eval_freq=max(1, math.ceil(total / args.evaluations)))
     check_sb3_config(config, args.algo, "the command line")
+    from aftir_rl.agents.sb3_config import SB3_ENV_IDS
     from aftir_rl.train import _check_env_id
 
-    _check_env_id(config.env_id, ("AFTIR-ArmReach-v0", "AFTIR-Arm-v0", "AFTIR-ArmFTL-v0"),
-                  args.algo)  # fmt: skip
+    _check_env_id(config.env_id, SB3_ENV_IDS, args.algo)
     return config
 
 
@@ -450,19 +370,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     base = _base_config(args)
     space_path = args.space or CONFIG_DIR / "search_spaces" / f"{args.algo}.yaml"
     space = load_search_space(space_path, args.algo, base)
-    out = run_sweep(args.algo, base, space, args.trials, logdir=args.logdir, ray=args.ray,
-                    workers=args.workers, seed=args.seed,
-                    verbose=0 if args.quiet else 1)  # fmt: skip
+    out = run_sweep(
+        args.algo,
+        base,
+        space,
+        args.trials,
+        logdir=args.logdir,
+        ray=args.ray,
+        workers=args.workers,
+        seed=args.seed,
+        verbose=0 if args.quiet else 1,
+    )
     keys = [d.key for d in space]
     print(f"| trial | {' | '.join(keys)} | success | tip error (cm) | steps | run |")
     print("|---:|" + "---:|" * len(keys) + "---:|---:|---:|---|")
     for i, r in enumerate(out["trials"]):
         values = " | ".join(f"{r[k]:.3g}" if isinstance(r[k], float) else str(r[k]) for k in keys)
         run = Path(r["run_dir"]).name if r["run_dir"] else "–"
-        note = f" (error: {r['error']})" if r["error"] else (
-            " (stopped early)" if r["stopped_early"] else "")  # fmt: skip
-        print(f"| {i} | {values} | {r['success_rate']:.0%} | {r['tip_error_cm']:.2f} | "
-              f"{r['timesteps']} | {run}{note} |")  # fmt: skip
+        note = (
+            f" (error: {r['error']})"
+            if r["error"]
+            else (" (stopped early)" if r["stopped_early"] else "")
+        )
+        print(
+            f"| {i} | {values} | {r['success_rate']:.0%} | {r['tip_error_cm']:.2f} | "
+            f"{r['timesteps']} | {run}{note} |"
+        )
     print(f"sweep: {out['sweep_dir']}")
     print(f"best config: {out['best_yaml']} (aftir train {args.algo} --config {out['best_yaml']})")
     return 0

@@ -43,8 +43,9 @@ hyperparameters:
 
 
 def _python(*args: str, timeout: float = 600, **kwargs) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=ROOT,
-                          timeout=timeout, **kwargs)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, *args], capture_output=True, text=True, cwd=ROOT, timeout=timeout, **kwargs
+    )
 
 
 #: Bench methods whose clearance and path come from OMPL's path simplifier, which runs for a time
@@ -85,7 +86,7 @@ def test_modules_import_without_ray():
 @pytest.mark.parametrize(
     "module,args",
     [
-        ("aftir_rl.bench", ["--sets", "seed004", "--ray", "local"]),
+        ("aftir_rl.bench", ["--sets", "jace", "--ray", "local"]),
         ("aftir_rl.evaluate", ["runs/none", "--ray", "local"]),
         ("aftir_rl.tune", ["ppo", "--trials", "2"]),
     ],
@@ -114,7 +115,7 @@ def test_ray_missing_is_one_line(module, args):
 def test_bad_ray_options(args, message, capsys):
     from aftir_rl.bench import main
 
-    assert main(["--sets", "seed004", "--quiet", *args]) == 2
+    assert main(["--sets", "jace", "--quiet", *args]) == 2
     err = capsys.readouterr().err
     assert message in err and err.strip().count("\n") == 0
 
@@ -128,7 +129,7 @@ def test_no_cluster_at_the_address_is_one_line(capsys):
     with socket.socket() as sock:  # a port nothing listens on
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    assert main(["--sets", "seed004", "--quiet", "--ray", f"127.0.0.1:{port}"]) == 2
+    assert main(["--sets", "jace", "--quiet", "--ray", f"127.0.0.1:{port}"]) == 2
     err = capsys.readouterr().err
     assert "cannot reach a Ray cluster" in err and err.strip().count("\n") == 0
 
@@ -250,8 +251,8 @@ def test_failed_tasks_are_results(local_ray, tmp_path):
     assert out[0] == (3, 1) and out[2] == (2, 1)
     assert isinstance(out[1], TaskFailure) and out[1].error.startswith("ZeroDivisionError")
 
-    sets = {"seed004": target_sets(1)["seed004"][:2]}
-    rows = benchmark_on_ray(sets, {"seed004": ("tga", "no_such_method")}, {"seed": 0})
+    sets = {"jace": target_sets(1)["jace"][:2]}
+    rows = benchmark_on_ray(sets, {"jace": ("tga", "no_such_method")}, {"seed": 0})
     assert [r.method for r in rows] == ["tga", "no_such_method"]
     assert all(o.success for o in rows[0].outcomes)
     assert all(o.note.startswith("task failed: ") for o in rows[1].outcomes)
@@ -267,13 +268,13 @@ def test_failed_tasks_are_results(local_ray, tmp_path):
 @pytest.mark.slow
 def test_bench_on_ray_gives_the_serial_table():
     pytest.importorskip("ray")
-    args = ["-m", "aftir_rl.bench", "--sets", "seed004", "bay1", "--n-random", "2", "--quiet"]
+    args = ["-m", "aftir_rl.bench", "--sets", "jace", "bay1", "--n-random", "2", "--quiet"]
     serial = _python(*args)
     assert serial.returncode == 0, serial.stderr
     on_ray = _python(*args, "--ray", "local", "--workers", "2")
     assert on_ray.returncode == 0, on_ray.stderr
     rows = _without_seconds(serial.stdout)
-    assert len(rows) == 1 + 4 + 7  # header, the seed004 and bay1 methods
+    assert len(rows) == 1 + 4 + 7  # header, the jace and bay1 methods
     assert _without_seconds(on_ray.stdout) == rows
 
 
@@ -284,10 +285,27 @@ def sweep(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("tune")
     (tmp / "base.yaml").write_text(BASE_PPO)
     (tmp / "space.yaml").write_text(SPACE_PPO)
-    run = _python("-m", "aftir_rl.tune", "ppo", "--env", "AFTIR-ArmReach-v0", "--trials", "8",
-                  "--workers", "2", "--total-timesteps", "256", "--config", str(tmp / "base.yaml"),
-                  "--space", str(tmp / "space.yaml"), "--logdir", str(tmp / "runs"), "--quiet",
-                  timeout=300)  # fmt: skip
+    run = _python(
+        "-m",
+        "aftir_rl.tune",
+        "ppo",
+        "--env",
+        "AFTIR-ArmReach-v0",
+        "--trials",
+        "8",
+        "--workers",
+        "2",
+        "--total-timesteps",
+        "256",
+        "--config",
+        str(tmp / "base.yaml"),
+        "--space",
+        str(tmp / "space.yaml"),
+        "--logdir",
+        str(tmp / "runs"),
+        "--quiet",
+        timeout=300,
+    )
     assert run.returncode == 0, run.stderr[-3000:]
     (folder,) = (tmp / "runs").glob("tune__ppo__AFTIR-ArmReach-v0__*")
     return tmp, folder, run.stdout
@@ -307,9 +325,18 @@ def test_sweep_writes_runs_and_a_best_config(sweep):
     assert not list(folder.glob(".*.partial"))
     assert "best config:" in stdout and (folder / "best.yaml").exists()
     # `train ppo --config best.yaml` takes it
-    run = _python("-m", "aftir_rl.train", "ppo", "--config", str(folder / "best.yaml"),
-                  "--total-timesteps", "64", "--logdir", str(tmp / "again"),
-                  "--no-progress")  # fmt: skip
+    run = _python(
+        "-m",
+        "aftir_rl.train",
+        "ppo",
+        "--config",
+        str(folder / "best.yaml"),
+        "--total-timesteps",
+        "64",
+        "--logdir",
+        str(tmp / "again"),
+        "--no-progress",
+    )
     assert run.returncode == 0, run.stderr[-2000:]
 
 

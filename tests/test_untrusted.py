@@ -66,10 +66,19 @@ def ppo_run(tmp_path_factory):
     run.mkdir()
     model = PPO("MlpPolicy", gym.make("AFTIR-ArmReach-v0"), n_steps=64, batch_size=32, seed=0)
     model.save(run / "model.zip")
-    config = {"env_id": "AFTIR-ArmReach-v0", "total_timesteps": 128, "n_envs": 1,
-              "eval_freq": 100000, "eval_targets": 2, "checkpoint_freq": 64,
-              "policy": "MlpPolicy", "hyperparameters": {"n_steps": 64, "batch_size": 32},
-              "algo": "ppo", "seed": 0, "resume": None}  # fmt: skip
+    config = {
+        "env_id": "AFTIR-ArmReach-v0",
+        "total_timesteps": 128,
+        "n_envs": 1,
+        "eval_freq": 100000,
+        "eval_targets": 2,
+        "checkpoint_freq": 64,
+        "policy": "MlpPolicy",
+        "hyperparameters": {"n_steps": 64, "batch_size": 32},
+        "algo": "ppo",
+        "seed": 0,
+        "resume": None,
+    }
     (run / "config.json").write_text(json.dumps(config))
     return run
 
@@ -143,11 +152,23 @@ def test_malicious_model_refused_by_evaluate_resume_and_bench(ppo_run, tmp_path,
     assert "refused" in capsys.readouterr().err
     config = tmp_path / "ppo.yaml"
     config.write_text(PPO_YAML)
-    rc = train.main(["ppo", "--config", str(config), "--resume", str(run), "--no-progress",
-                     "--total-timesteps", "64", "--logdir", str(tmp_path / "again")])  # fmt: skip
+    rc = train.main(
+        [
+            "ppo",
+            "--config",
+            str(config),
+            "--resume",
+            str(run),
+            "--no-progress",
+            "--total-timesteps",
+            "64",
+            "--logdir",
+            str(tmp_path / "again"),
+        ]
+    )
     assert rc == 2 and "refused" in capsys.readouterr().err
     assert not (tmp_path / "again").exists() or not any((tmp_path / "again").iterdir())
-    assert bench.main(["--model", str(run), "--sets", "seed004", "--quiet"]) == 2
+    assert bench.main(["--model", str(run), "--sets", "jace", "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "refused" in err and len(err.strip().splitlines()) == 1
     assert not marker.exists()
@@ -158,8 +179,11 @@ def test_malicious_model_one_line_in_a_subprocess(ppo_run, tmp_path):
     marker = tmp_path / "marker"
     run = _copy_run(ppo_run, tmp_path / "run")
     _poison(run, "pth_torch", marker)
-    proc = subprocess.run([sys.executable, "-m", "aftir_rl.evaluate", str(run), "--logdir",
-                           str(tmp_path / "ev")], capture_output=True, text=True)  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-m", "aftir_rl.evaluate", str(run), "--logdir", str(tmp_path / "ev")],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2 and not marker.exists()
     assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
 
@@ -204,8 +228,12 @@ def test_config_json_not_a_config(ppo_run, tmp_path, text, capsys):
 def _q_checkpoint(path: Path, **extra) -> Path:
     env = gym.make("AFTIR-Tank-v0", target=(230, 140, 90))
     agent = QLearning(env, seed=0)
-    meta = {"env_id": "AFTIR-Tank-v0", "tank": "b737_center", "target": [230.0, 140.0, 90.0],
-            "target_cell": list(env.unwrapped.target_cell)}  # fmt: skip
+    meta = {
+        "env_id": "AFTIR-Tank-v0",
+        "tank": "b737_center",
+        "target": [230.0, 140.0, 90.0],
+        "target_cell": list(env.unwrapped.target_cell),
+    }
     hyper = extra.pop("hyperparameters", None)
     agent.save(path, extra={**meta, **extra})
     if hyper is not None:  # rewrite the metadata as an attacker would
@@ -250,16 +278,46 @@ def test_malformed_q_table_metadata(tmp_path, extra, message):
 
 def test_q_table_from_another_tank_is_refused(tmp_path, capsys):
     path = _q_checkpoint(tmp_path / "q.npz", tank_fingerprint="0123456789abcdef")
-    rc = train.main(["q_table", "--target", "230", "140", "90", "--resume", str(path),
-                     "--episodes", "1", "--no-postures", "--no-progress", "--logdir",
-                     str(tmp_path / "runs")])  # fmt: skip
+    rc = train.main(
+        [
+            "q_table",
+            "--target",
+            "230",
+            "140",
+            "90",
+            "--resume",
+            str(path),
+            "--episodes",
+            "1",
+            "--no-postures",
+            "--no-progress",
+            "--logdir",
+            str(tmp_path / "runs"),
+        ]
+    )
     assert rc == 2 and "another tank" in capsys.readouterr().err
 
 
 def test_q_table_checkpoint_records_the_tank(tmp_path):
     run = tmp_path / "runs"
-    assert train.main(["q_table", "--target", "-50", "72", "90", "--episodes", "300",
-                       "--no-postures", "--no-progress", "--logdir", str(run)]) == 0  # fmt: skip
+    assert (
+        train.main(
+            [
+                "q_table",
+                "--target",
+                "-50",
+                "72",
+                "90",
+                "--episodes",
+                "300",
+                "--no-postures",
+                "--no-progress",
+                "--logdir",
+                str(run),
+            ]
+        )
+        == 0
+    )
     (run_dir,) = run.iterdir()
     _, meta = QLearning.read_checkpoint(run_dir / "q_table.npz")
     assert meta["tank_fingerprint"] == load_tank("b737_center").fingerprint
@@ -352,19 +410,29 @@ def test_plan_does_not_build_the_raster(tmp_path):
 
 def test_tank_cli_one_line_and_closed_stdout(tmp_path):
     bad = _tank(tmp_path, _ref("box: {min: [-60, -50, 0]", "box: {min: [-1e200, -50, 0]"))
-    proc = subprocess.run([sys.executable, "-m", "aftir_rl.cli", "tank", "--tank", str(bad)],
-                          capture_output=True, text=True)  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-m", "aftir_rl.cli", "tank", "--tank", str(bad)],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
     # a reader that went away: one line, exit 2
-    proc = subprocess.Popen([sys.executable, "-m", "aftir_rl.cli", "tank", "--json"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "aftir_rl.cli", "tank", "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     proc.stdout.close()
     err = proc.stderr.read().decode()
     assert proc.wait() == 2 and "broken pipe" in err and len(err.strip().splitlines()) == 1
     # a full disk
     with open("/dev/full", "w") as full:
-        proc = subprocess.run([sys.executable, "-m", "aftir_rl.cli", "tank", "--json"], stdout=full,
-                              stderr=subprocess.PIPE, text=True)  # fmt: skip
+        proc = subprocess.run(
+            [sys.executable, "-m", "aftir_rl.cli", "tank", "--json"],
+            stdout=full,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
     assert proc.returncode == 2 and "no space left" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
 
@@ -391,8 +459,9 @@ def test_bad_sb3_config_refused_before_training(tmp_path, yaml_text, message, ca
     config = tmp_path / "ppo.yaml"
     config.write_text("env_id: AFTIR-ArmReach-v0\n" + yaml_text)
     start = time.perf_counter()
-    rc = train.main(["ppo", "--config", str(config), "--logdir", str(tmp_path / "runs"),
-                     "--no-progress"])  # fmt: skip
+    rc = train.main(
+        ["ppo", "--config", str(config), "--logdir", str(tmp_path / "runs"), "--no-progress"]
+    )
     err = capsys.readouterr().err
     assert rc == 2 and message in err and len(err.strip().splitlines()) == 1
     assert time.perf_counter() - start < 5
@@ -433,7 +502,7 @@ def test_resumed_callbacks_continue_their_counters():
 
     callback = AtomicCheckpoint(Path("/nonexistent"), 50)
     callback.init_callback(Model())  # type: ignore[arg-type]
-    assert callback._next == 200
+    assert callback._period.next_step == 200
 
 
 @pytest.mark.slow
@@ -441,9 +510,23 @@ def test_ctrl_c_saves_a_resumable_partial_run(tmp_path):
     config = tmp_path / "ppo.yaml"
     config.write_text(PPO_YAML.replace("checkpoint_freq: 64", "checkpoint_freq: 100000"))
     runs = tmp_path / "runs"
-    proc = subprocess.Popen([sys.executable, "-m", "aftir_rl.train", "ppo", "--config",
-                             str(config), "--total-timesteps", "1000000", "--logdir", str(runs),
-                             "--no-progress"], stderr=subprocess.PIPE, text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "aftir_rl.train",
+            "ppo",
+            "--config",
+            str(config),
+            "--total-timesteps",
+            "1000000",
+            "--logdir",
+            str(runs),
+            "--no-progress",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.time() + 60
     while time.time() < deadline and not list(runs.glob(".*.partial/progress.csv")):
         time.sleep(0.2)
@@ -461,9 +544,23 @@ def test_ctrl_c_saves_a_resumable_partial_run(tmp_path):
     # --resume RUN_DIR continues from that checkpoint; its checkpoints follow on, no burst
     config.write_text(PPO_YAML)
     again = tmp_path / "again"
-    assert train.main(["ppo", "--config", str(config), "--resume", str(partial),
-                       "--total-timesteps", "128", "--logdir", str(again),
-                       "--no-progress"]) == 0  # fmt: skip
+    assert (
+        train.main(
+            [
+                "ppo",
+                "--config",
+                str(config),
+                "--resume",
+                str(partial),
+                "--total-timesteps",
+                "128",
+                "--logdir",
+                str(again),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     (run_dir,) = again.iterdir()
     assert not run_dir.name.startswith(".") and (run_dir / "model.zip").exists()
     saved = sorted(int(p.stem.split("_")[1]) for p in (run_dir / "checkpoints").iterdir())

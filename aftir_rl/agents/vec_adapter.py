@@ -133,8 +133,13 @@ def make_batched_vec_env(
     kwargs = dict(env_kwargs or {})
     if spec.max_episode_steps is not None:
         kwargs.setdefault("max_episode_steps", spec.max_episode_steps)
-    venv = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point",
-                        autoreset_mode=AutoresetMode.SAME_STEP, **kwargs)  # fmt: skip
+    venv = gym.make_vec(
+        env_id,
+        num_envs=n_envs,
+        vectorization_mode="vector_entry_point",
+        autoreset_mode=AutoresetMode.SAME_STEP,
+        **kwargs,
+    )
     out = VecMonitor(SB3VectorEnv(venv))
     out.seed(seed)
     return out

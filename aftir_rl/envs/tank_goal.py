@@ -15,7 +15,7 @@ Stable-Baselines3's ``HerReplayBuffer`` relies on:
 - :meth:`TankGoalEnv.compute_reward`, :meth:`TankGoalEnv.compute_terminated` and
   :meth:`TankGoalEnv.compute_truncated`, vectorised over leading batch axes.
 
-**How hits are represented.** Seed 002's −100 is for entering an obstructed cell or leaving the
+**How hits are represented.** filomat2018's −100 is for entering an obstructed cell or leaving the
 box; the tip then stays where it was, so the cells alone cannot tell a hit from a free move. Every
 ``step`` therefore puts ``info["hit"]`` (a bool) in the info dict, and ``compute_reward`` reads it:
 the reward is −100 where ``hit``, else +100 where ``achieved_goal == desired_goal``, else
@@ -40,23 +40,19 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any, SupportsFloat, cast
 
 import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.envs.tank_grid import OBSTACLE_REWARD, TARGET_REWARD, TankGridEnv
+from aftir_rl.envs.tank_grid import TankGridEnv, step_reward, target_options
 from aftir_rl.errors import TargetError
-from aftir_rl.tank import Tank, load_tank
 
 __all__ = ["TankGoalEnv", "GoalObs"]
 
 #: One observation of :class:`TankGoalEnv`.
 GoalObs = dict[str, NDArray[np.int64]]
-
-_OPTIONS = ("target", "target_cell")
 
 
 class TankGoalEnv(TankGridEnv):
@@ -96,21 +92,16 @@ class TankGoalEnv(TankGridEnv):
     - v0: initial version.
     """
 
-    def __init__(
-        self,
-        tank: str | Path | Tank = "b737_center",
-        target: tuple[float, float, float] | None = None,
-        target_cell: tuple[int, int, int] | None = None,
-        step_penalty: float = 0.0,
-        render_mode: str | None = None,
+    def _init_target(
+        self, target: tuple[float, float, float] | None, target_cell: Sequence[int] | None
     ) -> None:
-        loaded = load_tank(tank)
-        reach = loaded.reachable
+        """Find the goals, and set the constructor's fixed goal or a placeholder one."""
+        reach = self.tank.reachable
         #: Every goal a random episode can draw: reachable free cells but the start, shape (G, 3),
         #: in flat-index order.
         self.goal_cells: NDArray[np.int64] = np.argwhere(reach > 0).astype(np.int64)
         if len(self.goal_cells) == 0:
-            raise TargetError(f"tank {loaded.name}: no free cell is reachable from the start")
+            raise TargetError(f"tank {self.tank.name}: no free cell is reachable from the start")
         #: Flat state index of each of :attr:`goal_cells`.
         self.goal_states: NDArray[np.int64] = cast(  # numpy types it a scalar (a tuple of Any)
             NDArray[np.int64], np.ravel_multi_index(tuple(self.goal_cells.T), reach.shape)
@@ -119,7 +110,7 @@ class TankGoalEnv(TankGridEnv):
         if not self._fixed_goal:
             a, b, c = (int(v) for v in self.goal_cells[0])
             target_cell = (a, b, c)  # replaced at every reset
-        super().__init__(loaded, target, target_cell, step_penalty, render_mode)
+        super()._init_target(target, target_cell)
         self._fixed = (self.target_point.copy(), self.target_cell)
         shape = self.raster.shape
         cell_space = spaces.MultiDiscrete(np.array(shape, dtype=np.int64), dtype=np.int64)
@@ -162,11 +153,7 @@ class TankGoalEnv(TankGridEnv):
 
         """
         state, info = super().reset(seed=seed)  # seeds np_random; the tip to the start cell
-        options = dict(options or {})
-        unknown = sorted(set(options) - set(_OPTIONS))
-        if unknown:
-            raise ValueError(f"unknown reset option {unknown[0]!r}; use 'target' or 'target_cell'")
-        target, target_cell = options.get("target"), options.get("target_cell")
+        target, target_cell = target_options(options)
         if target is not None or target_cell is not None:
             self._set_target(target, target_cell)
         elif self._fixed_goal:
@@ -204,9 +191,7 @@ class TankGoalEnv(TankGridEnv):
 
         """
         reached, hit = self._reached_and_hit(achieved_goal, desired_goal, info)
-        reward = np.where(
-            hit, OBSTACLE_REWARD, np.where(reached, TARGET_REWARD, -self.step_penalty)
-        ).astype(np.float64)
+        reward = step_reward(hit, reached, self.step_penalty)
         return float(reward) if reward.ndim == 0 else reward
 
     def compute_terminated(

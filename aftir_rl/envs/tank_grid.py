@@ -1,4 +1,4 @@
-"""``AFTIR-Tank-v0``: the rasterised fuel tank of seed 002 as a Gymnasium grid world."""
+"""``AFTIR-Tank-v0``: the rasterised fuel tank of filomat2018 as a Gymnasium grid world."""
 
 from __future__ import annotations
 
@@ -11,15 +11,34 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.errors import InvalidActionError, TargetError
 from aftir_rl.tank import Tank, load_tank
 
-__all__ = ["Action", "TankGridEnv"]
+__all__ = ["Action", "TankGridEnv", "step_reward", "target_options"]
 
 TARGET_REWARD = 100.0
 OBSTACLE_REWARD = -100.0
+
+
+def step_reward(hit: ArrayLike, reached: ArrayLike, step_penalty: float) -> NDArray[np.float64]:
+    """filomat2018 eq. 2: −100 where ``hit``, else +100 where ``reached``, else -step_penalty."""
+    return np.where(hit, OBSTACLE_REWARD, np.where(reached, TARGET_REWARD, -step_penalty))
+
+
+def target_options(options: dict[str, Any] | None) -> tuple[Any, Any]:
+    """``(target, target_cell)`` of ``reset``'s ``options`` (None where not given).
+
+    Raises:
+        ValueError: an option other than ``target`` and ``target_cell``.
+
+    """
+    options = options or {}
+    unknown = sorted(set(options) - {"target", "target_cell"})
+    if unknown:
+        raise ValueError(f"unknown reset option {unknown[0]!r}; use 'target' or 'target_cell'")
+    return options.get("target"), options.get("target_cell")
 
 
 class Action(IntEnum):
@@ -37,7 +56,7 @@ _MOVES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 
 
 
 class TankGridEnv(gym.Env[int, int]):
-    """The arm's tip moving cell by cell through the rasterised tank (seed 002 §2–3).
+    """The arm's tip moving cell by cell through the rasterised tank (filomat2018 §2–3).
 
     ## Description
     The interior of the reference Boeing 737 center tank (two bays joined by a hatch in the
@@ -56,7 +75,7 @@ class TankGridEnv(gym.Env[int, int]):
     The cell containing the tank's ``start_point`` (``(0, 0, 10)`` cm: just inside the panel).
 
     ## Rewards
-    Seed 002 eq. 2: +100 for entering the target cell, −100 for entering an obstructed cell or
+    filomat2018 eq. 2: +100 for entering the target cell, −100 for entering an obstructed cell or
     leaving the box, otherwise ``-step_penalty`` (default 0).
 
     ## Episode End
@@ -107,15 +126,21 @@ class TankGridEnv(gym.Env[int, int]):
         self.start_state = self.raster.index(self.start_cell)
         self._model_target: int | None = None
         self._P: dict[int, dict[int, list[tuple[float, int, float, bool]]]] | None = None
+        self._init_target(target, target_cell)
+        self._state = self.start_state
+        self._path: list[int] = [self.start_state]
+
+    # ---------------------------------------------------------------- target and model
+    def _init_target(
+        self, target: tuple[float, float, float] | None, target_cell: Sequence[int] | None
+    ) -> None:
+        """Set the constructor's target: by default the tank's first reference target."""
         if target is None and target_cell is None:
             if not self.tank.targets:
                 raise TargetError(f"tank {self.tank.name} has no reference target; pass target=")
             target = self.tank.targets[0]
         self._set_target(target, target_cell)
-        self._state = self.start_state
-        self._path: list[int] = [self.start_state]
 
-    # ---------------------------------------------------------------- target and model
     def _set_target(
         self, target: tuple[float, float, float] | None, target_cell: Sequence[int] | None
     ) -> None:
@@ -146,9 +171,7 @@ class TankGridEnv(gym.Env[int, int]):
         here = np.arange(self.raster.n_cells)[:, None]
         nxt = np.where(blocked, here, nxt)
         reached = ~blocked & (nxt == self.target_state)
-        reward = np.where(
-            blocked, OBSTACLE_REWARD, np.where(reached, TARGET_REWARD, -self.step_penalty)
-        )
+        reward = step_reward(blocked, reached, self.step_penalty)
         terminated = blocked | reached
         # Absorbing states (the target, obstructed cells) loop with reward 0, as in FrozenLake.
         absorbing = self.raster.obstructed.ravel().copy()
@@ -185,14 +208,9 @@ class TankGridEnv(gym.Env[int, int]):
     ) -> tuple[int, dict[str, Any]]:
         """Put the tip in the start cell; ``options`` may set ``target`` or ``target_cell``."""
         super().reset(seed=seed)
-        if options:
-            unknown = sorted(set(options) - {"target", "target_cell"})
-            if unknown:
-                raise ValueError(
-                    f"unknown reset option {unknown[0]!r}; use 'target' or 'target_cell'"
-                )
-            if options.get("target") is not None or options.get("target_cell") is not None:
-                self._set_target(options.get("target"), options.get("target_cell"))
+        target, target_cell = target_options(options)
+        if target is not None or target_cell is not None:
+            self._set_target(target, target_cell)
         self._state = self.start_state
         self._path = [self.start_state]
         return self.start_state, {"prob": 1.0, "target_cell": self.target_cell}
