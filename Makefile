@@ -32,8 +32,8 @@ lint: $(STAMP)
 bench: $(STAMP)  ## every benchmark table of the README (about 20 minutes)
 	$(PY) benchmarks/bench_tank.py
 	$(PY) benchmarks/bench_posture.py
-	$(PY) benchmarks/bench_seed000.py
-	$(PY) benchmarks/bench_seed001.py
+	$(PY) benchmarks/bench_icra2014.py
+	$(PY) benchmarks/bench_st2014.py
 	$(PY) benchmarks/bench_arm.py
 	$(PY) benchmarks/bench_motion.py
 	$(PY) benchmarks/bench_goal.py

@@ -47,8 +47,11 @@ def _q_table_run(
     target = meta.get("target")
     if target is None:
         raise CheckpointError(f"{run_dir}: the Q-table has no target in its metadata")
-    env = gym.make(meta.get("env_id", "AFTIR-Tank-v0"), tank=meta.get("tank", "b737_center"),
-                   target=tuple(target))  # fmt: skip
+    env = gym.make(
+        meta.get("env_id", "AFTIR-Tank-v0"),
+        tank=meta.get("tank", "b737_center"),
+        target=tuple(target),
+    )
     agent = QLearning.load(run_dir / "q_table.npz", env)
     start = time.perf_counter()
     states, reached = greedy_rollout(agent, env)
@@ -95,8 +98,7 @@ def _sb3_run(run_dir: Path, targets: list[np.ndarray] | None) -> dict[str, Any]:
     targets = targets or evaluation_targets(env_id, config.eval_targets)
     metrics, _ = evaluate_policy_on_targets(model, env_id, targets, clearance=True)
     note = f"{metrics['collision_rate']:.0%} collided" if metrics["collision_rate"] else ""
-    return {"agent": f"{algo} ({config.env_id})", "targets": len(targets), **metrics,
-            "note": note}  # fmt: skip
+    return {"agent": f"{algo} ({config.env_id})", "targets": len(targets), **metrics, "note": note}
 
 
 def evaluate_run(
@@ -132,14 +134,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         description="Evaluate trained runs (Q-table or SB3) and print one comparison table.",
     )
     parser.add_argument("runs", nargs="+", metavar="RUN_DIR", help="run directories")
-    parser.add_argument("--target", nargs=3, type=float, action="append", metavar=("X", "Y", "Z"),
-                        help="evaluation target for SB3 runs (repeatable)")  # fmt: skip
+    parser.add_argument(
+        "--target",
+        nargs=3,
+        type=float,
+        action="append",
+        metavar=("X", "Y", "Z"),
+        help="evaluation target for SB3 runs (repeatable)",
+    )
     parser.add_argument("--logdir", default="runs", help="where the evaluate__<time> logs go")
-    parser.add_argument("--motion", choices=("ftl", "progressive"), default="ftl",
-                        help="a Q-table run's motion: follow-the-leader (default) or the papers' "
-                        "postures per cell")  # fmt: skip
-    parser.add_argument("--margin", type=float, default=DEFAULT_MARGIN, metavar="CM",
-                        help=f"clearance the arm keeps ({DEFAULT_MARGIN:g} cm)")  # fmt: skip
+    parser.add_argument(
+        "--motion",
+        choices=("ftl", "progressive"),
+        default="ftl",
+        help="a Q-table run's motion: follow-the-leader (default) or the papers' postures per cell",
+    )
+    parser.add_argument(
+        "--margin",
+        type=float,
+        default=DEFAULT_MARGIN,
+        metavar="CM",
+        help=f"clearance the arm keeps ({DEFAULT_MARGIN:g} cm)",
+    )
     parser.add_argument(
         "--ray",
         metavar="ADDRESS",
@@ -169,8 +185,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print("| run | agent | targets | success | tip error (cm) | path (cm) | min clearance (cm) | "
-          "s / target | note |")  # fmt: skip
+    print(
+        "| run | agent | targets | success | tip error (cm) | path (cm) | min clearance (cm) | "
+        "s / target | note |"
+    )
     print("|---|---|---:|---:|---:|---:|---:|---:|---|")
     for name, r in results.items():
         head = f"| {name} | {r['agent']} | {r['targets']} | {r['success_rate']:.0%} | "
@@ -182,8 +200,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = Path(args.logdir) / f"evaluate__{datetime.now().strftime('%Y%m%d-%H%M%S-%f')}"
     logger = configure(str(out), ["tensorboard", "csv"])
     for name, r in results.items():
-        for key in ("success_rate", "tip_error_cm", "path_length_cm", "min_clearance_cm",
-                    "seconds_per_target"):  # fmt: skip
+        for key in (
+            "success_rate",
+            "tip_error_cm",
+            "path_length_cm",
+            "min_clearance_cm",
+            "seconds_per_target",
+        ):
             logger.record(f"compare/{name}/{key}", float(r[key]))
     logger.dump(0)
     logger.close()

@@ -14,7 +14,9 @@ from collections.abc import Sequence
 
 from aftir_rl.config import DEFAULT_MARGIN
 from aftir_rl.errors import AftirError, ConfigError, PlanningError
-from aftir_rl.posture.planner import METHODS, PlannedPosture, Planner
+from aftir_rl.posture.context import PlannedPosture
+from aftir_rl.posture.planner import Planner
+from aftir_rl.posture.registry import AUTO, METHOD_NAMES, REGISTRY
 from aftir_rl.safety import cli
 
 __all__ = ["main", "format_table"]
@@ -46,22 +48,34 @@ def format_table(result: PlannedPosture) -> str:
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.plan``."""
+    methods = "; ".join(f"{m.name}: {m.summary} ({m.paper})" for m in REGISTRY.values())
     parser = argparse.ArgumentParser(
         prog="python -m aftir_rl.plan",
         description="Plan a collision-free posture (dis, theta, phi) of the arm reaching a target.",
     )
     parser.add_argument(
-        "--target", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"),
+        "--target",
+        nargs=3,
+        type=float,
+        required=True,
+        metavar=("X", "Y", "Z"),
         help="target point in cm (frame S: origin at the access panel)",
-    )  # fmt: skip
+    )
     parser.add_argument("--tank", default="b737_center", help="tank name or YAML path")
-    parser.add_argument("--method", default="auto", choices=METHODS,
-                        help="auto: TSM beyond the baffle, TGA otherwise (default)")  # fmt: skip
+    parser.add_argument(
+        "--method",
+        default=AUTO,
+        choices=METHOD_NAMES,
+        help=f"auto: TSM beyond the baffle, TGA otherwise (default); {methods}",
+    )
     parser.add_argument("--json", action="store_true", help="print the posture JSON")
     parser.add_argument(
-        "--margin", type=float, default=DEFAULT_MARGIN, metavar="CM",
+        "--margin",
+        type=float,
+        default=DEFAULT_MARGIN,
+        metavar="CM",
         help=f"clearance the arm's surface keeps from the tank (default {DEFAULT_MARGIN:g} cm)",
-    )  # fmt: skip
+    )
     args = parser.parse_args(argv)
     try:
         if not 0 <= args.margin <= 20:

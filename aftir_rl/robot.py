@@ -7,7 +7,7 @@ and ``φ_i`` [rad] the bending-plane angle of section ``i``.
 
 Frame S has its origin at the centre of the access panel, ``z`` along the panel normal into the
 tank. The base of section 1 sits at ``(0, 0, dis)`` pointing ``+z``. Each section transform is
-seed 004 eq. 7, expressed in the end frame of the previous section and chained
+jace eq. 7, expressed in the end frame of the previous section and chained
 ``T = T_1 · T_2 ⋯ T_N``::
 
     T_i = [[c²φ cθ + s²φ,  cφ sφ (cθ−1),   cφ sθ,  (l/θ)(1−cθ) cφ],
@@ -27,7 +27,7 @@ Python loop over the batch (only over the N ≤ 12 sections). Units: cm and rad.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +40,8 @@ __all__ = [
     "forward_kinematics",
     "body_points",
     "tip_position",
+    "finite_differences",
+    "tip_jacobian",
 ]
 
 _SMALL = 1e-4
@@ -132,17 +134,18 @@ class Posture:
 
 
 def _bend_terms(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Return ``(1 − cos θ)/θ`` and ``sin θ/θ``, smooth through ``θ = 0``."""
-    small = np.abs(theta) < _SMALL
-    safe = np.where(small, 1.0, theta)
-    t2 = theta * theta
-    one_minus_cos = np.where(small, theta * (0.5 - t2 / 24.0), 2.0 * np.sin(0.5 * safe) ** 2 / safe)
-    sinc = np.where(small, 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0), np.sin(safe) / safe)
-    return one_minus_cos, sinc
+    """Return ``(1 − cos θ)/θ`` and ``sin θ/θ``, smooth through ``θ = 0``.
+
+    With ``h = θ/2``: ``(1 − cos θ)/θ = h·(sin h / h)²`` and ``sin θ/θ = (sin h / h)·cos h``.
+    """
+    h = 0.5 * np.asarray(theta, dtype=np.float64)
+    small = np.abs(h) < 0.5 * _SMALL
+    sinc_h = np.where(small, 1.0 - h * h / 6.0, np.sin(h) / np.where(small, 1.0, h))
+    return h * sinc_h * sinc_h, sinc_h * np.cos(h)
 
 
 def section_transforms(theta: ArrayLike, phi: ArrayLike, arc: ArrayLike) -> NDArray[np.float64]:
-    """Homogeneous transforms of constant-curvature arcs (seed 004 eq. 7).
+    """Homogeneous transforms of constant-curvature arcs (jace eq. 7).
 
     Args:
         theta: bending angle over the arc [rad], any shape.
@@ -247,19 +250,31 @@ def body_points(
     if points_per_section < 1:
         raise ValueError(f"points_per_section must be at least 1, got {points_per_section}")
     dis, theta, phi = _as_batch(dis, theta, phi)
-    k = points_per_section
+    k, n, lead = points_per_section, theta.shape[-1], theta.shape[:-1]
     frac = np.arange(1, k + 1, dtype=np.float64) / k
-    # Local transforms of every sample in its section's base frame: shape (..., N, K, 4, 4). The
-    # last sample of a section is its end, so the section frames chain from those (one call).
-    local = section_transforms(theta[..., None] * frac, phi[..., None], section_length * frac)
-    frames = _chain(dis, local[..., -1, :, :])
-    local_pos = local[..., :3, 3]
-    rot = frames[..., :-1, None, :3, :3]
-    origin = frames[..., :-1, None, :3, 3]
-    world = (rot @ local_pos[..., None])[..., 0] + origin
-    lead = theta.shape[:-1]
-    world = world.reshape(lead + (-1, 3))
-    return np.concatenate([frames[..., 0:1, :3, 3], world], axis=-2)
+    arc = section_length * frac
+    # Sample positions in their section's base frame, (..., N, 3, K): the arc of bend θ·j/K.
+    one_minus_cos, sinc = _bend_terms(theta[..., None] * frac)
+    cp, sp = np.cos(phi), np.sin(phi)
+    local = np.empty(lead + (n, 3, k))
+    local[..., 0, :] = arc * one_minus_cos * cp[..., None]
+    local[..., 1, :] = arc * one_minus_cos * sp[..., None]
+    local[..., 2, :] = arc * sinc
+    # Base rotation of every section: the product of the rotations of the sections before it.
+    end_rot = section_transforms(theta, phi, section_length)[..., :3, :3]
+    base_rot = np.empty(lead + (n, 3, 3))
+    rot = np.broadcast_to(np.eye(3), lead + (3, 3))
+    for i in range(n):
+        base_rot[..., i, :, :] = rot
+        rot = rot @ end_rot[..., i, :, :]
+    world = base_rot @ local  # offsets from each section's base, (..., N, 3, K)
+    ends = world[..., :, -1]
+    origin = np.cumsum(ends, axis=-2) - ends  # section bases relative to the arm's base
+    origin[..., 2] += dis[..., None]
+    world += origin[..., None]
+    base = np.zeros(lead + (1, 3))
+    base[..., 0, 2] = dis
+    return np.concatenate([base, world.swapaxes(-1, -2).reshape(lead + (-1, 3))], axis=-2)
 
 
 def tip_position(
@@ -267,3 +282,70 @@ def tip_position(
 ) -> NDArray[np.float64]:
     """Tip position [cm], shape ``(..., 3)``."""
     return forward_kinematics(dis, theta, phi, section_length)[..., -1, :3, 3]
+
+
+def finite_differences(
+    fn: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    x: ArrayLike,
+    h: float,
+    central: bool = True,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``fn(x)`` and its Jacobian by finite differences, batched.
+
+    Args:
+        fn: maps parameters ``(..., R, P)`` to values ``(..., R, K)``, row by row.
+        x: the parameters, shape ``(..., P)``.
+        h: the step.
+        central: central differences (``2P + 1`` rows evaluated), else forward (``P + 1``).
+
+    Returns:
+        ``fn(x)`` of shape ``(..., K)`` and the Jacobian ``(..., K, P)`` (a transposed view).
+
+    """
+    x = np.asarray(x, dtype=np.float64)
+    p = x.shape[-1]
+    step = np.eye(p) * h
+    rows = [x[..., None, :], x[..., None, :] + step]
+    if central:
+        rows.append(x[..., None, :] - step)
+    values = fn(np.concatenate(rows, axis=-2))
+    if central:
+        diff = (values[..., 1 : p + 1, :] - values[..., p + 1 :, :]) / (2 * h)
+    else:
+        diff = (values[..., 1:, :] - values[..., :1, :]) / h
+    return values[..., 0, :], np.swapaxes(diff, -1, -2)
+
+
+def _joint_vector(x: NDArray[np.float64]) -> tuple[ArrayLike, ArrayLike, ArrayLike]:
+    n = (x.shape[-1] - 1) // 2
+    return x[..., 0], x[..., 1 : n + 1], x[..., n + 1 :]
+
+
+def tip_jacobian(
+    x: ArrayLike,
+    section_length: float,
+    h: float = 1e-6,
+    central: bool = True,
+    joints: Callable[[NDArray[np.float64]], tuple[ArrayLike, ArrayLike, ArrayLike]] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The tip [cm] and its Jacobian by finite differences of :func:`tip_position`.
+
+    Args:
+        x: the joint vector ``(dis, θ_1..θ_N, φ_1..φ_N)``, or other parameters with ``joints``;
+            shape ``(..., P)``.
+        section_length: ``l`` [cm].
+        h: the step.
+        central: central differences, else forward.
+        joints: maps parameters ``(..., R, P)`` to ``(dis, θ, φ)`` (default: the joint vector).
+
+    Returns:
+        The tip ``(..., 3)`` and the Jacobian ``(..., 3, P)``.
+
+    """
+    split = _joint_vector if joints is None else joints
+
+    def tips(p: NDArray[np.float64]) -> NDArray[np.float64]:
+        dis, theta, phi = split(p)
+        return tip_position(dis, theta, phi, section_length)
+
+    return finite_differences(tips, x, h, central)

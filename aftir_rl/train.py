@@ -345,10 +345,13 @@ def _log_motion(
         shown = sorted(set(np.linspace(0, len(m) - 1, 7).astype(int)))
         arms = [m.posture(i).points(m.route.section_length, 10) for i in shown]
         picture = render_path(
-            env.tank, m.tips(), env.target_point, arms=arms,
+            env.tank,
+            m.tips(),
+            env.target_point,
+            arms=arms,
             title=f"follow-the-leader motion to {_target_tag(target)} "
             f"({len(m)} entries, clearance {plan.min_clearance_cm:.1f} cm)",
-        )  # fmt: skip
+        )
         logger.record("paths/eval", Image(picture, "HWC"), exclude=("stdout", "log", "json", "csv"))
     return plan
 
@@ -391,9 +394,12 @@ def _log_trajectory(
         shown = found[:: max(1, len(found) // 5)] + [last]
         arms = [p.posture.points(p.section_length, 10) for p in shown]
         picture = render_path(
-            env.tank, points, env.target_point, arms=arms,
+            env.tank,
+            points,
+            env.target_point,
+            arms=arms,
             title=f"arm postures along the path to {_target_tag(target)}",
-        )  # fmt: skip
+        )
         logger.record(
             f"paths/{_target_tag(target)}_arm",
             Image(picture, "HWC"),
@@ -444,13 +450,12 @@ def train_sb3(
         load_model,
         newest_model,
         save_model,
-    )  # fmt: skip
+    )
+    from aftir_rl.agents.sb3_config import SB3_ENV_IDS
     from aftir_rl.agents.vec_adapter import make_batched_vec_env
     from aftir_rl.safety import check_writable_dir
 
-    bare = _check_env_id(
-        config.env_id, ("AFTIR-ArmReach-v0", "AFTIR-Arm-v0", "AFTIR-ArmFTL-v0"), algo
-    )
+    bare = _check_env_id(config.env_id, SB3_ENV_IDS, algo)
     check_sb3_config(config, algo, "config")
     env_id = f"aftir_rl:{bare}"
     logdir = check_writable_dir(logdir)
@@ -465,8 +470,13 @@ def train_sb3(
         # a batched env (one numpy pass for all rows) when the env has one, else copies
         venv = make_batched_vec_env(env_id, config.n_envs, seed, config.env_kwargs)
         if venv is None:
-            venv = make_vec_env(env_id, n_envs=config.n_envs, seed=seed, vec_env_cls=vec_cls,
-                                env_kwargs=config.env_kwargs)  # fmt: skip
+            venv = make_vec_env(
+                env_id,
+                n_envs=config.n_envs,
+                seed=seed,
+                vec_env_cls=vec_cls,
+                env_kwargs=config.env_kwargs,
+            )
     finally:
         if main_thread:
             signal.signal(signal.SIGINT, previous)
@@ -482,17 +492,26 @@ def train_sb3(
         partial.mkdir(parents=True, exist_ok=False)
         logger = configure(str(partial), ["csv", "tensorboard"])
         model.set_logger(logger)
-        params = {**dataclasses.asdict(config), "algo": algo, "seed": seed,
-                  "resume": str(resume_path) if resume_path else None}  # fmt: skip
+        params = {
+            **dataclasses.asdict(config),
+            "algo": algo,
+            "seed": seed,
+            "resume": str(resume_path) if resume_path else None,
+        }
         write_json(partial / "config.json", params)
         logger.record("hyperparameters", _hyperparameter_text(params), exclude=("csv",))
-        evaluator = ArmEvalCallback(env_id, targets, config.eval_freq, config.env_kwargs,
-                                    on_evaluate=on_evaluation)  # fmt: skip
+        evaluator = ArmEvalCallback(
+            env_id, targets, config.eval_freq, config.env_kwargs, on_evaluate=on_evaluation
+        )
         callbacks = [evaluator, AtomicCheckpoint(partial / "checkpoints", config.checkpoint_freq)]
         start = time.perf_counter()
         try:
-            model.learn(config.total_timesteps, callback=callbacks, progress_bar=progress_bar,
-                        reset_num_timesteps=resume_path is None)  # fmt: skip
+            model.learn(
+                config.total_timesteps,
+                callback=callbacks,
+                progress_bar=progress_bar,
+                reset_num_timesteps=resume_path is None,
+            )
         except KeyboardInterrupt:
             steps = int(model.num_timesteps)
             save_model(model, partial / "checkpoints" / f"model_{steps}.zip")
@@ -504,9 +523,14 @@ def train_sb3(
         seconds = time.perf_counter() - start
         save_model(model, partial / "model.zip")
         logger.close()
-        summary = {"algo": algo, "env_id": config.env_id, "timesteps": int(model.num_timesteps),
-                   "seconds": seconds, "run_dir": str(run_dir),
-                   **evaluator.last_metrics}  # fmt: skip
+        summary = {
+            "algo": algo,
+            "env_id": config.env_id,
+            "timesteps": int(model.num_timesteps),
+            "seconds": seconds,
+            "run_dir": str(run_dir),
+            **evaluator.last_metrics,
+        }
         write_json(partial / "summary.json", summary)
         partial.rename(run_dir)
     except BaseException:
@@ -568,7 +592,7 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="algo", required=True, metavar="ALGO")
     q = sub.add_parser(
         "q_table",
-        help="tabular Q-learning on AFTIR-Tank-v0 (seed 002)",
+        help="tabular Q-learning on AFTIR-Tank-v0 (filomat2018)",
         description="Tabular Q-learning on the rasterised tank, one run directory per target.",
     )
     q.add_argument(
@@ -627,8 +651,11 @@ def _parser() -> argparse.ArgumentParser:
             help=f"{algo.upper()} (Stable-Baselines3) on an arm env",
             description=f"{algo.upper()} on a continuous AFTIR arm env, one run directory.",
         )
-        p.add_argument("--config", default=str(CONFIG_DIR / f"{algo}.yaml"),
-                       help=f"YAML of SB3Config fields (default: configs/{algo}.yaml)")  # fmt: skip
+        p.add_argument(
+            "--config",
+            default=str(CONFIG_DIR / f"{algo}.yaml"),
+            help=f"YAML of SB3Config fields (default: configs/{algo}.yaml)",
+        )
         p.add_argument("--env", help="environment id (overrides config), e.g. AFTIR-ArmReach-v0")
         p.add_argument("--total-timesteps", type=int, help="training steps (overrides config)")
         p.add_argument("--n-envs", type=int, help="parallel subprocess envs (overrides config)")
@@ -643,15 +670,20 @@ def _main_sb3(args: argparse.Namespace) -> int:
     from aftir_rl.agents.sb3 import load_sb3_config
 
     config = load_sb3_config(args.config, args.algo)
-    overrides = {"env_id": args.env, "total_timesteps": args.total_timesteps,
-                 "n_envs": args.n_envs}  # fmt: skip
+    overrides = {"env_id": args.env, "total_timesteps": args.total_timesteps, "n_envs": args.n_envs}
     for key, value in overrides.items():
         if value is not None:
             if isinstance(value, int) and value < 1:
                 raise ConfigError(f"--{key.replace('_', '-')} must be at least 1, got {value}")
             config = dataclasses.replace(config, **{key: value})
-    s = train_sb3(args.algo, config, seed=args.seed, logdir=args.logdir, resume=args.resume,
-                  progress_bar=not args.no_progress)  # fmt: skip
+    s = train_sb3(
+        args.algo,
+        config,
+        seed=args.seed,
+        logdir=args.logdir,
+        resume=args.resume,
+        progress_bar=not args.no_progress,
+    )
     print(
         f"{args.algo.upper()} on {s['env_id']}: {s['timesteps']} steps in {s['seconds']:.0f} s; "
         f"evaluation: success {s['success_rate']:.0%}, tip error {s['tip_error_cm']:.1f} cm, "

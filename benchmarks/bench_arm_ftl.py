@@ -74,8 +74,15 @@ def ppo_env_share(num_envs: int, steps: int) -> tuple[float, float]:
         return out
 
     inner.step_wait = timed
-    model = PPO("MultiInputPolicy", venv, n_steps=64, batch_size=4096, n_epochs=5, seed=0,
-                policy_kwargs={"net_arch": [256, 256]})  # fmt: skip
+    model = PPO(
+        "MultiInputPolicy",
+        venv,
+        n_steps=64,
+        batch_size=4096,
+        n_epochs=5,
+        seed=0,
+        policy_kwargs={"net_arch": [256, 256]},
+    )
     start = time.perf_counter()
     model.learn(steps)
     total = time.perf_counter() - start

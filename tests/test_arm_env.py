@@ -89,16 +89,30 @@ def test_smoke_training_writes_tensorboard(tmp_path, algo, steps, capsys):
         "env_id: AFTIR-ArmReach-v0\neval_freq: 100000\neval_targets: 2\ncheckpoint_freq: 100\n"
         f"hyperparameters:\n{hyper}"
     )
-    rc = train.main([algo, "--config", str(config), "--total-timesteps", str(steps),
-                     "--logdir", str(tmp_path / "runs"), "--no-progress"])  # fmt: skip
+    rc = train.main(
+        [
+            algo,
+            "--config",
+            str(config),
+            "--total-timesteps",
+            str(steps),
+            "--logdir",
+            str(tmp_path / "runs"),
+            "--no-progress",
+        ]
+    )
     assert rc == 0
     (run_dir,) = list((tmp_path / "runs").iterdir())
     assert (run_dir / "model.zip").exists() and any((run_dir / "checkpoints").iterdir())
     acc = EventAccumulator(str(run_dir), size_guidance={"images": 0, "tensors": 0})
     acc.Reload()
     tags = acc.Tags()
-    for tag in ("eval/success_rate", "eval/tip_error_cm", "eval/path_length_cm",
-                "eval/collision_rate"):  # fmt: skip
+    for tag in (
+        "eval/success_rate",
+        "eval/tip_error_cm",
+        "eval/path_length_cm",
+        "eval/collision_rate",
+    ):
         assert tag in tags["scalars"], tag
     assert "paths/eval" in tags["images"]
     # Resume from the saved model (with the default progress bar, which needs tqdm and rich),
@@ -109,8 +123,18 @@ def test_smoke_training_writes_tensorboard(tmp_path, algo, steps, capsys):
     bad = tmp_path / "bad.zip"
     bad.write_bytes(b"not a zip")
     capsys.readouterr()
-    rc = train.main([algo, "--config", str(config), "--resume", str(bad),
-                     "--logdir", str(tmp_path / "x"), "--no-progress"])  # fmt: skip
+    rc = train.main(
+        [
+            algo,
+            "--config",
+            str(config),
+            "--resume",
+            str(bad),
+            "--logdir",
+            str(tmp_path / "x"),
+            "--no-progress",
+        ]
+    )
     assert rc == 2 and "not a readable" in capsys.readouterr().err
 
 
@@ -125,3 +149,23 @@ def test_bad_sb3_config(tmp_path, capsys):
     config.write_text("env_id: AFTIR-ArmReach-v0\nhyperparameters:\n  learnin_rate: 0.1\n")
     assert train.main(["ppo", "--config", str(config), "--logdir", str(tmp_path)]) == 2
     assert "unknown key 'learnin_rate' for PPO" in capsys.readouterr().err
+
+
+def test_full_arm_raw_joint_env_poses_the_ftl_task():
+    """AFTIR-ArmFull-v0: 12 sections by joint increments, targets drawn as AFTIR-ArmFTL-v0's."""
+    from gymnasium.utils.env_checker import check_env as gym_check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    from aftir_rl.collision import point_clearance
+
+    env = gym.make("AFTIR-ArmFull-v0", bay=2)
+    gym_check_env(env.unwrapped, skip_render_check=True)
+    sb3_check_env(env.unwrapped)
+    full, ftl = env.unwrapped, gym.make("AFTIR-ArmFTL-v0", bay=2).unwrapped
+    assert full.n == 12 and full.action_space.shape == (25,)
+    for seed in range(5):
+        full.reset(seed=seed)
+        ftl.reset(seed=seed)
+        np.testing.assert_array_equal(full.target, ftl.target)  # the same task, target by target
+        assert point_clearance(full.tank, full.target[None])[0] >= 10.0
+        assert full.target[full.tank.baffle.index] > full.tank.baffle.position

@@ -182,10 +182,14 @@ def test_targets_per_bay_and_by_option():
 
 @pytest.mark.parametrize(
     "kwargs, error",
-    [({"bay": 3}, ConfigError), ({"push_step": 80.0}, ConfigError),
-     ({"n_sections": 0}, ConfigError), ({"target": (0, 60, 50)}, TargetError),
-     ({"target": (500, 0, 10)}, TargetError)],
-)  # fmt: skip
+    [
+        ({"bay": 3}, ConfigError),
+        ({"push_step": 80.0}, ConfigError),
+        ({"n_sections": 0}, ConfigError),
+        ({"target": (0, 60, 50)}, TargetError),
+        ({"target": (500, 0, 10)}, TargetError),
+    ],
+)
 def test_bad_arguments(kwargs, error):
     with pytest.raises(error):
         gym.make(ENV_ID, **kwargs)
@@ -212,8 +216,9 @@ def test_vector_env_matches_single_envs():
     rng = np.random.default_rng(5)
     actions = rng.uniform(-1, 1, (steps, b, 3)).astype(np.float32)
     actions[..., 2] = np.abs(actions[..., 2])
-    venv = gym.make_vec(ENV_ID, num_envs=b, vectorization_mode="vector_entry_point",
-                        max_episode_steps=40)  # fmt: skip
+    venv = gym.make_vec(
+        ENV_ID, num_envs=b, vectorization_mode="vector_entry_point", max_episode_steps=40
+    )
     obs, _ = venv.reset(seed=10)
     v_rows = []
     for t in range(steps):
@@ -252,10 +257,18 @@ def test_sac_her_smoke():
     from stable_baselines3 import SAC, HerReplayBuffer
 
     env = gym.make(ENV_ID, shaping=True, max_episode_steps=30)
-    sac = SAC("MultiInputPolicy", env, learning_starts=60, batch_size=16, buffer_size=1000,
-              policy_kwargs={"net_arch": [16]}, replay_buffer_class=HerReplayBuffer,
-              replay_buffer_kwargs={"copy_info_dict": True, "n_sampled_goal": 2},
-              train_freq=4, seed=0)  # fmt: skip
+    sac = SAC(
+        "MultiInputPolicy",
+        env,
+        learning_starts=60,
+        batch_size=16,
+        buffer_size=1000,
+        policy_kwargs={"net_arch": [16]},
+        replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs={"copy_info_dict": True, "n_sampled_goal": 2},
+        train_freq=4,
+        seed=0,
+    )
     sac.learn(152)  # train_freq 4
     assert sac.num_timesteps == 152
 
@@ -264,8 +277,15 @@ def test_ppo_smoke():
     from stable_baselines3 import PPO
 
     env = gym.make(ENV_ID, shaping=True, max_episode_steps=30)
-    ppo = PPO("MultiInputPolicy", env, n_steps=64, batch_size=32, n_epochs=1,
-              policy_kwargs={"net_arch": [16]}, seed=0)  # fmt: skip
+    ppo = PPO(
+        "MultiInputPolicy",
+        env,
+        n_steps=64,
+        batch_size=32,
+        n_epochs=1,
+        policy_kwargs={"net_arch": [16]},
+        seed=0,
+    )
     ppo.learn(128)
     assert ppo.num_timesteps == 128
     action, _ = ppo.predict(env.reset(seed=0)[0], deterministic=True)
@@ -296,8 +316,9 @@ def test_train_cli_sac_her(tmp_path):
 
     config = yaml.safe_load(open("configs/sac_ftl.yaml"))
     config.update(total_timesteps=400, eval_freq=400, eval_targets=2, checkpoint_freq=400)
-    config["hyperparameters"].update(learning_starts=320, batch_size=16, buffer_size=2000,
-                                     policy_kwargs={"net_arch": [16]})  # fmt: skip
+    config["hyperparameters"].update(
+        learning_starts=320, batch_size=16, buffer_size=2000, policy_kwargs={"net_arch": [16]}
+    )
     path = tmp_path / "sac.yaml"
     path.write_text(yaml.safe_dump(config))
     assert main(["sac", "--config", str(path), "--logdir", str(tmp_path), "--no-progress"]) == 0

@@ -16,12 +16,16 @@ from aftir_rl.tank import load_tank
 
 
 def test_summary_counts_only_what_ran():
-    row = Row("s", "m", [
-        Outcome(True, 0.1, 2.0, 100.0, 1.0),
-        Outcome(True, 0.3, 1.0, 300.0, 3.0),
-        Outcome(False, seconds=5.0, note="no posture"),
-        Outcome(False, ran=False, note="not run"),
-    ])  # fmt: skip
+    row = Row(
+        "s",
+        "m",
+        [
+            Outcome(True, 0.1, 2.0, 100.0, 1.0),
+            Outcome(True, 0.3, 1.0, 300.0, 3.0),
+            Outcome(False, seconds=5.0, note="no posture"),
+            Outcome(False, ran=False, note="not run"),
+        ],
+    )
     s = row.summary()
     assert s["targets"] == 3 and s["not_run"] == 1
     assert s["success_rate"] == pytest.approx(2 / 3)
@@ -36,14 +40,15 @@ def test_summary_counts_only_what_ran():
 
 def test_target_sets_are_fixed_and_free():
     a, b = target_sets(3, seed=7), target_sets(3, seed=7)
-    assert a.keys() == {"seed004", "seed000", "seed001", "seed002", "bay1", "bay2"}
+    assert a.keys() == {"jace", "icra2014", "st2014", "filomat2018", "bay1", "bay2"}
     for name in a:
-        assert all(ta == tb and np.array_equal(xa, xb) for (ta, xa), (tb, xb) in
-                   zip(a[name], b[name]))  # fmt: skip
+        assert all(
+            ta == tb and np.array_equal(xa, xb) for (ta, xa), (tb, xb) in zip(a[name], b[name])
+        )
     planner = Planner("b737_center")
     assert all(not planner.beyond_baffle(t) for _, t in a["bay1"])
     assert all(planner.beyond_baffle(t) for _, t in a["bay2"])
-    assert len(a["seed001"]) == 12 and len(a["seed000"]) == 4
+    assert len(a["st2014"]) == 12 and len(a["icra2014"]) == 4
 
 
 @pytest.mark.slow
@@ -71,13 +76,18 @@ def test_benchmark_outcomes_check_out(tank):
 def test_bench_cli(tmp_path):
     out = tmp_path / "bench.json"
     run = subprocess.run(
-        [sys.executable, "-m", "aftir_rl.bench", "--sets", "seed004", "--quiet", "--json",
-         str(out)], capture_output=True, text=True, check=True,
-    )  # fmt: skip
-    lines = [line for line in run.stdout.splitlines() if line.startswith("| seed004")]
+        [sys.executable, "-m", "aftir_rl.bench", "--sets", "jace", "--quiet", "--json", str(out)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    lines = [line for line in run.stdout.splitlines() if line.startswith("| jace")]
     assert [line.split("|")[2].strip() for line in lines] == [
-        "blind", "region_clipping", "tga", "obstacle_clipping",
-    ]  # fmt: skip
+        "blind",
+        "region_clipping",
+        "tga",
+        "obstacle_clipping",
+    ]
     data = json.loads(out.read_text())
     tga = next(r for r in data if r["method"] == "tga")
     assert tga["success_rate"] == 1.0 and len(tga["outcomes"]) == 3
@@ -89,21 +99,25 @@ def test_bench_cli(tmp_path):
         assert not scene.collides(p)
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--model", "nowhere"], "no model.zip"),
-    (["--model", "{bad_run}"], "config.json is missing or not a training run's"),
-    (["--n-random", "0"], "--n-random must be at least 1"),
-    (["--rrt-seconds", "nan"], "--rrt-seconds positive and finite"),
-    (["--bridge-seconds", "-1"], "--bridge-seconds must be a finite 0 or more"),
-    (["--json", "/nonexistent/dir/out.json"], "cannot write in"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--model", "nowhere"], "no model.zip"),
+        (["--model", "{bad_run}"], "config.json is missing or not a training run's"),
+        (["--n-random", "0"], "--n-random must be at least 1"),
+        (["--rrt-seconds", "nan"], "--rrt-seconds positive and finite"),
+        (["--bridge-seconds", "-1"], "--bridge-seconds must be a finite 0 or more"),
+        (["--json", "/nonexistent/dir/out.json"], "cannot write in"),
+    ],
+)
 def test_bench_cli_rejects_bad_input(tmp_path, args, message):
     bad_run = tmp_path / "run"
     bad_run.mkdir()
     (bad_run / "model.zip").write_bytes(b"")
     (bad_run / "config.json").write_text("{}")
     args = [a.replace("{bad_run}", str(bad_run)) for a in args]
-    run = subprocess.run([sys.executable, "-m", "aftir_rl.bench", *args], capture_output=True,
-                         text=True, timeout=60)  # fmt: skip
+    run = subprocess.run(
+        [sys.executable, "-m", "aftir_rl.bench", *args], capture_output=True, text=True, timeout=60
+    )
     assert run.returncode == 2 and message in run.stderr
     assert "Traceback" not in run.stderr

@@ -12,15 +12,32 @@ from aftir_rl import evaluate, train
 @pytest.mark.slow
 def test_compare_q_table_and_ppo_runs(tmp_path, capsys):
     runs = tmp_path / "runs"
-    assert train.main(["q_table", "--target", "230", "72", "10", "--logdir", str(runs),
-                       "--no-progress"]) == 0  # fmt: skip
+    assert (
+        train.main(
+            ["q_table", "--target", "230", "72", "10", "--logdir", str(runs), "--no-progress"]
+        )
+        == 0
+    )
     config = tmp_path / "ppo.yaml"
     config.write_text(
         "env_id: AFTIR-ArmReach-v0\neval_freq: 100000\neval_targets: 2\ncheckpoint_freq: 1000\n"
         "hyperparameters:\n  n_steps: 128\n  batch_size: 64\n"
     )
-    assert train.main(["ppo", "--config", str(config), "--total-timesteps", "128", "--logdir",
-                       str(runs), "--no-progress"]) == 0  # fmt: skip
+    assert (
+        train.main(
+            [
+                "ppo",
+                "--config",
+                str(config),
+                "--total-timesteps",
+                "128",
+                "--logdir",
+                str(runs),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     dirs = sorted(str(p) for p in runs.iterdir())
     assert evaluate.main([*dirs, "--logdir", str(tmp_path / "eval")]) == 0
@@ -38,7 +55,8 @@ def test_compare_q_table_and_ppo_runs(tmp_path, capsys):
 
 
 def test_not_a_run_dir_exits_2(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "aftir_rl.evaluate", str(tmp_path)],
-                          capture_output=True, text=True)  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-m", "aftir_rl.evaluate", str(tmp_path)], capture_output=True, text=True
+    )
     assert proc.returncode == 2 and "not a run directory" in proc.stderr
     assert "Traceback" not in proc.stderr

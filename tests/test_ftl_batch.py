@@ -7,9 +7,15 @@ import numpy as np
 import pytest
 
 from aftir_rl.collision import point_clearance
-from aftir_rl.envs.arm_ftl import ArmFTLEnv, ArmFTLVectorEnv, clearance_grid
-from aftir_rl.envs.ftl_batch import RasterGuide, draw_targets, raster_distance_table
-from aftir_rl.robot import body_points
+from aftir_rl.envs.arm_ftl import ArmFTLEnv, ArmFTLVectorEnv
+from aftir_rl.envs.ftl_batch import (
+    clearance_grid,
+    draw_targets,
+    field_guide,
+    raster_distance_table,
+)
+from aftir_rl.motion.ftl import kappa_to_angles
+from aftir_rl.robot import body_points, forward_kinematics
 from aftir_rl.tank import load_tank
 
 ENV_ID = "AFTIR-ArmFTL-v0"
@@ -28,13 +34,14 @@ def test_grid_row_min_is_the_exact_minimum(name):
     tank = load_tank(name)
     rng = np.random.default_rng(1)
     pts = random_arms(tank, rng, 2000)
-    grid = clearance_grid(tank, ArmFTLEnv(tank=tank).batch.distance)
+    grid = clearance_grid(tank)
     exact = point_clearance(tank, pts.reshape(-1, 3)).reshape(pts.shape[:2])
     np.testing.assert_allclose(grid.row_min(pts), exact.min(1), atol=1e-9)
     use = rng.random(pts.shape[:2]) < 0.5
     use[:, 0] = True
-    np.testing.assert_allclose(grid.row_min(pts, use), np.where(use, exact, np.inf).min(1),
-                               atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(
+        grid.row_min(pts, use), np.where(use, exact, np.inf).min(1), atol=1e-9
+    )
     approx = grid.approx(pts[:200])
     assert np.abs(approx - exact[:200]).max() <= grid.slack + 1e-9
 
@@ -62,28 +69,35 @@ def test_raster_distance_table_against_bfs():
         np.testing.assert_array_equal(table[start][reach], bfs[reach])
 
 
-def test_guide_points_through_the_hatch():
+def test_guide_leads_through_the_hatch():
+    """Following the guide's way from bay 1 reaches a bay-2 target, and P is GuideField's."""
+    from aftir_rl.motion.route import GuideField
+
     tank = load_tank("b737_center")
-    guide = RasterGuide(tank)
-    target = np.array([[200.0, 120.0, 50.0]])  # bay 2
-    tip = np.array([[100.0, 20.0, 20.0]])  # bay 1, low, away from the hatch
-    to_go, direction = guide(tip, target)
-    assert to_go[0] > np.linalg.norm(target - tip)  # the way is longer than the straight line
-    # descending the interpolated potential by small steps never increases it, reaches bay 2
-    p = tip.copy()
-    values = [to_go[0]]
-    for _ in range(400):
-        v, d = guide(p, target)
-        p = p + 2.0 * d
-        values.append(guide(p, target)[0][0])
-    baffle = tank.baffle
-    assert p[0, baffle.index] > baffle.position
-    assert values[-1] < 0.2 * values[0]
-    # finite differences agree with the direction where the potential is smooth
-    q = np.array([[30.0, 10.0, 30.0]])
-    v0 = guide(q, target)[0][0]
-    grad = np.array([(guide(q + e, target)[0][0] - v0) / 1e-4 for e in np.eye(3)[:, None] * 1e-4])
-    np.testing.assert_allclose(-grad / np.linalg.norm(grad), guide(q, target)[1][0], atol=1e-3)
+    guide = field_guide(tank)
+    rng = np.random.default_rng(0)
+    env = ArmFTLEnv(bay=2)
+    targets = draw_targets([rng], env.batch.grid, env.region, 10.0, env.start_tip)
+    targets = np.concatenate([targets, [[200.0, 120.0, 50.0]]])
+    starts = np.array([[100.0, 20.0, 20.0], [0.0, 0.0, 10.0]])
+    for target in targets:
+        ids = guide.field_ids(np.repeat(target[None], len(starts), 0))
+        centre = guide.origin + (np.floor((target - guide.origin) / guide.size) + 0.5) * guide.size
+        p = starts.copy()
+        # P is the distance-to-go of the GuideField of the target's cell centre
+        np.testing.assert_allclose(guide(p, np.repeat(target[None], len(p), 0), ids)[0],
+                                   GuideField(tank, centre)(p), rtol=1e-6)  # fmt: skip
+        for _ in range(150):
+            _, way = guide(p, np.repeat(target[None], len(p), 0), ids)
+            p = p + 2.0 * way
+        assert np.linalg.norm(p - target, axis=1).max() < 3.0
+    # the path never passed through the baffle elsewhere than its hatch: checked by the
+    # distances staying positive along one walk
+    p = starts[:1].copy()
+    ids = guide.field_ids(targets[-1:])
+    for _ in range(150):
+        assert point_clearance(tank, p)[0] > 0
+        p = p + 2.0 * guide(p, targets[-1:], ids)[1]
 
 
 def test_draw_targets_are_free_and_reproducible():
@@ -92,18 +106,39 @@ def test_draw_targets_are_free_and_reproducible():
     t = draw_targets(rngs, env.batch.grid, env.region, 10.0, env.start_tip)
     assert (point_clearance(env.tank, t) >= 10.0).all()
     assert (t[:, env.tank.baffle.index] > env.tank.baffle.position).all()
-    again = draw_targets([np.random.default_rng(i) for i in range(50)], env.batch.grid,
-                         env.region, 10.0, env.start_tip)  # fmt: skip
+    again = draw_targets(
+        [np.random.default_rng(i) for i in range(50)],
+        env.batch.grid,
+        env.region,
+        10.0,
+        env.start_tip,
+    )
     np.testing.assert_array_equal(t, again)
+
+
+def route_frame(kappa, k, l):
+    """Rotation of the route's frame after its first ``k`` sections, by forward kinematics."""
+    theta, phi = kappa_to_angles(kappa[:k])
+    return forward_kinematics(0.0, theta, phi, l)[-1, :3, :3]
 
 
 def test_guide_observation():
     env = gym.make(ENV_ID, guide=True)
     plain = gym.make(ENV_ID)
     obs, _ = env.reset(seed=0)
-    assert obs["observation"].shape[0] == plain.observation_space["observation"].shape[0] + 7
-    tail = obs["observation"][-3:]
+    assert obs["observation"].shape[0] == plain.observation_space["observation"].shape[0] + 10
+    # straight arm: the steering frame is the world's
+    tail = obs["observation"][-6:-3]
     np.testing.assert_allclose(tail, (obs["desired_goal"] - obs["achieved_goal"]) / 100, atol=1e-5)
+    np.testing.assert_allclose(obs["observation"][-3:], [0, 0, 1], atol=1e-6)
+    # after a bend and a push past a section end, the frame is the frozen section's end frame
+    rng = np.random.default_rng(0)
+    for _ in range(14):
+        obs, *_ = env.step(np.array([*rng.uniform(-1, 1, 2), 1.0], dtype=np.float32))
+    batch = env.unwrapped.batch
+    assert batch.k[0] >= 1
+    frame = route_frame(batch.kappa[0], batch.k[0], batch.l)
+    np.testing.assert_allclose(batch.steering_frames()[0], frame, atol=1e-9)
     from gymnasium.utils.env_checker import check_env
 
     check_env(env.unwrapped, skip_render_check=True)
@@ -141,14 +176,29 @@ def test_sb3_adapter_trains_ppo_and_sac_her():
 
     venv = make_batched_vec_env(f"aftir_rl:{ENV_ID}", 8, 0, {"guide": True, "shaping": True})
     assert isinstance(venv, VecEnv)
-    ppo = PPO("MultiInputPolicy", venv, n_steps=16, batch_size=64, n_epochs=1,
-              policy_kwargs={"net_arch": [16]}, seed=0)  # fmt: skip
+    ppo = PPO(
+        "MultiInputPolicy",
+        venv,
+        n_steps=16,
+        batch_size=64,
+        n_epochs=1,
+        policy_kwargs={"net_arch": [16]},
+        seed=0,
+    )
     ppo.learn(256)
     assert ppo.num_timesteps == 256
     venv = make_batched_vec_env(f"aftir_rl:{ENV_ID}", 4, 0, {"max_episode_steps": 20})
-    sac = SAC("MultiInputPolicy", venv, learning_starts=80, batch_size=16, buffer_size=1000,
-              policy_kwargs={"net_arch": [16]}, replay_buffer_class=HerReplayBuffer,
-              replay_buffer_kwargs={"copy_info_dict": True, "n_sampled_goal": 2},
-              train_freq=1, seed=0)  # fmt: skip
+    sac = SAC(
+        "MultiInputPolicy",
+        venv,
+        learning_starts=80,
+        batch_size=16,
+        buffer_size=1000,
+        policy_kwargs={"net_arch": [16]},
+        replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs={"copy_info_dict": True, "n_sampled_goal": 2},
+        train_freq=1,
+        seed=0,
+    )
     sac.learn(160)
     assert sac.num_timesteps == 160

@@ -101,8 +101,9 @@ def test_rrt_connect_from_the_start_posture_in_bay_1(planner):
     plan = rrt_connect(planner.scene, start, goal.posture, time_limit=20, seed=1)
     assert plan.solved, plan.reason
     assert plan.postures[0] == start
-    np.testing.assert_allclose(plan.postures[-1].points(50, 4), goal.posture.points(50, 4),
-                               atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(
+        plan.postures[-1].points(50, 4), goal.posture.points(50, 4), atol=1e-9
+    )
     # Independent check of the whole path: dense interpolation, fcl on every posture.
     scene = CollisionScene(planner.tank)
     dense = densify(plan.postures)
@@ -180,8 +181,12 @@ def test_bridge_the_first_move_along_the_floor(planner):
     assert plan.postures[0] == start and plan.postures[-1] == goal
     assert all(p.n_sections == n for p in plan.postures)
     # In the plane: every bent section of every posture between bends in phi = 0 (or pi).
-    assert all(abs(math.sin(phi)) < 1e-9 for p in plan.postures[1:-1]
-               for t, phi in zip(p.theta, p.phi) if abs(t) > 1e-9)  # fmt: skip
+    assert all(
+        abs(math.sin(phi)) < 1e-9
+        for p in plan.postures[1:-1]
+        for t, phi in zip(p.theta, p.phi)
+        if abs(t) > 1e-9
+    )
     # Independent check: every densified posture with fcl itself, not the fast pre-check.
     dense = densify(plan.postures)
     assert not any(scene.collides(p) for p in dense)
@@ -196,8 +201,7 @@ def test_slide_by_a_whole_section_keeps_the_body_and_lengthens_it():
         pushed = slide(p, l, l)
         assert pushed.dis == pytest.approx(p.dis + l)
         # Exact at one section: the old body from its second section on, point for point ...
-        np.testing.assert_allclose(pushed.points(l, k)[: 5 * k + 1], p.points(l, k)[k:],
-                                   atol=1e-9)  # fmt: skip
+        np.testing.assert_allclose(pushed.points(l, k)[: 5 * k + 1], p.points(l, k)[k:], atol=1e-9)
         # ... then one more section bent like the last.
         np.testing.assert_allclose(pushed.theta[-1], p.theta[-1])
         np.testing.assert_allclose(slide(p, 0.0, l).points(l, k), p.points(l, k), atol=1e-9)

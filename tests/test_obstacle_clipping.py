@@ -11,14 +11,15 @@ import pytest
 
 from aftir_rl.collision import CollisionScene
 from aftir_rl.errors import PlanningError
+from aftir_rl.papers import ICRA2014_OBSTACLES, ICRA2014_TANKS, ICRA2014_TARGET
 from aftir_rl.posture import Planner
 from aftir_rl.posture.obstacle_clipping import obstacle_clipping
 from aftir_rl.robot import body_points, tip_position
 from aftir_rl.tank import Sphere, load_tank
 
-TARGET = np.array([30.0, 18.0, 51.0])
-OBSTACLES = [(3.90, 2.25, 5.45), (6.15, 10.67, 23.86), (21.34, 14.93, 43.35)]  # seed 000 §IV
-ROWS = ["open_space", *(f"open_space_obstacles{k}" for k in (1, 2, 3))]
+TARGET = np.array(ICRA2014_TARGET)
+OBSTACLES = list(ICRA2014_OBSTACLES)  # icra2014 §IV
+ROWS = list(ICRA2014_TANKS)
 
 
 def zone_distance(posture, obstacles):
@@ -32,7 +33,7 @@ def zone_distance(posture, obstacles):
 
 
 @pytest.mark.parametrize("row", range(4))
-def test_seed000_table2_rows(row):
+def test_icra2014_table2_rows(row):
     planner = Planner(ROWS[row])
     assert [s.center for s in planner.tank.obstacles] == OBSTACLES[:row]
     result = planner.plan(TARGET, method="obstacle_clipping")
@@ -63,10 +64,26 @@ def test_obstacle_under_the_target_makes_it_unreachable():
 
 def test_plan_cli_obstacle_clipping_json():
     out = subprocess.run(
-        [sys.executable, "-m", "aftir_rl.plan", "--tank", ROWS[3], "--target", "30", "18", "51",
-         "--method", "obstacle_clipping", "--json", "--margin", "0"],
-        capture_output=True, text=True, check=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "aftir_rl.plan",
+            "--tank",
+            ROWS[3],
+            "--target",
+            "30",
+            "18",
+            "51",
+            "--method",
+            "obstacle_clipping",
+            "--json",
+            "--margin",
+            "0",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     data = json.loads(out.stdout)
     assert data["method"] == "obstacle_clipping" and data["error_cm"] < 0.01
     assert len(data["theta"]) == len(data["phi"]) == 3

@@ -10,16 +10,27 @@ from aftir_rl.robot import tip_position
 
 
 def _run(*args):
-    return subprocess.run([sys.executable, "-m", "aftir_rl.plan", *args], capture_output=True,
-                          text=True)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "aftir_rl.plan", *args], capture_output=True, text=True
+    )
 
 
 def test_json_schema_and_fk():
     proc = _run("--target", "230", "140", "90", "--json")
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
-    assert set(out) == {"dis", "theta", "phi", "section_length", "tip", "target", "error_cm",
-                        "clearance_cm", "method", "seconds"}  # fmt: skip
+    assert set(out) == {
+        "dis",
+        "theta",
+        "phi",
+        "section_length",
+        "tip",
+        "target",
+        "error_cm",
+        "clearance_cm",
+        "method",
+        "seconds",
+    }
     assert out["method"] == "tsm" and out["section_length"] == 50
     tip = tip_position(out["dis"], out["theta"], out["phi"], out["section_length"])
     assert np.linalg.norm(tip - [230, 140, 90]) < 0.01 and out["error_cm"] < 0.01

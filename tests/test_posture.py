@@ -7,12 +7,20 @@ import pytest
 
 from aftir_rl.collision import CollisionScene
 from aftir_rl.errors import PlanningError
-from aftir_rl.posture import PlanarProblem, Planner, blind_search, refine, region_clipping
+from aftir_rl.papers import FILOMAT2018_TABLE2, ICRA2014_TARGET, JACE_TABLE2
+from aftir_rl.posture import (
+    REGISTRY,
+    PlanarProblem,
+    Planner,
+    blind_search,
+    random_free_targets,
+    refine,
+    region_clipping,
+)
 from aftir_rl.posture.planar import planar_points, to_frame
-from aftir_rl.posture.planner import random_free_targets
 from aftir_rl.robot import body_points, tip_position
 
-SEED004 = [([11, 31, 31], 2), ([30, 19, 50], 3), ([30, 29, 67], 4)]
+JACE = [(row.target, row.sections) for row in JACE_TABLE2]
 
 
 @pytest.fixture(scope="module")
@@ -44,8 +52,8 @@ def test_planar_chain_equals_robot_fk():
     np.testing.assert_allclose(to_frame(rho, z, 0.3), expected, atol=1e-10)
 
 
-@pytest.mark.parametrize("target, n", SEED004)
-def test_seed004_targets_reached(open_planner, target, n):
+@pytest.mark.parametrize("target, n", JACE)
+def test_jace_targets_reached(open_planner, target, n):
     result = open_planner.plan(target)
     assert result.method == "tga" and result.posture.n_sections == n  # as in Table II
     assert_valid(open_planner, result, target)
@@ -53,7 +61,7 @@ def test_seed004_targets_reached(open_planner, target, n):
     assert len(set(result.posture.phi)) == 1  # dimension reduction: one plane
 
 
-def test_seed004_region_clipping_like_the_paper():
+def test_jace_region_clipping_like_the_paper():
     # Table II row 2: N = 2, 3 loops, 3.0e2 combinations, theta close to the blind search's.
     rho, z = math.hypot(11, 31), 31.0
     problem = PlanarProblem(rho, z, 2, 25.0, math.pi / 2, zone=0.5, dis_range=(-50, 0))
@@ -71,11 +79,11 @@ def test_seed004_region_clipping_like_the_paper():
     assert abs(rho_tip[0, -1] - rho) < 1e-9 and np.max(np.abs(theta - clip.theta)) < 0.05
 
 
-def test_seed000_case_a(open_planner):
-    # Table II (a): target [30, 18, 51], no obstacles, three sections of 25 cm.
-    result = open_planner.plan([30, 18, 51])
+def test_icra2014_case_a(open_planner):
+    # icra2014 Table II (a): target [30, 18, 51], no obstacles, three sections of 25 cm.
+    result = open_planner.plan(ICRA2014_TARGET)
     assert result.posture.n_sections == 3
-    assert_valid(open_planner, result, [30, 18, 51])
+    assert_valid(open_planner, result, ICRA2014_TARGET)
 
 
 def test_end_direction(open_planner):
@@ -92,7 +100,7 @@ def test_end_direction(open_planner):
         open_planner.tga(target, end_direction=[1.0, -1.0, 0.0])
 
 
-@pytest.mark.parametrize("target", [(230, 140, 90), (-50, 140, 10), (-50, 72, 90), (230, 72, 10)])
+@pytest.mark.parametrize("target", [row.target for row in FILOMAT2018_TABLE2])
 def test_tsm_reference_targets(planner, target):
     result = planner.plan(target)
     assert result.method == "tsm"
@@ -153,3 +161,27 @@ def test_blind_and_region_clipping_methods(open_planner):
         assert result.method == method and result.error_cm <= 0.5 + 1e-6
     with pytest.raises(ValueError, match="method must be one of"):
         open_planner.plan([11, 31, 31], method="rrt")
+
+
+def test_registry_and_dispatch(open_planner):
+    assert list(REGISTRY) == [
+        "blind",
+        "region_clipping",
+        "tga",
+        "tsm",
+        "obstacle_clipping",
+        "region_division",
+    ]
+    for method in REGISTRY.values():
+        assert method.summary and method.paper in ("jace", "icra2014", "st2014", "filomat2018")
+    # The method modules never import the planner or the registry (no cycle).
+    import importlib
+    import inspect
+
+    for name in ("tga", "tsm", "obstacle_clipping", "region_division", "search", "clipping"):
+        source = inspect.getsource(importlib.import_module(f"aftir_rl.posture.{name}"))
+        assert "posture.planner" not in source and "posture.registry" not in source, name
+    # Blind search names why it is not run on a target too far for its grid.
+    blind = REGISTRY["blind"]
+    assert blind.unavailable(open_planner, (11, 31, 31)) == ""
+    assert blind.unavailable(open_planner, (30, 29, 67)) == "blind: 4 sections, grid above 5e7"

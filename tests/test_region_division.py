@@ -1,4 +1,4 @@
-"""Region division (seed 001): the geometric reading against Table 2, and checked postures."""
+"""Region division (st2014): the geometric reading against Table 2, and checked postures."""
 
 from __future__ import annotations
 
@@ -10,12 +10,11 @@ import pytest
 from aftir_rl import tank as tank_cli
 from aftir_rl.collision import CollisionScene
 from aftir_rl.errors import PlanningError
+from aftir_rl.papers import ST2014_TABLE1, ST2014_TABLE2
 from aftir_rl.posture import Planner
 from aftir_rl.posture.region_division import (
     ARC_PEAK,
     REACH_RATIO,
-    SEED001_TABLE1,
-    SEED001_TABLE2,
     arc_tip,
     bearing,
     candidate_posture,
@@ -80,7 +79,7 @@ def test_regions_and_branches():
 
 
 def test_row9_exact():
-    row = SEED001_TABLE2[8]
+    row = ST2014_TABLE2[8]
     c = geometric_solution(row.paper_target)
     assert (c.method, c.joints, c.region) == ("I", 4, 4)
     assert deg(bearing(row.paper_target)) == pytest.approx(21.0, abs=0.1)
@@ -92,7 +91,7 @@ def test_row9_exact():
 
 
 def test_row3_exact():
-    row = SEED001_TABLE2[2]
+    row = ST2014_TABLE2[2]
     c = geometric_solution(row.paper_target)
     assert (c.method, c.joints) == ("I", 5)
     assert deg(bearing(row.paper_target)) % 360 == pytest.approx(215.9, abs=0.1)
@@ -102,18 +101,18 @@ def test_row3_exact():
 
 @pytest.mark.parametrize("index", [4, 5, 6, 7])
 def test_method_iii_rows(index):
-    row = SEED001_TABLE2[index]
+    row = ST2014_TABLE2[index]
     c = geometric_solution(row.paper_target)
     assert (c.method, c.joints) == ("III", 14)
     assert np.sign(c.bend) == np.sign(row.bend_deg)  # downwards to the floor, upwards to the top
     # The printed |Θ| are 71.7 and 71.4 (ours 71.63 for y = 42.5, 71.33 for y = -43.5): rows 5
     # and 6 are printed swapped (row 5's ϕ = 8.02° is the bearing of y = 42.5), so each of ours
     # is matched with the nearest printed value.
-    printed = [abs(r.bend_deg) for r in SEED001_TABLE2[4:8]]
+    printed = [abs(r.bend_deg) for r in ST2014_TABLE2[4:8]]
     assert min(abs(abs(deg(c.bend)) - p) for p in printed) <= 0.1
     assert abs(deg(c.bend)) == pytest.approx(71.4, abs=0.25)
     same_height = [
-        r.descending_cm for r in SEED001_TABLE2[4:8] if r.paper_target[2] == row.paper_target[2]
+        r.descending_cm for r in ST2014_TABLE2[4:8] if r.paper_target[2] == row.paper_target[2]
     ]
     assert min(abs(c.descending - p) for p in same_height) <= 0.1
 
@@ -134,9 +133,9 @@ def test_candidates_reach_the_target_by_forward_kinematics():
 
 def test_tank_matches_table2(capsys):
     tank = load_tank("single_cabin")
-    assert tank.targets == tuple(tuple(float(v) for v in r.target) for r in SEED001_TABLE2)
+    assert tank.targets == tuple(tuple(float(v) for v in r.target) for r in ST2014_TABLE2)
     lo, hi = np.array(tank.box_min), np.array(tank.box_max)
-    for row in SEED001_TABLE2[:8]:
+    for row in ST2014_TABLE2[:8]:
         paper, ours = np.array(row.paper_target), np.array(row.target)
         on_wall = np.isclose(paper, lo) | np.isclose(paper, hi)
         assert on_wall.all()
@@ -159,7 +158,7 @@ def check_independently(planner, result, target):
 
 @pytest.mark.parametrize("index", range(9))
 def test_table2_targets_reached(planner, index):
-    row = SEED001_TABLE2[index]
+    row = ST2014_TABLE2[index]
     result = region_division(planner, row.target)
     check_independently(planner, result, row.target)
     d = result.details
@@ -173,7 +172,7 @@ def test_table2_targets_reached(planner, index):
     assert result.posture.dis + d["base_sections"] * L == pytest.approx(-d["descending_cm"])
 
 
-@pytest.mark.parametrize("target", [t for t, _, _ in SEED001_TABLE1])
+@pytest.mark.parametrize("target", [t for t, _, _ in ST2014_TABLE1])
 def test_table1_targets_by_region_division_and_blind_search(planner, target):
     check_independently(planner, region_division(planner, target), target)
     blind = planner.plan(target, method="blind")

@@ -5,24 +5,20 @@ import math
 import numpy as np
 import pytest
 
-from aftir_rl.robot import ArmSpec, Posture, body_points, forward_kinematics, tip_position
+from aftir_rl.papers import ICRA2014_TABLE2, JACE_TABLE2
+from aftir_rl.robot import (
+    ArmSpec,
+    Posture,
+    body_points,
+    forward_kinematics,
+    tip_jacobian,
+    tip_position,
+)
 
-# Seed 000 Table II: theta, phi, dis, printed tip (l = 25 cm).
-SEED000 = [
-    ([0.62, -0.15, 0.32], [0.54, 0.54, 0.54], -13.99, [30.01, 18.01, 51.00]),
-    ([0.49, 0.65, -0.10], [1.22, 6.00, 6.79], -11.34, [30.03, 17.95, 51.00]),
-    ([0.71, 0.96, 0.57], [1.35, 5.41, 1.44], -9.57, [30.02, 17.94, 51.00]),
-    ([0.60, 1.07, 1.13], [1.42, 6.24, 3.99], -7.08, [29.95, 17.97, 51.00]),
-]
-# Seed 004 Table II: target, theta, d (planar arm in the plane through the target, l = 25 cm).
-SEED004 = [
-    ([11, 31, 31], [1.27, -0.82], -3.51),
-    ([11, 31, 31], [1.22, -0.64], -3.58),
-    ([30, 19, 50], [0.53, 0.17, -0.12], -14.18),
-    ([30, 19, 50], [0.53, 0.21, -0.25], -14.39),
-    ([30, 29, 67], [0.24, 0.54, -0.42, 0.40], -20.91),
-    ([30, 29, 67], [0.21, 0.66, -0.55, 0.46], -20.61),
-]
+# icra2014 Table II: theta, phi, dis, printed tip (l = 25 cm).
+ICRA2014 = [(r.theta, r.phi, r.dis, r.tip) for r in ICRA2014_TABLE2]
+# jace Table II, both searches: target, theta, d (planar arm in the target's plane, l = 25 cm).
+JACE = [(r.target, s.theta, s.dis) for r in JACE_TABLE2 for s in (r.blind, r.clipping)]
 
 
 def test_straight_arm_points_up():
@@ -39,14 +35,14 @@ def test_single_section_closed_form():
     np.testing.assert_allclose(tip, [r * math.cos(ph), r * math.sin(ph), r], atol=1e-12)
 
 
-@pytest.mark.parametrize("theta, phi, dis, printed", SEED000)
-def test_seed000_table2_tips(theta, phi, dis, printed):
+@pytest.mark.parametrize("theta, phi, dis, printed", ICRA2014)
+def test_icra2014_table2_tips(theta, phi, dis, printed):
     tip = tip_position(dis, theta, phi, 25.0)
     assert np.linalg.norm(tip - printed) < 0.5
 
 
-@pytest.mark.parametrize("target, theta, dis", SEED004)
-def test_seed004_table2_tips(target, theta, dis):
+@pytest.mark.parametrize("target, theta, dis", JACE)
+def test_jace_table2_tips(target, theta, dis):
     phi = [math.atan2(target[1], target[0])] * len(theta)
     tip = tip_position(dis, theta, phi, 25.0)
     assert np.linalg.norm(tip - target) < 0.7
@@ -129,3 +125,27 @@ def test_posture_vector_and_dict_round_trip():
     assert Posture(**p.to_dict()) == p
     with pytest.raises(ValueError, match="1 \\+ 2N values"):
         Posture.from_vector([0.0, 1.0])
+
+
+def test_tip_jacobian_matches_forward_kinematics():
+    rng = np.random.default_rng(3)
+    x = np.concatenate([[-20.0], rng.uniform(-1.2, 1.2, 4), rng.uniform(-3, 3, 4)])
+    tip, jac = tip_jacobian(x, 25.0)
+    assert jac.shape == (3, 9)
+    np.testing.assert_array_equal(tip, tip_position(x[0], x[1:5], x[5:], 25.0))
+    np.testing.assert_allclose(jac[:, 0], [0.0, 0.0, 1.0], atol=1e-8)  # dis moves the tip up
+    for i in range(1, 9):
+        step = np.zeros(9)
+        step[i] = 1e-4
+        plus, minus = x + step, x - step
+        slope = tip_position(plus[0], plus[1:5], plus[5:], 25.0)
+        slope = (slope - tip_position(minus[0], minus[1:5], minus[5:], 25.0)) / 2e-4
+        np.testing.assert_allclose(jac[:, i], slope, atol=1e-5)
+    # Batched, forward differences, other parameters: the same columns.
+    batch, fwd = tip_jacobian(np.stack([x, x]), 25.0, central=False)
+    assert fwd.shape == (2, 3, 9) and np.array_equal(batch[1], tip)
+    np.testing.assert_allclose(fwd[0], jac, atol=1e-4)
+    _, theta_only = tip_jacobian(
+        x[1:5], 25.0, joints=lambda p: (x[0], p, np.broadcast_to(x[5:], p.shape))
+    )
+    np.testing.assert_array_equal(theta_only, jac[:, 1:5])

@@ -191,8 +191,20 @@ def test_help():
 
 
 def test_all_targets_run(tmp_path, capsys):
-    assert train.main(["q_table", "--all-targets", "--logdir", str(tmp_path), "--no-progress",
-                       "--episodes", "1500"]) == 0  # fmt: skip
+    assert (
+        train.main(
+            [
+                "q_table",
+                "--all-targets",
+                "--logdir",
+                str(tmp_path),
+                "--no-progress",
+                "--episodes",
+                "1500",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     (run_dir,) = list(tmp_path.iterdir())
     assert run_dir.name.startswith("q_table_goal__AFTIR-TankGoal-v0__all__0__")

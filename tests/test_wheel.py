@@ -68,11 +68,22 @@ def test_wheel_runs_train_and_plan(installed) -> None:
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout)["error_cm"] < 0.01
     out = _run(
-        [sys.executable, "-m", "aftir_rl.train", "q_table", "--target", "20", "10", "60",
-         "--logdir", str(cwd / "runs"), "--no-progress"],
+        [
+            sys.executable,
+            "-m",
+            "aftir_rl.train",
+            "q_table",
+            "--target",
+            "20",
+            "10",
+            "60",
+            "--logdir",
+            str(cwd / "runs"),
+            "--no-progress",
+        ],
         cwd,
         env,
-    )  # fmt: skip
+    )
     assert out.returncode == 0, out.stderr
     (run,) = (cwd / "runs").iterdir()
     assert json.loads((run / "path.json").read_text())["target"] == [20.0, 10.0, 60.0]

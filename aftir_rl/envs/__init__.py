@@ -64,6 +64,13 @@ def register_envs() -> None:
             max_episode_steps=100,
             kwargs={"n_sections": 2, "target_region": REACH_REGION},
         )
+    if "AFTIR-ArmFull-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-ArmFull-v0",
+            entry_point="aftir_rl.envs.arm:ArmEnv",
+            max_episode_steps=300,
+            kwargs={"n_sections": 12, "free_targets": True},
+        )
     if "AFTIR-ArmFTL-v0" not in gym.registry:
         gym.register(
             id="AFTIR-ArmFTL-v0",

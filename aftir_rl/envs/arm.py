@@ -12,6 +12,7 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from aftir_rl.collision import CollisionScene, panel_violation
+from aftir_rl.envs.ftl_batch import bay_region, clearance_grid, draw_targets
 from aftir_rl.errors import InvalidActionError, TargetError
 from aftir_rl.robot import Posture, body_points
 from aftir_rl.tank import Tank, load_tank
@@ -56,6 +57,9 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     - ``target``: a fixed target [cm], or None to draw one per episode from ``self.np_random``:
       the tip of a random collision-free posture of the arm, so every target is reachable.
     - ``target_region``: ``(min, max)`` corners [cm] the drawn targets must lie in.
+    - ``free_targets``: draw targets as ``AFTIR-ArmFTL-v0`` does instead (uniformly among the
+      points of ``target_region``, or of ``bay`` 1 / 2, at least 10 cm from every surface and
+      20 cm from the start), so both envs pose the same task (``AFTIR-ArmFull-v0``).
     - ``success_tolerance``: [cm].
     - ``dis_step``, ``angle_step``: largest increments per step [cm], [rad].
     - ``render_mode``: ``"rgb_array"``.
@@ -78,6 +82,8 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         dis_step: float = 3.0,
         angle_step: float = 0.1,
         start_height: float = 10.0,
+        free_targets: bool = False,
+        bay: int | None = None,
         render_mode: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -94,12 +100,13 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.start_height = float(start_height)
         self.render_mode = render_mode
         self.fixed_target = None if target is None else self._check_target(target)
-        lo, hi = self.tank.box_min, self.tank.box_max
         self.target_region = (
-            (np.array(lo, float), np.array(hi, float))
+            bay_region(self.tank, bay)
             if target_region is None
             else (np.array(target_region[0], float), np.array(target_region[1], float))
         )
+        self.free_targets = bool(free_targets)
+        self._grid = clearance_grid(self.tank) if free_targets else None
         self.action_space = spaces.Box(-1.0, 1.0, (1 + 2 * self.n,), np.float32)
         self.observation_space = spaces.Box(-20.0, 20.0, (6 * self.n + 15,), np.float32)
         # Fast pre-check (see _collides): backbone samples farther than radius + margin from
@@ -156,6 +163,9 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return report.collides, max(report.clearance_cm, 0.0)
 
     def _draw_target(self) -> NDArray[np.float64]:
+        if self._grid is not None:
+            start = np.array([0.0, 0.0, self.start_height])
+            return draw_targets([self.np_random], self._grid, self.target_region, 10.0, start)[0]
         lo, hi = self.target_region
         for _ in range(10_000):
             state = self._random_state()
@@ -186,12 +196,20 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         diff = self.target - tip
         return np.concatenate(
             [
-                [s[0] / self.l], theta / self.arm.theta_max, np.sin(phi), np.cos(phi),
-                tip / 100, self.target / 100, diff / 100,
+                [s[0] / self.l],
+                theta / self.arm.theta_max,
+                np.sin(phi),
+                np.cos(phi),
+                tip / 100,
+                self.target / 100,
+                diff / 100,
                 [min(clearance, 10.0) / 10, np.linalg.norm(diff) / 100],
-                np.sin(theta), np.cos(theta), frames_z / 100, np.clip(diff / 10, -3, 3),
+                np.sin(theta),
+                np.cos(theta),
+                frames_z / 100,
+                np.clip(diff / 10, -3, 3),
             ]
-        ).astype(np.float32)  # fmt: skip
+        ).astype(np.float32)
 
     # ------------------------------------------------------------------ Gymnasium API
     def reset(
@@ -266,5 +284,6 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             from aftir_rl.plotting import PathRenderer
 
             self._renderer = PathRenderer(self.tank, title="AFTIR-Arm")
-        return self._renderer.render(np.array(self._tips), self.target,
-                                     arms=[self._points(self._state, 10)])  # fmt: skip
+        return self._renderer.render(
+            np.array(self._tips), self.target, arms=[self._points(self._state, 10)]
+        )

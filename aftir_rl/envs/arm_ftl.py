@@ -57,7 +57,6 @@ single env seeded ``seed + i`` under the same actions.
 from __future__ import annotations
 
 import math
-import weakref
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, SupportsFloat
@@ -71,11 +70,11 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.collision import point_clearance
-from aftir_rl.envs.ftl_batch import GRID_SPACING, ClearanceGrid, RasterGuide, draw_targets
+from aftir_rl.envs.ftl_batch import bay_region, clearance_grid, draw_targets, field_guide
 from aftir_rl.errors import AftirError, ConfigError, InvalidActionError, TargetError
 from aftir_rl.motion.ftl import kappa_to_angles
-from aftir_rl.robot import Posture, body_points
-from aftir_rl.tank import Box, Cylinder, Sphere, Tank, load_tank
+from aftir_rl.robot import Posture, body_points, section_transforms
+from aftir_rl.tank import Tank, TankDistance, load_tank
 
 __all__ = [
     "ArmFTLEnv",
@@ -135,120 +134,6 @@ def ftl_kappa_batch(
 
     j = kk[:, None] + np.arange(n)[None, :]
     return (1.0 - f) * padded(j) + f * padded(j + 1)
-
-
-class TankDistance:
-    """:func:`~aftir_rl.collision.point_clearance` of one tank, compiled for many calls.
-
-    The same signed distance [cm] (every solid and wall, the floor's round opening continued as
-    the guide tube below it), with the tank's boxes, cylinders and spheres stacked into arrays so
-    that one call is a few dozen numpy operations whatever the number of solids: the per-step
-    cost of a single env is call overhead, not arithmetic. The tests compare the two.
-    """
-
-    def __init__(self, tank: Tank) -> None:
-        self.tank = tank
-        boxes = [s for s in tank.solids if isinstance(s, Box)]
-        spheres = [s for s in tank.solids if isinstance(s, Sphere)]
-        cylinders = [s for s in tank.solids if isinstance(s, Cylinder)]
-        lo = np.array([b.min for b in boxes], dtype=np.float64).reshape(-1, 3)
-        hi = np.array([b.max for b in boxes], dtype=np.float64).reshape(-1, 3)
-        self._box_c, self._box_h = (lo + hi) / 2, (hi - lo) / 2
-        self._sph = np.array([[*s.center, s.radius] for s in spheres], dtype=np.float64)
-        # cylinders grouped by axis: (axis, other axes' centre (C, 2), radius, mid, half length)
-        self._cyl = []
-        for k in range(3):
-            group = [c for c in cylinders if c.axis == k]
-            if not group:
-                continue
-            others = [i for i in range(3) if i != k]
-            centre = np.array([[c.p0[i] for i in others] for c in group], dtype=np.float64)
-            ends = np.sort(np.array([[c.p0[k], c.p1[k]] for c in group], dtype=np.float64), 1)
-            radius = np.array([c.radius for c in group], dtype=np.float64)
-            half = (ends[:, 1] - ends[:, 0]) / 2
-            self._cyl.append((k, others, centre, radius, ends.mean(1), half))
-        self._lo, self._hi = np.array(tank.box_min, float), np.array(tank.box_max, float)
-        self._panel_c, self._panel_r = np.array(tank.panel.center, float), tank.panel.radius
-
-    def _solids(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Distance of points ``(P, 3)`` to the nearest solid (``inf`` without solids)."""
-        x, y, z = p[:, 0, None], p[:, 1, None], p[:, 2, None]
-        best = np.full(len(p), np.inf)
-        if len(self._box_c):
-            c, h = self._box_c, self._box_h
-            qx = np.abs(x - c[:, 0]) - h[:, 0]
-            qy = np.abs(y - c[:, 1]) - h[:, 1]
-            qz = np.abs(z - c[:, 2]) - h[:, 2]
-            out = np.sqrt(
-                np.maximum(qx, 0.0) ** 2 + np.maximum(qy, 0.0) ** 2 + np.maximum(qz, 0.0) ** 2
-            )
-            inside = np.minimum(np.maximum(np.maximum(qx, qy), qz), 0.0)
-            best = np.minimum(best, (out + inside).min(-1))
-        coords = (x, y, z)
-        for k, others, centre, radius, mid, half in self._cyl:
-            radial = np.hypot(coords[others[0]] - centre[:, 0], coords[others[1]] - centre[:, 1])
-            radial = radial - radius
-            axial = np.abs(coords[k] - mid) - half
-            out = np.hypot(np.maximum(radial, 0.0), np.maximum(axial, 0.0))
-            best = np.minimum(best, (out + np.minimum(np.maximum(radial, axial), 0.0)).min(-1))
-        if len(self._sph):
-            sp = self._sph
-            d = np.sqrt((x - sp[:, 0]) ** 2 + (y - sp[:, 1]) ** 2 + (z - sp[:, 2]) ** 2) - sp[:, 3]
-            best = np.minimum(best, d.min(-1))
-        return best
-
-    def __call__(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Signed distance [cm] of points ``(..., 3)`` to the nearest solid or wall.
-
-        Points deeper than the panel's radius below the floor skip the solids: the solids lie in
-        the box, so they are at least that far, and the guide tube (at most the radius away, or
-        negative outside it) is always nearer.
-        """
-        p = np.asarray(points, dtype=np.float64)
-        flat = p.reshape(-1, 3)
-        if self.tank.walls:
-            near = np.flatnonzero(flat[:, 2] > self._lo[2] - self._panel_r)
-            best: NDArray[np.float64] = np.full(len(flat), np.inf)
-            best[near] = self._solids(flat[near])
-            best = best.reshape(p.shape[:-1])
-        else:
-            best = self._solids(flat).reshape(p.shape[:-1])
-        if self.tank.walls:
-            x, y, z = p[..., 0], p[..., 1], p[..., 2]
-            lo, hi = self._lo, self._hi
-            side = np.minimum(np.minimum(x - lo[0], hi[0] - x), np.minimum(y - lo[1], hi[1] - y))
-            ceiling = hi[2] - z
-            c, r = self._panel_c, self._panel_r
-            radial = np.hypot(x - c[0], y - c[1])
-            height = z - lo[2]
-            rim = np.where(height >= 0, np.hypot(r - radial, height), r - radial)
-            floor = np.where(radial > r, height, rim)
-            best = np.minimum(best, np.minimum(np.minimum(side, ceiling), floor))
-        return best
-
-
-_GRIDS: weakref.WeakKeyDictionary[Tank, ClearanceGrid] = weakref.WeakKeyDictionary()
-
-
-def clearance_grid(tank: Tank, distance: TankDistance) -> ClearanceGrid:
-    """The :class:`ClearanceGrid` of a tank, built once per tank.
-
-    The grids cover only where the signed distance is 1-Lipschitz, as their bound needs: the
-    tank's box grown by 10 cm sideways and above (not below the floor, where the distance jumps
-    at the guide's wall), and a column around the guide's axis below the floor, narrow enough
-    that no node or point of it reaches the wall, down to the deepest base of the longest arm.
-    Everything else is computed exactly.
-    """
-    grid = _GRIDS.get(tank)
-    if grid is None:
-        lo, hi = np.asarray(tank.box_min, float) - 10.0, np.asarray(tank.box_max, float) + 10.0
-        lo[2] = tank.box_min[2]
-        c, r = np.asarray(tank.panel.center, float), float(tank.panel.radius)
-        half = max((r - 2.0 * GRID_SPACING) / math.sqrt(2.0), 0.0)
-        depth = tank.arm.max_sections * tank.arm.section_length + 10.0
-        column = (c - [half, half, depth], c + [half, half, 0.0])
-        grid = _GRIDS[tank] = ClearanceGrid(distance, [(lo, hi), column])
-    return grid
 
 
 _DETOUR_CACHE: dict[int, NDArray[np.int32]] = {}
@@ -343,16 +228,17 @@ class FTLBatch:
         self.success_tolerance, self.shaping = float(success_tolerance), bool(shaping)
         self.s_max = self.n * self.l
         self.detour = raster_detour_table(tank) if shaping else None
-        self.distance = TankDistance(tank)
-        self.grid = clearance_grid(tank, self.distance)
+        self.distance = tank.distance
+        self.grid = clearance_grid(tank)
         self._deep = tank.box_min[2] - tank.panel.radius - 1.0
         self.kappa = np.zeros((self.b, self.n, 2))
         self.k = np.zeros(self.b, dtype=np.int64)
         self.s = np.full(self.b, self.start_height)
         self.target = np.zeros((self.b, 3))
         self.obs_size = 14 + 3 * self.n + (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)
-        self.guide = RasterGuide(tank) if guide else None
-        self.obs_size += 7 if guide else 0
+        self.guide = field_guide(tank) if guide else None
+        self.guide_ids = np.zeros(self.b, dtype=np.int64)
+        self.obs_size += 10 if guide else 0
         self.refresh()
 
     # -- geometry
@@ -400,9 +286,31 @@ class FTLBatch:
             self.points[:, self.k_samples :: self.k_samples, 2][:, -3:] / 100.0,
         ]
         if self.guide is not None:
-            to_go, direction = self.guide(self.tip, self.target)
-            parts += [(to_go / 100.0)[:, None], direction, (self.target - self.tip) / 100.0]
+            to_go, direction = self.guide(self.tip, self.target, self.guide_ids)
+            to_go = np.minimum(to_go, 1000.0)
+            # in the frame the steered κ bends in, where steering towards them is simplest
+            frame = self.steering_frames()
+            parts += [
+                (to_go / 100.0)[:, None],
+                np.einsum("bji,bj->bi", frame, direction),
+                np.einsum("bji,bj->bi", frame, self.target - self.tip) / 100.0,
+                np.einsum("bji,bj->bi", frame, self.heading),
+            ]
         return np.concatenate(parts, axis=1).astype(np.float32)
+
+    def steering_frames(self) -> NDArray[np.float64]:
+        """Rotations ``(B, 3, 3)`` of the frames the steered sections bend in.
+
+        The route's frame at ``k·l``: the product of the rotations of its frozen sections
+        ``0..k−1``.
+        """
+        theta, phi = kappa_to_angles(self.kappa)
+        ends = section_transforms(theta, phi, self.l)[..., :3, :3]
+        frame = np.broadcast_to(np.eye(3), (self.b, 3, 3)).copy()
+        for j in range(int(self.k.max(initial=0))):
+            frozen = (j < self.k)[:, None, None]
+            frame = np.where(frozen, frame @ ends[:, j], frame)
+        return frame
 
     # -- dynamics
     def reset_rows(
@@ -417,6 +325,8 @@ class FTLBatch:
         self.k[rows] = 0
         self.s[rows] = self.start_height
         self.target[rows] = targets
+        if self.guide is not None:
+            self.guide_ids[rows] = self.guide.field_ids(self.target[rows])
         if refresh:
             self.refresh()
 
@@ -516,8 +426,10 @@ class _GoalReward:
         a = np.asarray(achieved_goal, dtype=np.float64)
         g = np.asarray(desired_goal, dtype=np.float64)
         shape = np.broadcast_shapes(a.shape, g.shape)[:-1]
-        d = _distance(np.broadcast_to(a, shape + (3,)).reshape(-1, 3),
-                      np.broadcast_to(g, shape + (3,)).reshape(-1, 3))  # fmt: skip
+        d = _distance(
+            np.broadcast_to(a, shape + (3,)).reshape(-1, 3),
+            np.broadcast_to(g, shape + (3,)).reshape(-1, 3),
+        )
         _, contact = _info_arrays(info, len(d))
         out = ((d < self.batch.success_tolerance) | contact).reshape(shape)
         return bool(out) if out.ndim == 0 else out
@@ -567,8 +479,11 @@ class _Setup:
         n = arm.max_sections if n_sections is None else int(n_sections)
         if not 1 <= n <= arm.max_sections:
             raise ConfigError(f"n_sections must be in 1..{arm.max_sections}, got {n_sections}")
-        for name, value in (("kappa_step", kappa_step), ("push_step", push_step),
-                            ("success_tolerance", success_tolerance)):  # fmt: skip
+        for name, value in (
+            ("kappa_step", kappa_step),
+            ("push_step", push_step),
+            ("success_tolerance", success_tolerance),
+        ):
             if not 0 < value < math.inf:
                 raise ConfigError(f"{name} must be positive and finite, got {value}")
         if push_step > arm.section_length:
@@ -579,31 +494,24 @@ class _Setup:
             raise ConfigError(f"samples_per_section must be at least 2, got {samples_per_section}")
         if not 0 <= start_height < arm.section_length:
             raise ConfigError(f"start_height must be in [0, {arm.section_length:g}) cm")
-        self.region = self._bay_region(bay)
+        self.region = bay_region(self.tank, bay)
         self.bay = bay
         self.target_clearance = float(target_clearance)
         self.batch = FTLBatch(
-            self.tank, n, batch, samples_per_section, kappa_step, push_step, start_height,
-            margin, success_tolerance, shaping, guide,
+            self.tank,
+            n,
+            batch,
+            samples_per_section,
+            kappa_step,
+            push_step,
+            start_height,
+            margin,
+            success_tolerance,
+            shaping,
+            guide,
         )
         self.start_tip = np.array([0.0, 0.0, float(start_height)])
         self.fixed_target = None if target is None else self._check_target(target)
-
-    def _bay_region(self, bay: int | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        lo, hi = np.array(self.tank.box_min, float), np.array(self.tank.box_max, float)
-        if bay is None:
-            return lo, hi
-        baffle = self.tank.baffle
-        if baffle is None or bay not in (1, 2):
-            raise ConfigError(
-                f"bay must be None, 1 or 2 (and the tank must have a baffle), got {bay!r}"
-            )
-        i, half = baffle.index, baffle.thickness / 2
-        if bay == 1:
-            hi[i] = baffle.position - half
-        else:
-            lo[i] = baffle.position + half
-        return lo, hi
 
     def _check_target(self, target: Any) -> NDArray[np.float64]:
         try:
@@ -695,9 +603,11 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
     - ``success_tolerance`` (2 cm), ``margin`` (1 cm), ``kappa_step`` (0.1 rad), ``push_step``
       (5 cm), ``start_height`` (10 cm), ``samples_per_section`` (10), ``shaping`` (False).
     - ``guide`` (False): append to ``observation`` what the way to *this* target looks like: the
-      distance-to-go through the tank's raster (cm/100) and the unit direction in which it falls
-      (:class:`~aftir_rl.envs.ftl_batch.RasterGuide`), and ``(target − tip)/100``. These depend
-      on the goal, so HER's relabelled goals would not match them: use it with PPO, not HER.
+      free-space distance-to-go (cm/100, at most 10), then, in the frame the steered section
+      bends in (:meth:`FTLBatch.steering_frames`), the unit way to the next point of the
+      shortest way (:class:`~aftir_rl.envs.ftl_batch.FieldGuide`), ``(target − tip)/100`` and
+      the tip's heading. These depend on the goal, so HER's relabelled goals would not match them:
+      use it with PPO, not HER.
     - ``render_mode``: ``"rgb_array"``.
 
     ``reset(options={"target": (x, y, z)})`` sets the target of one episode.
@@ -728,9 +638,22 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         self.render_mode = render_mode
-        self._setup(tank, n_sections, 1, target, bay, target_clearance, success_tolerance,
-                    margin, kappa_step, push_step, start_height, samples_per_section,
-                    shaping, guide)  # fmt: skip
+        self._setup(
+            tank,
+            n_sections,
+            1,
+            target,
+            bay,
+            target_clearance,
+            success_tolerance,
+            margin,
+            kappa_step,
+            push_step,
+            start_height,
+            samples_per_section,
+            shaping,
+            guide,
+        )
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
         self.action_space, self.observation_space = self._spaces()  # type: ignore[assignment]
@@ -779,7 +702,10 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
             target = self.fixed_target
         else:
             target = draw_targets(
-                [self.np_random], self.batch.grid, self.region, self.target_clearance,
+                [self.np_random],
+                self.batch.grid,
+                self.region,
+                self.target_clearance,
                 self.start_tip,
             )[0]
         self.batch.reset_rows(np.array([0]), target[None])
@@ -801,8 +727,12 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         reward = self.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)
         distance = _distance(obs["achieved_goal"], obs["desired_goal"])
         success = bool(distance < b.success_tolerance) and not contact
-        info.update(is_success=success, collision=contact, distance_cm=float(distance),
-                    min_clearance_cm=float(b.body_clearance[0]))  # fmt: skip
+        info.update(
+            is_success=success,
+            collision=contact,
+            distance_cm=float(distance),
+            min_clearance_cm=float(b.body_clearance[0]),
+        )
         return obs, float(reward), bool(success or contact), False, info
 
     def render(self) -> NDArray[np.uint8] | None:
@@ -864,9 +794,22 @@ class ArmFTLVectorEnv(
         self.num_envs = int(num_envs)
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = None
-        self._setup(tank, n_sections, self.num_envs, target, bay, target_clearance,
-                    success_tolerance, margin, kappa_step, push_step, start_height,
-                    samples_per_section, shaping, guide)  # fmt: skip
+        self._setup(
+            tank,
+            n_sections,
+            self.num_envs,
+            target,
+            bay,
+            target_clearance,
+            success_tolerance,
+            margin,
+            kappa_step,
+            push_step,
+            start_height,
+            samples_per_section,
+            shaping,
+            guide,
+        )
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -890,8 +833,9 @@ class ArmFTLVectorEnv(
         if self.fixed_target is not None:
             return np.repeat(self.fixed_target[None], len(rows), axis=0)
         rngs = [self._rngs[i] for i in rows]
-        return draw_targets(rngs, self.batch.grid, self.region, self.target_clearance,
-                            self.start_tip)
+        return draw_targets(
+            rngs, self.batch.grid, self.region, self.target_clearance, self.start_tip
+        )
 
     def reset(
         self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
@@ -952,8 +896,12 @@ class ArmFTLVectorEnv(
         terminated[done_rows] = False
         truncated[done_rows] = False
         self.steps[done_rows] = 0
-        info.update(is_success=success, collision=contact, distance_cm=distance,
-                    min_clearance_cm=b.body_clearance.copy())  # fmt: skip
+        info.update(
+            is_success=success,
+            collision=contact,
+            distance_cm=distance,
+            min_clearance_cm=b.body_clearance.copy(),
+        )
         done = terminated | truncated
         if self.autoreset_mode is AutoresetMode.NEXT_STEP:
             self.prev_done = done

@@ -9,12 +9,14 @@ Two things make the batched follow-the-leader env fast and goal-aware without ap
   bound ``v + δ`` over its samples bounds the minimum; only samples whose lower bound ``v − δ``
   is below it can hold the minimum, and only those (typically a handful of 121) go to the exact
   function. The result equals the exact minimum (the tests compare them). The sensing rays of
-  the observation read the nearest node's value (:meth:`ClearanceGrid.approx`, within ``δ`` = 1.7 cm).
-- :class:`RasterGuide` turns the all-pairs shortest 6-connected distances through the tank's
-  raster (the BFS the grid world is checked against) into a smooth distance-to-go ``P(p, g)``
-  [cm] by trilinear interpolation between cell centres, and its gradient: the way through the
-  hatch as two numbers a policy can read, looked up in a table, for any target, at no per-episode
-  cost.
+  the observation read the nearest node's value (:meth:`ClearanceGrid.approx`, within
+  ``δ`` = 1.7 cm).
+- :class:`FieldGuide` keeps the free-space distance-to-go fields of the targets seen so far
+  (the motion planner's guide field, one per target grid cell) and reads, for every tip at once,
+  the distance-to-go and the way to the next grid point: the way through the hatch as numbers a
+  policy can read.
+- :func:`raster_distance_table`: the all-pairs shortest 6-connected distances through the tank's
+  raster (the BFS the grid world is checked against), for the reward's shaping term.
 """
 
 from __future__ import annotations
@@ -26,15 +28,25 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.errors import TargetError
+from aftir_rl.errors import ConfigError, TargetError
 from aftir_rl.tank import Tank
 
-__all__ = ["ClearanceGrid", "RasterGuide", "draw_targets", "raster_distance_table"]
+__all__ = [
+    "ClearanceGrid",
+    "FieldGuide",
+    "bay_region",
+    "clearance_grid",
+    "field_guide",
+    "draw_targets",
+    "raster_distance_table",
+]
 
 #: Grid spacing [cm] of :class:`ClearanceGrid`.
 GRID_SPACING = 2.0
 #: Largest number of grid nodes a tank may ask for (about 8 bytes each).
 MAX_GRID_NODES = 8_000_000
+#: Largest number of distance-to-go values :class:`FieldGuide` keeps (4 bytes each).
+MAX_GUIDE_VALUES = 50_000_000
 
 
 class ClearanceGrid:
@@ -42,7 +54,7 @@ class ClearanceGrid:
 
     Args:
         distance: the exact signed distance [cm] of points ``(..., 3)`` (e.g.
-            :class:`aftir_rl.envs.arm_ftl.TankDistance`).
+            :class:`aftir_rl.tank.TankDistance`).
         boxes: ``(lo, hi)`` corners [cm] of the boxes the grids cover (e.g. the tank and the
             guide tube below its floor); points outside every box are always computed exactly.
             Within each box ``distance`` must be 1-Lipschitz (a true signed distance, with no
@@ -119,6 +131,48 @@ class ClearanceGrid:
         if far.any():
             v[far] = self.distance(points[far])
         return v
+
+
+_GRIDS: weakref.WeakKeyDictionary[Tank, ClearanceGrid] = weakref.WeakKeyDictionary()
+
+
+def clearance_grid(tank: Tank) -> ClearanceGrid:
+    """The :class:`ClearanceGrid` of a tank, built once per tank.
+
+    The grids cover only where the signed distance is 1-Lipschitz, as their bound needs: the
+    tank's box grown by 10 cm sideways and above (not below the floor, where the distance jumps
+    at the guide's wall), and a column around the guide's axis below the floor, narrow enough
+    that no node or point of it reaches the wall, down to the deepest base of the longest arm.
+    Everything else is computed exactly.
+    """
+    grid = _GRIDS.get(tank)
+    if grid is None:
+        lo, hi = np.asarray(tank.box_min, float) - 10.0, np.asarray(tank.box_max, float) + 10.0
+        lo[2] = tank.box_min[2]
+        c, r = np.asarray(tank.panel.center, float), float(tank.panel.radius)
+        half = max((r - 2.0 * GRID_SPACING) / math.sqrt(2.0), 0.0)
+        depth = tank.arm.max_sections * tank.arm.section_length + 10.0
+        column = (c - [half, half, depth], c + [half, half, 0.0])
+        grid = _GRIDS[tank] = ClearanceGrid(tank.distance, [(lo, hi), column])
+    return grid
+
+
+def bay_region(tank: Tank, bay: int | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Corners [cm] of the tank's box, or of bay 1 / 2 (either side of the baffle)."""
+    lo, hi = np.array(tank.box_min, float), np.array(tank.box_max, float)
+    if bay is None:
+        return lo, hi
+    baffle = tank.baffle
+    if baffle is None or bay not in (1, 2):
+        raise ConfigError(
+            f"bay must be None, 1 or 2 (and the tank must have a baffle), got {bay!r}"
+        )
+    i, half = baffle.index, baffle.thickness / 2
+    if bay == 1:
+        hi[i] = baffle.position - half
+    else:
+        lo[i] = baffle.position + half
+    return lo, hi
 
 
 def draw_targets(
@@ -206,49 +260,111 @@ def raster_distance_table(tank: Tank) -> NDArray[np.int32]:
 _TABLES: weakref.WeakKeyDictionary[Tank, NDArray[np.int32]] = weakref.WeakKeyDictionary()
 
 
-class RasterGuide:
-    """Distance-to-go through the tank's raster, interpolated, and its direction.
+class FieldGuide:
+    """Distance-to-go through free space and the way to go, for many targets at once.
 
-    ``P(p, g) = cell · Σ_corners w_c · D[c, cell(g)]`` over the 8 cell centres around ``p``
-    (trilinear weights ``w_c``; outside the centres' hull the nearest is repeated), with ``D``
-    from :func:`raster_distance_table`. :meth:`__call__` returns ``P`` [cm] and ``−∇P/|∇P|``,
-    the unit direction in which the distance-to-go falls fastest (zero where it is flat).
+    The field of a target is :class:`aftir_rl.motion.route.GuideField` (the fine grid of half
+    the raster's cell, points that keep the arm's radius from every surface, 26-neighbour edges
+    whose midpoints are free too, so a thin wall is crossed only through its hatch), built for
+    the centre of the target's grid cell the first time a target falls in that cell and kept
+    (at most :data:`MAX_GUIDE_VALUES` values in all; the cache starts again when full).
+    :meth:`__call__` returns, for each tip, the distance-to-go ``P`` [cm] (its cell's or a
+    joined neighbour's distance plus the straight line to that grid point, as ``GuideField``
+    does) and the unit vector towards the joined neighbour that minimises it: the next waypoint.
+    In the target's own cell both are the straight line to the target.
     """
 
     def __init__(self, tank: Tank) -> None:
-        raster = tank.raster
-        self.table = raster_distance_table(tank)
-        self.shape = np.asarray(raster.shape)
-        self.origin = np.asarray(raster.origin, dtype=np.float64)
-        self.cell = float(raster.cell_size)
+        from aftir_rl.motion.route import _NEIGHBOURS, GuideField
 
-    def cell_index(self, p: NDArray[np.float64]) -> NDArray[np.int64]:
-        """Flat raster cell index of points ``(B, 3)``, clipped to the raster."""
-        c = np.clip(np.floor((p - self.origin) / self.cell).astype(np.int64), 0, self.shape - 1)
-        return (c[:, 0] * self.shape[1] + c[:, 1]) * self.shape[2] + c[:, 2]
+        lo, hi = np.asarray(tank.box_min, float), np.asarray(tank.box_max, float)
+        probe = GuideField(tank, (lo + hi) / 2)
+        self.size, self.origin = probe.size, probe.origin
+        self.shape = np.asarray(probe.shape, dtype=np.int64)
+        self.edges, self.neighbours = probe.edges, np.asarray(_NEIGHBOURS, dtype=np.int64)
+        self._tank = tank
+        self._field_cls = GuideField
+        n = int(np.prod(self.shape))
+        self._capacity = max(1, MAX_GUIDE_VALUES // n)
+        self._rows: dict[int, int] = {}
+        self._table = np.empty((min(64, self._capacity), n), dtype=np.float32)
+
+    def _flat(self, cell: NDArray[np.int64]) -> NDArray[np.int64]:
+        return (cell[..., 0] * self.shape[1] + cell[..., 1]) * self.shape[2] + cell[..., 2]
+
+    def _cell(self, p: NDArray[np.float64]) -> NDArray[np.int64]:
+        c = np.floor((p - self.origin) / self.size).astype(np.int64)
+        return np.clip(c, 0, self.shape - 1)
+
+    def field_ids(self, targets: NDArray[np.float64]) -> NDArray[np.int64]:
+        """Rows of the field table for targets ``(B, 3)``, building the missing fields."""
+        keys = self._flat(self._cell(targets))
+        out = np.empty(len(keys), dtype=np.int64)
+        for i, key in enumerate(keys.tolist()):
+            row = self._rows.get(key)
+            if row is None:
+                if len(self._rows) >= self._capacity:
+                    self._rows.clear()  # full: start again (ids given out before stay valid
+                    # until their rows are overwritten, i.e. until the next reset of that row)
+                row = len(self._rows)
+                if row >= len(self._table):
+                    grown = np.empty(
+                        (min(2 * len(self._table), self._capacity),) + self._table.shape[1:],
+                        np.float32,
+                    )
+                    grown[: len(self._table)] = self._table
+                    self._table = grown
+                cell = np.array(
+                    [
+                        key // (self.shape[1] * self.shape[2]),
+                        key // self.shape[2] % self.shape[1],
+                        key % self.shape[2],
+                    ]
+                )
+                centre = self.origin + (cell + 0.5) * self.size
+                self._table[row] = self._field_cls(self._tank, centre).dist.reshape(-1)
+                self._rows[key] = row
+            out[i] = row
+        return out
 
     def __call__(
-        self, p: NDArray[np.float64], g: NDArray[np.float64]
+        self, p: NDArray[np.float64], g: NDArray[np.float64], ids: NDArray[np.int64]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """``P`` ``(B,)`` [cm] and the descent direction ``(B, 3)`` for tips ``p``, goals ``g``."""
-        u = (p - self.origin) / self.cell - 0.5  # coordinates in cell-centre units
-        top = (self.shape - 1).astype(np.float64)
-        u = np.clip(u, 0.0, top)
-        i0 = np.minimum(np.floor(u).astype(np.int64), np.maximum(self.shape - 2, 0))
-        f = u - i0
-        goal = self.cell_index(g)
-        value = np.zeros(len(p))
-        grad = np.zeros((len(p), 3))
-        for corner in range(8):
-            bits = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
-            c = np.minimum(i0 + bits, self.shape - 1)
-            d = self.table[(c[:, 0] * self.shape[1] + c[:, 1]) * self.shape[2] + c[:, 2], goal]
-            d = d.astype(np.float64) * self.cell
-            w = np.where(bits, f, 1.0 - f)  # per-axis weights (B, 3)
-            value += w.prod(-1) * d
-            for axis in range(3):
-                others = np.delete(w, axis, axis=1).prod(-1)
-                grad[:, axis] += (1.0 if bits[axis] else -1.0) * others * d
-        norm = np.linalg.norm(grad, axis=-1, keepdims=True)
-        direction = np.where(norm > 1e-9, -grad / np.maximum(norm, 1e-12), 0.0)
-        return value, direction
+        """Distance-to-go and way to go of tips ``p`` to targets ``g`` (fields: rows ``ids``).
+
+        Returns ``P`` ``(B,)`` [cm] and the unit way ``(B, 3)``.
+        """
+        cell = self._cell(p)
+        own = self._table[ids, self._flat(cell)].astype(np.float64)
+        value = own + np.linalg.norm(p - (self.origin + (cell + 0.5) * self.size), axis=-1)
+        best = np.full(len(p), np.inf)
+        way = np.zeros((len(p), 3))
+        for e, d in enumerate(self.neighbours):
+            c = cell + d
+            ok = np.all((c >= 0) & (c < self.shape), axis=-1)
+            c = np.where(ok[:, None], c, 0)
+            ok &= self.edges[e][cell[:, 0], cell[:, 1], cell[:, 2]]
+            step = self.origin + (c + 0.5) * self.size - p
+            v = self._table[ids, self._flat(c)] + np.linalg.norm(step, axis=-1)
+            v = np.where(ok, v, np.inf)
+            better = v < best
+            best = np.where(better, v, best)
+            way = np.where(better[:, None], step, way)
+        value = np.minimum(value, best)
+        home = np.all(cell == self._cell(g), axis=-1) | ~np.isfinite(best)
+        straight = g - p
+        value = np.where(home, np.linalg.norm(straight, axis=-1), value)
+        way = np.where(home[:, None], straight, way)
+        norm = np.linalg.norm(way, axis=-1, keepdims=True)
+        return value, np.where(norm > 1e-9, way / np.maximum(norm, 1e-12), 0.0)
+
+
+_GUIDES: weakref.WeakKeyDictionary[Tank, FieldGuide] = weakref.WeakKeyDictionary()
+
+
+def field_guide(tank: Tank) -> FieldGuide:
+    """The :class:`FieldGuide` of a tank, shared by every env of it (its fields are kept)."""
+    guide = _GUIDES.get(tank)
+    if guide is None:
+        guide = _GUIDES[tank] = FieldGuide(tank)
+    return guide

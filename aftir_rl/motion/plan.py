@@ -36,7 +36,7 @@ SEARCH_VARIANTS: tuple[RouteSettings, ...] = (
     RouteSettings(clearance_weight=0.5, change_weight=5.0, beam_width=250, max_change=1.0),
     RouteSettings(
         clearance_weight=1.0, change_weight=20.0, beam_width=400, bin_cm=6.0, bin_heading=0.3
-    ),  # fmt: skip
+    ),
 )
 
 #: Largest follow-the-leader deviation [cm] a motion should keep (the published FTL anchors:

@@ -43,7 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.collision import point_clearance, points_clear
 from aftir_rl.errors import PlanningError
 from aftir_rl.motion.ftl import Route, clip_kappa, kappa_to_angles
-from aftir_rl.robot import ArmSpec, body_points, section_transforms, tip_position
+from aftir_rl.robot import ArmSpec, body_points, section_transforms, tip_jacobian, tip_position
 from aftir_rl.tank import Tank
 
 __all__ = ["RouteSettings", "RouteResult", "GuideField", "plan_route"]
@@ -256,10 +256,15 @@ def route_clearance(tank: Tank, arm: ArmSpec, route: Route, per_section: int = 2
 
 
 def _close_batch(
-    lead: NDArray[np.float64], kappa: NDArray[np.float64], target: NDArray[np.float64],
-    l: float, theta_max: float, free: int = 3, iterations: int = 40,
+    lead: NDArray[np.float64],
+    kappa: NDArray[np.float64],
+    target: NDArray[np.float64],
+    l: float,
+    theta_max: float,
+    free: int = 3,
+    iterations: int = 40,
     lead_range: tuple[ArrayLike, ArrayLike] | None = (-25.0, 60.0),
-) -> list[tuple[float, NDArray[np.float64]] | None]:  # fmt: skip
+) -> list[tuple[float, NDArray[np.float64]] | None]:
     """Put each route's tip on ``target``: damped least squares on its lead and last ``κ``.
 
     ``kappa`` is ``(C, M, 2)``: C candidate routes of one depth, solved together (one batched
@@ -277,21 +282,23 @@ def _close_batch(
     c, m = kap.shape[:2]
     j0 = max(0, m - free)
     nk = 2 * (m - j0)
-    eps = 1e-6
-    eye = np.eye(nk).reshape(nk, m - j0, 2)
     unit_z = np.array([0.0, 0.0, 1.0])
+
+    def joints(p: NDArray[np.float64]) -> tuple[ArrayLike, ArrayLike, ArrayLike]:
+        # the last sections' κ, flattened in p (C, R, nk), after the fixed ones of each route
+        fixed = np.broadcast_to(kap[:, None, :j0], p.shape[:2] + (j0, 2))
+        theta, phi = kappa_to_angles(np.concatenate([fixed, p.reshape(p.shape[:2] + (-1, 2))], 2))
+        return lead[:, None], theta, phi
+
     for _ in range(iterations):
-        theta, phi = kappa_to_angles(kap)
-        tip = tip_position(lead, theta, phi, l)  # (C, 3)
+        # forward differences of the tip in the free κ (C, 3, nk)
+        tip, jac_t = tip_jacobian(kap[:, j0:].reshape(c, nk), l, central=False, joints=joints)
         err = target - tip
         norm = np.linalg.norm(err, axis=1)
         done = norm < 1e-7
         if done.all():
             break
-        trial = np.repeat(kap[:, None], nk, axis=1)  # (C, nk, M, 2)
-        trial[:, :, j0:] += eps * eye[None]
-        th, ph = kappa_to_angles(trial)
-        jac_k = (tip_position(lead[:, None], th, ph, l) - tip[:, None, :]) / eps  # (C, nk, 3)
+        jac_k = np.swapaxes(jac_t, 1, 2)  # (C, nk, 3)
         # the lead's column is in cm, the angles' in cm/rad: scale it like 1/l rad per cm
         free_lead = 1.0 if lead_range is not None else 0.0
         jac = np.concatenate([jac_k, np.broadcast_to(unit_z * l * free_lead, (c, 1, 3))], axis=1)
@@ -301,8 +308,9 @@ def _close_batch(
         step[done] = 0.0
         dk, dlead = step[:, :nk], step[:, nk] * l
         size = np.linalg.norm(dk, axis=1)
-        scale = np.minimum(np.minimum(1.0, 0.3 / np.maximum(size, 1e-12)),
-                           10.0 / np.maximum(np.abs(dlead), 1e-12))  # fmt: skip
+        scale = np.minimum(
+            np.minimum(1.0, 0.3 / np.maximum(size, 1e-12)), 10.0 / np.maximum(np.abs(dlead), 1e-12)
+        )
         kap[:, j0:] = clip_kappa(kap[:, j0:] + (dk * scale[:, None]).reshape(c, -1, 2), theta_max)
         lead = np.clip(lead + dlead * scale, lo, hi)
     theta, phi = kappa_to_angles(kap)
@@ -311,9 +319,14 @@ def _close_batch(
 
 
 def _push_away(
-    tank: Tank, arm: ArmSpec, route: Route, target: NDArray[np.float64], goal: float,
-    iterations: int = 12, step: float = 0.04,
-) -> Route:  # fmt: skip
+    tank: Tank,
+    arm: ArmSpec,
+    route: Route,
+    target: NDArray[np.float64],
+    goal: float,
+    iterations: int = 12,
+    step: float = 0.04,
+) -> Route:
     """Raise a route's clearance while its end stays on ``target`` (clearance as an objective).
 
     Gradient ascent on a soft minimum of the body's clearance over every ``κ`` and the lead,
@@ -469,16 +482,18 @@ def _beam(
         dk_all = np.diff(np.vstack([np.zeros((1, 2)), kap]), axis=0)
         change = np.hypot(dk_all[:, 0], dk_all[:, 1])
         total = (
-            cost + extra * l
+            cost
+            + extra * l
             + settings.clearance_weight * extra * l / max(rc - settings.margin, 0.25)
             + settings.change_weight * l * float(np.sum(change[-extra - 1 :] ** 2)) / 10
-        )  # fmt: skip
+        )
         return (total, route, rc) if best is None or total < best[0] else best
 
     # near targets: one to three sections from the panel, closed directly from a few shapes
     # (bent towards the target, or an S), since the straight arm is a saddle of the tip distance
-    toward = np.array([math.cos(math.atan2(target[1], target[0])),
-                       math.sin(math.atan2(target[1], target[0]))])  # fmt: skip
+    toward = np.array(
+        [math.cos(math.atan2(target[1], target[0])), math.sin(math.atan2(target[1], target[0]))]
+    )
     for extra in (1, 2, 3):
         shapes = [np.outer(np.ones(extra), toward) * a for a in (0.3, 0.8)]
         shapes += [np.outer((-1.0) ** np.arange(extra), toward) * a for a in (0.5, 1.0)]
@@ -549,9 +564,12 @@ def _beam(
             # states from which `extra` sections of length l can end on the target: not too
             # near (a section cannot fold back on itself) and not too far; nearest to go first
             near = np.flatnonzero(
-                (dist > band[0] * l) & (dist < band[1] * l) & (togo < 2.2 * l) & fits
+                (dist > band[0] * l)
+                & (dist < band[1] * l)
+                & (togo < 2.2 * l)
+                & fits
                 & (depth + 1 + extra + np.ceil(lead / l - 1e-9) <= arm.max_sections)
-            )  # fmt: skip
+            )
             picks = list(near[np.argsort(togo[near])][: settings.closings])
             if not picks:
                 continue

@@ -1,6 +1,17 @@
-"""Posture generation: region clipping, blind search, TGA and TSM (seeds 004, 000, 002)."""
+"""Posture generation: region clipping, blind search, TGA, TSM, obstacle clipping, region division.
 
-from aftir_rl.posture.planner import METHODS, PlannedPosture, Planner
+:class:`PlanningContext` is what every method receives, :data:`REGISTRY` lists the methods and
+:class:`Planner` dispatches to them (see :mod:`aftir_rl.papers` for the papers they come from).
+"""
+
+from aftir_rl.posture.context import (
+    PlannedPosture,
+    PlanningContext,
+    PostureMethod,
+    random_free_targets,
+)
+from aftir_rl.posture.planner import METHODS, Planner
+from aftir_rl.posture.registry import REGISTRY
 from aftir_rl.posture.search import (
     PlanarProblem,
     SearchResult,
@@ -11,11 +22,15 @@ from aftir_rl.posture.search import (
 
 __all__ = [
     "METHODS",
+    "REGISTRY",
     "PlannedPosture",
     "Planner",
+    "PlanningContext",
+    "PostureMethod",
     "PlanarProblem",
     "SearchResult",
     "blind_search",
+    "random_free_targets",
     "refine",
     "region_clipping",
 ]

@@ -214,8 +214,9 @@ class MotionPlan:
 
     def joint_length(self, section_length: float) -> float:
         """Joint-space length of the path (``dis`` in section lengths, angles in rad)."""
-        return sum(joint_distance(a, b, section_length)
-                   for a, b in zip(self.postures, self.postures[1:]))  # fmt: skip
+        return sum(
+            joint_distance(a, b, section_length) for a, b in zip(self.postures, self.postures[1:])
+        )
 
 
 def rrt_connect(
@@ -258,8 +259,9 @@ def rrt_connect(
     goal = align(goal, start)
     for name, p in (("start", start), ("goal", goal)):
         if first_collision(scene, [p]) is not None:
-            return MotionPlan(seconds=time.perf_counter() - began,
-                              reason=f"the {name} posture collides")  # fmt: skip
+            return MotionPlan(
+                seconds=time.perf_counter() - began, reason=f"the {name} posture collides"
+            )
     ou.setLogLevel(ou.LOG_WARN)
     global _SEEDED
     if not _SEEDED:
@@ -279,10 +281,20 @@ def rrt_connect(
         ends[1] = align(goal, ends[0])
         family = np.array(ends[0].phi)
         sign = np.sign(np.cos(family - plane))
-    low = np.concatenate([[min(x0[0], x1[0], -n * l) / l], np.full(n, -tmax),
-                          np.minimum(x0[n + 1 :], x1[n + 1 :]) - math.pi])  # fmt: skip
-    high = np.concatenate([[max(x0[0], x1[0], 0.0) / l], np.full(n, tmax),
-                           np.maximum(x0[n + 1 :], x1[n + 1 :]) + math.pi])  # fmt: skip
+    low = np.concatenate(
+        [
+            [min(x0[0], x1[0], -n * l) / l],
+            np.full(n, -tmax),
+            np.minimum(x0[n + 1 :], x1[n + 1 :]) - math.pi,
+        ]
+    )
+    high = np.concatenate(
+        [
+            [max(x0[0], x1[0], 0.0) / l],
+            np.full(n, tmax),
+            np.maximum(x0[n + 1 :], x1[n + 1 :]) + math.pi,
+        ]
+    )
     dims = 1 + (n if plane is not None else 2 * n)
     low, high, x0, x1 = low[:dims], high[:dims], x0[:dims], x1[:dims]
     space = ob.RealVectorStateSpace(dims)

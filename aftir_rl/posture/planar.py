@@ -1,4 +1,4 @@
-"""The arm reduced to its bending plane (dimension reduction, seed 004 §IV.A).
+"""The arm reduced to its bending plane (dimension reduction, jace §IV.A).
 
 With every ``φ_i`` equal to the bearing ``ψ`` of the target, the arm lies in the vertical plane
 through the ``z`` axis and the target; headings add up, and a point of the arm is
@@ -12,10 +12,14 @@ evaluates 10⁴–10⁶ postures per loop.
 
 from __future__ import annotations
 
+import functools
+import operator
+from collections.abc import Sequence
+
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["planar_points", "planar_tip", "segment_distance", "to_frame"]
+__all__ = ["planar_points", "planar_tip", "distance_sum", "to_frame"]
 
 
 def _half_sinc(b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -68,15 +72,33 @@ def planar_tip(
     return np.sum(step * np.sin(mid), axis=1), np.sum(step * np.cos(mid), axis=1)
 
 
-def segment_distance(
-    rho: NDArray[np.float64], z: NDArray[np.float64], end_rho: float, end_z: float
+def _length(components: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
+    """Euclidean length of vectors given by their components: ``hypot`` in the plane."""
+    if len(components) == 2:
+        return np.hypot(*components)
+    return np.sqrt(sum(c * c for c in components))
+
+
+def distance_sum(
+    coords: Sequence[NDArray[np.float64]], end: Sequence[float]
 ) -> NDArray[np.float64]:
-    """Distance of plane points to the segment from the origin to ``(end_rho, end_z)``."""
-    length2 = end_rho * end_rho + end_z * end_z
+    """MDS: the sum over points of their distance to the segment from the origin to ``end``.
+
+    Args:
+        coords: the points' coordinates, one array ``(..., P)`` per axis (``(ρ, z)`` in the
+            plane, ``(x, y, z)`` in space).
+        end: the segment's end, one number per axis.
+
+    Returns:
+        The sums over the last axis, shape ``(...)``.
+
+    """
+    length2 = sum(e * e for e in end)
     if length2 == 0:
-        return np.hypot(rho, z)
-    t = np.clip((rho * end_rho + z * end_z) / length2, 0.0, 1.0)
-    return np.hypot(rho - t * end_rho, z - t * end_z)
+        return _length(coords).sum(axis=-1)
+    dot = functools.reduce(operator.add, (c * e for c, e in zip(coords, end)))
+    t = np.clip(dot / length2, 0.0, 1.0)
+    return _length([c - t * e for c, e in zip(coords, end)]).sum(axis=-1)
 
 
 def to_frame(

@@ -1,6 +1,6 @@
-"""Region division (seed 001): closed-form planar postures chosen by the target's region.
+"""Region division (st2014): closed-form planar postures chosen by the target's region.
 
-Seed 001 ("Path planning based on region division", Sensors & Transducers 2014) reduces the tank to
+The st2014 paper ("Path planning based on region division") reduces the tank to
 the vertical plane through the ``z`` axis and the target, sorts the target into a *region* by its
 horizontal distance, and solves the posture of that region in closed form instead of searching the
 bending angles. Its figures are missing and its equations are garbled in the scan, so this module
@@ -30,9 +30,9 @@ Readings taken
   upwards (``Θ < 0``). ``str = ⌊(R_G − f3)/ℓ⌋ − (bend − 1)`` (eq. 9), ``m = str + 6`` (eq. 10), and
   ``f3 + str·ℓ + 3ℓ sin Θ/Θ = R_G``; the tip is ``f3 ∓ 3ℓ(1 − cos Θ)/Θ`` above the base.
 - Among the candidates of the target's methods, the one with the smallest ``|dis|`` whose posture
-  passes :meth:`~aftir_rl.posture.planner.Planner.checked` (joint limits, tip error by forward
-  kinematics, python-fcl collision with the walls, and the panel rule: sections bent below the
-  floor must stay inside the panel's guide) is returned; if none does,
+  passes :meth:`~aftir_rl.posture.context.PlanningContext.checked` (joint limits, tip error by
+  forward kinematics, python-fcl collision with the walls, and the panel rule: sections bent
+  below the floor must stay inside the panel's guide) is returned; if none does,
   :class:`~aftir_rl.errors.PlanningError` "Cannot reach the target: ...".
 - **Signs and conventions.** The paper's *descending distance* is ``−dis`` (the tip's height above
   the base minus ``z_G``; row 9 prints −12.3 for a base raised by 12.3). Our ``dis`` stays ``≤ 0``
@@ -88,17 +88,15 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from aftir_rl.errors import PlanningError
+from aftir_rl.posture.context import Method, PlannedPosture, PlanningContext, fmt_point
 from aftir_rl.posture.motion import pad_sections
-from aftir_rl.posture.planner import PlannedPosture, Planner
 from aftir_rl.robot import Posture
 
 __all__ = [
     "ARC_PEAK",
     "REACH_RATIO",
-    "SEED001_TABLE1",
-    "SEED001_TABLE2",
+    "REGION_DIVISION",
     "Candidate",
-    "PaperRow",
     "arc_tip",
     "bearing",
     "candidate_posture",
@@ -122,51 +120,6 @@ TURN_JOINTS = 3
 """Joints of method III's quarter circle, each bending ``π/6``."""
 BEND_JOINTS = 3
 """Method III's ``bend``: the terminal joints that search the target."""
-
-
-@dataclass(frozen=True)
-class PaperRow:
-    """One row of seed 001 Table 2, with the target we plan for.
-
-    Attributes:
-        paper_target: the target as printed [cm].
-        target: ours: coordinates on a wall pulled 3 cm inside (arm radius + 0.5) [cm].
-        method: numerical method, "I", "II" or "III".
-        rotation_deg: rotation angle ϕ [deg].
-        bend_deg: bending angle θ [deg].
-        descending_cm: descending distance [cm].
-        joints: number of joints needed.
-
-    """
-
-    paper_target: tuple[float, float, float]
-    target: tuple[float, float, float]
-    method: str
-    rotation_deg: float
-    bend_deg: float
-    descending_cm: float
-    joints: int
-
-
-SEED001_TABLE2: tuple[PaperRow, ...] = (
-    PaperRow((-60, 42.5, 0), (-57, 39.5, 3), "II", 144.7, 128.8, 7.4, 5),
-    PaperRow((-60, -43.5, 0), (-57, -40.5, 3), "II", 215.9, 127.5, 7.7, 5),
-    PaperRow((-60, -43.5, 97), (-57, -40.5, 94), "I", 215.9, 80.2, -9.0, 5),
-    PaperRow((-60, 42.5, 97), (-57, 39.5, 94), "III", 144.7, 79.1, -9.0, 14),
-    PaperRow((301.7, -43.5, 0), (298.7, -40.5, 3), "III", 8.02, 71.7, 6.6, 14),
-    PaperRow((301.7, 42.5, 0), (298.7, 39.5, 3), "III", -81.0, 71.4, 6.8, 14),
-    PaperRow((301.7, -43.5, 97), (298.7, -40.5, 94), "III", -81.0, -71.4, -8.3, 14),
-    PaperRow((301.7, 42.5, 97), (298.7, 39.5, 94), "III", 8.0, -71.4, -8.1, 14),
-    PaperRow((60, 23, 75), (60, 23, 75), "I", 21.0, 91.4, -12.3, 4),
-)
-"""Seed 001 Table 2: the eight tank vertices and one arbitrary point."""
-
-SEED001_TABLE1: tuple[tuple[tuple[float, float, float], float, float], ...] = (
-    ((30, 30, 30), 52.333, 0.208),
-    ((42, 12, 26), 54.211, 0.206),
-    ((17, 26, 35), 61.826, 0.156),
-)
-"""Seed 001 Table 1: target [cm], blind search [s], region division [s] (Matlab, 2014)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -387,14 +340,14 @@ def candidate_posture(candidate: Candidate, psi: float, section_length: float) -
 
 
 # --------------------------------------------------------------------------------------------
-# Planner
+# The method
 
 
-def region_division(planner: Planner, target: ArrayLike) -> PlannedPosture:
-    """Region-division posture of the planner's arm reaching ``target`` [cm] (seed 001).
+def region_division(context: PlanningContext, target: ArrayLike) -> PlannedPosture:
+    """Region-division posture of the context's arm reaching ``target`` [cm] (st2014).
 
     The candidates of the target's region are tried in order of ``|dis|``; the first whose
-    posture passes every check of the planner is returned, with ``method`` "region_division" and
+    posture passes every check of the context is returned, with ``method`` "region_division" and
     ``details``: ``numerical_method``, ``region``, ``joints`` (the paper's ``m``), ``bend_deg``,
     ``rotation_deg`` (in ``[0, 360)``), ``descending_cm``, ``base_sections`` (straight sections
     added for a raised base) and ``candidates_tried``.
@@ -404,8 +357,8 @@ def region_division(planner: Planner, target: ArrayLike) -> PlannedPosture:
 
     """
     start = time.perf_counter()
-    goal = planner.check_target(target)
-    arm = planner.arm
+    goal = context.check_target(target)
+    arm = context.arm
     psi = bearing(goal)
     found = candidates(goal, arm.section_length, arm.theta_max, arm.max_sections)
     reasons: list[str] = []
@@ -416,7 +369,7 @@ def region_division(planner: Planner, target: ArrayLike) -> PlannedPosture:
             continue
         try:
             details = _details(cand, psi, posture, tried)
-            return planner.checked(posture, goal, METHOD, details=details, started=start)
+            return context.checked(posture, goal, METHOD, details=details, started=start)
         except PlanningError as exc:
             reasons.append(f"{cand.label}: {str(exc).split(': ', 1)[-1]}")
     raise PlanningError(_failure(goal, found, reasons))
@@ -436,7 +389,7 @@ def _details(cand: Candidate, psi: float, posture: Posture, tried: int) -> dict[
 
 
 def _failure(goal: np.ndarray, found: Sequence[Candidate], reasons: Sequence[str]) -> str:
-    where = "(" + ", ".join(f"{v:g}" for v in goal) + ")"
+    where = fmt_point(goal)
     if not found:
         return (
             f"Cannot reach the target: region division has no arc to {where} cm within the "
@@ -448,3 +401,12 @@ def _failure(goal: np.ndarray, found: Sequence[Candidate], reasons: Sequence[str
         f"Cannot reach the target: none of the {len(found)} region-division postures to {where} cm "
         f"passes the checks ({why})"
     )
+
+
+REGION_DIVISION = Method(
+    METHOD,
+    "closed-form planar postures chosen by the target's region (single cabin)",
+    region_division,
+    paper="st2014",
+    bench_sets=("st2014",),
+)

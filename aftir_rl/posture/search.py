@@ -1,15 +1,15 @@
-"""Region clipping and blind search over bending angles (seeds 004 §IV and 000 §III.B).
+"""Region clipping and blind search over bending angles (jace §IV and icra2014 §III.B).
 
 Both search the planar problem of :mod:`aftir_rl.posture.planar`: bending angles ``θ_1..θ_N`` of an
 arm whose base rises by ``dis`` along ``z``. A combination *reaches the target zone* when its tip's
 ``ρ`` is within the zone radius of the target's (the zone is the vertical cylinder around the
-target, seed 004 §IV.A); the rising distance then puts the tip at the target's height,
+target, jace §IV.A); the rising distance then puts the tip at the target's height,
 ``dis = z_t − z_tip``. Among reaching, feasible combinations the one with the minimum distance
 summation (MDS: sum over body points of their distance to the reference segment from the base
 point to the target) wins.
 
 - **Blind search** evaluates one grid of step ``Δθ`` over ``[−θ_max, θ_max]ᴺ`` (the baseline of
-  seed 004 Table II), in chunks so memory stays bounded, optionally on a strided sample of the
+  jace Table II), in chunks so memory stays bounded, optionally on a strided sample of the
   grid (for timing a search too long to run whole).
 - **Region clipping** splits each angle's interval into ``NUM`` parts, evaluates all
   ``(NUM + 1)ᴺ`` combinations at once, keeps the best and shrinks every interval to the best
@@ -19,7 +19,7 @@ point to the target) wins.
 Our reading of the zone in region clipping: on a grid of step ``s`` no combination need come within
 0.5 cm of the target, so loop ``k`` accepts tips within ``max(ε, Σ_i (s_i / 2) · L_i)`` where
 ``L_i`` is the arc length from section ``i`` to the tip. That bound is the continuity argument of
-seed 004 §III (a half-step change of ``θ_i`` moves the tip by at most ``s_i/2 · L_i``): if an exact
+jace §III (a half-step change of ``θ_i`` moves the tip by at most ``s_i/2 · L_i``): if an exact
 solution lies in the current box, its nearest grid point is accepted. The zone tightens to ``ε``
 as the grid does, and :func:`refine` then closes the remaining gap (the papers stop at the search
 step and report tip errors up to 2.45 cm; we reach 1e-9 cm).
@@ -38,9 +38,21 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.posture.planar import planar_points, planar_tip, segment_distance
+from aftir_rl.posture.clipping import clip_regions, gauss_newton, reach, zone_bound
+from aftir_rl.posture.planar import distance_sum, planar_points, planar_tip
 
-__all__ = ["PlanarProblem", "SearchResult", "region_clipping", "blind_search", "refine"]
+__all__ = [
+    "BLIND_LIMIT",
+    "PlanarProblem",
+    "SearchResult",
+    "blind_grid_size",
+    "blind_search",
+    "refine",
+    "region_clipping",
+]
+
+BLIND_LIMIT = 5e7
+"""Blind search is not run where its grid would exceed this many combinations."""
 
 Feasible = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.bool_]]
 
@@ -149,16 +161,15 @@ class PlanarProblem:
         for begin in range(0, len(theta), 1 << 15):
             part = slice(begin, begin + (1 << 15))
             rho, z = planar_points(theta[part], self.section_length, self.mds_points)
-            out[part] = segment_distance(rho, z + dis[part, None], self.rho, self.z).sum(axis=1)
+            out[part] = distance_sum((rho, z + dis[part, None]), (self.rho, self.z))
         return out
 
     def zone_for_step(self, step: NDArray[np.float64]) -> float:
         """Zone radius that accepts the nearest grid point of any exact solution (see module)."""
-        n, l = self.n_sections, self.section_length
-        reach = (n - np.arange(self.n_free)) * l
+        arcs = reach(self.n_sections, self.section_length, self.n_free)
         if self.end_heading is not None:
-            reach = reach + l
-        return max(self.zone, float(np.sum(step / 2 * reach)))
+            arcs = arcs + self.section_length
+        return zone_bound(self.zone, step, arcs)
 
 
 @dataclass
@@ -201,7 +212,7 @@ def region_clipping(
     n_candidates: int = 8,
     max_checks: int = 1 << 12,
 ) -> SearchResult | None:
-    """Region clipping search (seed 004 §IV.B). Returns None if no combination reaches the zone.
+    """Region clipping search (jace §IV.B). Returns None if no combination reaches the zone.
 
     Args:
         problem: the planar problem.
@@ -217,43 +228,42 @@ def region_clipping(
     start = time.perf_counter()
     tmax, m = problem.theta_max, problem.n_free
     if m == 0:
-        result = blind_search(problem, dtheta)
-        return result
-    lo, hi = np.full(m, -tmax), np.full(m, tmax)
-    best: SearchResult | None = None
-    evaluations, prev = 0, math.inf
-    for loop in range(1, max_loops + 1):
-        step = (hi - lo) / num
-        free = _product([np.linspace(a, b, num + 1) for a, b in zip(lo, hi)])
-        # Prefer a tenth of the bound when it holds feasible candidates: MDS ranks a loose zone's
-        # combinations poorly (a tip 20 cm short of the target has a small MDS); measured on seed
-        # 004's targets this gives 2-25% lower final MDS than the full bound.
-        zone = problem.zone_for_step(step)
-        idx, dis, mds = problem.evaluate(
-            free, zone, max(problem.zone, 0.1 * zone), want=n_candidates, max_checks=max_checks
-        )
-        evaluations += len(free)
+        return blind_search(problem, dtheta)
+
+    def evaluate(
+        values: list[NDArray[np.float64]], radius: float, tight: float, loop: int, count: int
+    ) -> tuple[SearchResult, NDArray[np.float64], float] | None:
+        free = _product(values)
+        idx, dis, mds = problem.evaluate(free, radius, tight, n_candidates, max_checks)
         if len(idx) == 0:
-            break
+            return None
         theta, _ = problem.full_theta(free[idx[:n_candidates]])
-        i0 = 0
-        best = SearchResult(
-            theta=theta[0], dis=float(dis[i0]), mds=float(mds[i0]), loops=loop,
-            evaluations=evaluations, seconds=0.0, candidates=list(theta[1:]),
-        )  # fmt: skip
-        # Done when the grid is finer than Δθ and the accepted tips are within ε of the target
-        # (else the refinement would move the body by more than the search's margin).
-        fine = np.max(step) < dtheta and 0.1 * zone <= problem.zone
-        if fine or abs(prev - best.mds) < 1e-9 or np.max(step) < dtheta / 100:
-            break
-        prev = best.mds
-        centre = free[idx[i0]]
-        lo, hi = np.maximum(centre - step, -tmax), np.minimum(centre + step, tmax)
-    if best is None:
+        best = SearchResult(theta[0], float(dis[0]), float(mds[0]), loop, count, 0.0)
+        best.candidates = list(theta[1:])
+        return best, free[idx[0]], best.mds
+
+    limits = (np.full(m, -tmax), np.full(m, tmax))
+    clipped = clip_regions(
+        limits,
+        limits,
+        evaluate,
+        problem.zone,
+        problem.zone_for_step,
+        num,
+        dtheta,
+        max_loops,
+        min_step=dtheta / 100,
+    )
+    if clipped.best is None:
         return None
-    best.evaluations = evaluations
-    best.seconds = time.perf_counter() - start
-    return best
+    clipped.best.evaluations = clipped.evaluations
+    clipped.best.seconds = time.perf_counter() - start
+    return clipped.best
+
+
+def blind_grid_size(n_free: int, theta_max: float, dtheta: float) -> int:
+    """Combinations of blind search's grid of step ``dtheta`` over ``n_free`` angles."""
+    return len(np.arange(-theta_max, theta_max + 1e-12, dtheta)) ** n_free
 
 
 def blind_search(
@@ -262,7 +272,7 @@ def blind_search(
     max_evaluations: int | None = None,
     chunk: int = 1 << 18,
 ) -> SearchResult | None:
-    """Blind search on one grid of step ``dtheta`` (seed 004 Table II, type A).
+    """Blind search on one grid of step ``dtheta`` (jace Table II, type A).
 
     Args:
         problem: the planar problem; its ``zone`` is the reaching tolerance.
@@ -302,9 +312,15 @@ def blind_search(
     if best_theta is None:
         return None
     return SearchResult(
-        theta=best_theta, dis=best_dis, mds=best_mds, loops=1, evaluations=count,
-        seconds=time.perf_counter() - start, sampled=sampled, grid_size=total,
-    )  # fmt: skip
+        theta=best_theta,
+        dis=best_dis,
+        mds=best_mds,
+        loops=1,
+        evaluations=count,
+        seconds=time.perf_counter() - start,
+        sampled=sampled,
+        grid_size=total,
+    )
 
 
 def refine(
@@ -320,32 +336,23 @@ def refine(
         ``(theta, dis)`` with ``|ρ_tip − ρ_t| < tol`` and every angle in bounds, or None.
 
     """
-    m, h = problem.n_free, 1e-7
+    m, tmax = problem.n_free, problem.theta_max
     free = np.array(theta[:m], dtype=np.float64)
-    if m == 0:
-        full, ok = problem.full_theta(free[None])
-        rho, z = planar_tip(full, problem.section_length)
-        good = ok[0] and abs(rho[0] - problem.rho) < tol
-        return (full[0], float(problem.z - z[0])) if good else None
-    for _ in range(iterations):
-        probe = np.repeat(free[None], 2 * m + 1, axis=0)
-        probe[1 : m + 1] += np.eye(m) * h
-        probe[m + 1 :] -= np.eye(m) * h
-        full, _ = problem.full_theta(probe)
-        rho, _ = planar_tip(full, problem.section_length)
-        f = rho[0] - problem.rho
-        if abs(f) < tol:
-            break
-        grad = (rho[1 : m + 1] - rho[m + 1 :]) / (2 * h)
-        norm2 = float(grad @ grad)
-        if norm2 < 1e-12:
+    if m:
+
+        def rho(probe: NDArray[np.float64]) -> NDArray[np.float64]:
+            return planar_tip(problem.full_theta(probe)[0], problem.section_length)[0][:, None]
+
+        limits = (np.full(m, -tmax), np.full(m, tmax))
+        refined = gauss_newton(rho, (problem.rho,), free, limits, tol, iterations)
+        if refined is None:
             return None
-        free = np.clip(free - f * grad / norm2, -problem.theta_max, problem.theta_max)
+        free = refined
     full, ok = problem.full_theta(free[None])
-    rho, z = planar_tip(full, problem.section_length)
-    if not ok[0] or abs(rho[0] - problem.rho) >= tol:
+    rho_tip, z = planar_tip(full, problem.section_length)
+    if not ok[0] or abs(rho_tip[0] - problem.rho) >= tol:
         return None
     dis = float(problem.z - z[0])
-    if not problem.dis_limits[0] - 1e-9 <= dis <= problem.dis_limits[1] + 1e-9:
+    if m and not problem.dis_limits[0] - 1e-9 <= dis <= problem.dis_limits[1] + 1e-9:
         return None
     return full[0], dis

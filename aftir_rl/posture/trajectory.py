@@ -1,4 +1,4 @@
-"""From a learned tip path to joint variables along it (seed 002 §5).
+"""From a learned tip path to joint variables along it (filomat2018 §5).
 
 Every cell centre of the greedy path gets a posture, and the last posture reaches the exact
 target. The paper plans each one with TGA (bay 1) or TSM (beyond the hatch) and relies on similar
@@ -46,9 +46,11 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from aftir_rl.collision import CollisionScene, point_clearance
+from aftir_rl.collision import CollisionScene
 from aftir_rl.config import DEFAULT_BRIDGE_SECONDS
 from aftir_rl.errors import PlanningError
+from aftir_rl.posture.context import PlannedPosture, PlanningContext
+from aftir_rl.posture.continuation import continue_posture, repair_posture, slide
 from aftir_rl.posture.motion import (
     align,
     bridge,
@@ -58,8 +60,8 @@ from aftir_rl.posture.motion import (
     sampled_clearance,
     tip_path_length,
 )
-from aftir_rl.posture.planner import PlannedPosture, Planner
-from aftir_rl.robot import Posture, body_points, forward_kinematics, tip_position
+from aftir_rl.posture.planner import Planner
+from aftir_rl.robot import Posture, forward_kinematics
 
 __all__ = [
     "DEFAULT_BRIDGE_SECONDS",
@@ -159,138 +161,6 @@ class Trajectory:
         return out
 
 
-def _central_probes(x: np.ndarray, h: float) -> np.ndarray:
-    """``x + h·e_i`` for every joint ``i``, then ``x − h·e_i``: shape ``(2m, m)``."""
-    step = np.eye(len(x)) * h
-    return np.vstack([x + step, x - step])
-
-
-def _within_limits(planner: Planner, x: np.ndarray) -> np.ndarray:
-    """``x`` with ``|θ| ≤ θ_max`` and ``dis ≤ 0`` (the linear module stays outside)."""
-    n = (len(x) - 1) // 2
-    x[1 : n + 1] = np.clip(x[1 : n + 1], -planner.arm.theta_max, planner.arm.theta_max)
-    x[0] = min(x[0], 0.0)
-    return x
-
-
-def _tip_jacobian(
-    x: np.ndarray, n: int, l: float, h: float = 1e-6
-) -> tuple[np.ndarray, np.ndarray]:
-    """Tip [cm] and its Jacobian ``(3, 1 + 2N)`` by central differences.
-
-    Sections still inside the guide (ending below the floor) are frozen straight.
-    """
-    probe = np.vstack([x, _central_probes(x, h)])
-    tips = tip_position(probe[:, 0], probe[:, 1 : n + 1], probe[:, n + 1 :], l)
-    jac = ((tips[1 : len(x) + 1] - tips[len(x) + 1 :]) / (2 * h)).T
-    ends = x[0] + l * np.arange(1, n + 1)
-    jac[:, np.concatenate([[False], ends <= 0.0, ends <= 0.0])] = 0.0
-    return tips[0], jac
-
-
-def continue_posture(
-    planner: Planner,
-    start: Posture,
-    target: ArrayLike,
-    tolerance: float = 0.01,
-    iterations: int = 40,
-    damping: float = 1.0,
-) -> Posture | None:
-    """Move the tip of ``start`` onto ``target`` by damped least squares on ``(dis, θ, φ)``.
-
-    Joint limits hold throughout (``|θ| ≤ θ_max``, ``dis ≤ 0``), and sections that end below the
-    floor (inside the guide, when the ones below them are straight) are not bent. Returns None if
-    the tip does not get within ``tolerance`` [cm].
-    """
-    goal = np.asarray(target, dtype=np.float64)
-    x = _solve_tip(planner, start.to_vector(), goal, tolerance * 0.1, iterations, damping)
-    posture = Posture.from_vector(x)
-    if np.linalg.norm(posture.tip(planner.arm.section_length) - goal) >= tolerance:
-        return None
-    return posture
-
-
-def _solve_tip(
-    planner: Planner, x: np.ndarray, goal: np.ndarray, tol: float, iterations: int, damping: float
-) -> np.ndarray:
-    n = (len(x) - 1) // 2
-    for _ in range(iterations):
-        tip, jac = _tip_jacobian(x, n, planner.arm.section_length)
-        error = tip - goal
-        if np.linalg.norm(error) < tol:
-            break
-        step = jac.T @ np.linalg.solve(jac @ jac.T + damping**2 * np.eye(3), error)
-        x = _within_limits(planner, x - step)
-    return x
-
-
-class _Penalty:
-    """Penetration of a posture's backbone into the band ``r + margin`` around the tank.
-
-    ``Σ max(0, r + margin − d_j)²`` over backbone samples ``j``, batched over postures.
-    """
-
-    def __init__(self, planner: Planner, margin: float) -> None:
-        self.tank, self.l = planner.tank, planner.arm.section_length
-        self.limit = planner.arm.radius + margin
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        n = (x.shape[1] - 1) // 2
-        pts = body_points(x[:, 0], x[:, 1 : n + 1], x[:, n + 1 :], self.l, 10)
-        depth = np.maximum(0.0, self.limit - point_clearance(self.tank, pts))
-        return np.sum(depth**2, axis=1)
-
-
-def _null_space_step(
-    planner: Planner, x: np.ndarray, objective: _Penalty, max_step: float, h: float = 1e-4
-) -> np.ndarray | None:
-    """One descent step on ``objective`` that leaves the tip where it is (to first order)."""
-    n = (len(x) - 1) // 2
-    value = objective(_central_probes(x, h))
-    grad = (value[: len(x)] - value[len(x) :]) / (2 * h)
-    _, jac = _tip_jacobian(x, n, planner.arm.section_length)
-    step = -(grad - np.linalg.pinv(jac) @ (jac @ grad))
-    size = np.max(np.abs(step))
-    if size < 1e-12:
-        return None
-    return _within_limits(planner, x + step * min(1.0, max_step / size))
-
-
-def repair_posture(
-    planner: Planner,
-    posture: Posture,
-    target: ArrayLike,
-    margin: float = 1.0,
-    iterations: int = 60,
-    max_step: float = 0.05,
-    tolerance: float = 0.01,
-) -> Posture | None:
-    """Push a colliding posture clear of the tank while its tip stays on ``target``.
-
-    Redundancy resolution: the arm has ``1 + 2N`` joints for a 3D tip, so it can move in the
-    null space of the tip's Jacobian without moving the tip. Each iteration descends the penalty
-    ``Σ max(0, r + margin − d_j)²`` over backbone samples ``j`` (``d_j`` their signed distance to
-    the tank, :func:`~aftir_rl.collision.point_clearance`, with the guide below the panel),
-    projected onto that null space, then puts the tip back by damped least squares. Returns the
-    first posture python-fcl clears, or None.
-    """
-    l = planner.arm.section_length
-    goal = np.asarray(target, dtype=np.float64)
-    x = posture.to_vector()
-    objective = _Penalty(planner, margin)
-    for _ in range(iterations):
-        candidate = Posture.from_vector(x)
-        if np.linalg.norm(candidate.tip(l) - goal) < tolerance and not planner.scene.collides(
-            candidate
-        ):
-            return candidate
-        stepped = _null_space_step(planner, x, objective, max_step)
-        if stepped is None:
-            return None
-        x = _solve_tip(planner, stepped, goal, tolerance * 0.1, 10, 1.0)
-    return None
-
-
 def plan_trajectory(
     planner: Planner,
     points: Iterable[Iterable[float]],
@@ -343,8 +213,9 @@ def plan_trajectory(
             if hit is not None:
                 before = chain.postures[previous]
                 assert before is not None  # previous is the last waypoint with a posture
-                via = _bridge_move(planner, before, via, posture, previous,
-                                   hit, bridge_seconds, seed, out)  # fmt: skip
+                via = _bridge_move(
+                    planner, before, via, posture, previous, hit, bridge_seconds, seed, out
+                )
             out.moves.append((previous, via))
         out.postures.append(planner.checked(posture, points_arr[i], chain.methods[i]))
         previous = i
@@ -370,7 +241,7 @@ class _Chain:
 
 
 def _build_chain(
-    planner: Planner,
+    planner: PlanningContext,
     planned: Sequence[PlannedPosture | None],
     points: np.ndarray,
     n: int,
@@ -414,7 +285,7 @@ def _build_chain(
 
 
 def _bridge_move(
-    planner: Planner,
+    planner: PlanningContext,
     previous: Posture,
     via: list[Posture],
     chosen: Posture,
@@ -443,7 +314,7 @@ def _bridge_move(
 
 
 def _continue(
-    planner: Planner,
+    planner: PlanningContext,
     previous: Posture,
     point: np.ndarray,
     steps: int,
@@ -470,32 +341,8 @@ def _continue(
     return current, via[:-1]
 
 
-def slide(posture: Posture, delta: float, section_length: float) -> Posture:
-    """The arm pushed ``delta`` [cm] further in, sliding along its own backbone (approximately).
-
-    ``dis`` grows by ``delta`` and section ``k`` takes ``1 − δ/l`` of its own bend and ``δ/l``
-    of section ``k + 1``'s (as bending vectors ``θ(cos φ, sin φ)``); the last section keeps its
-    own. At ``δ = l``, when the first section is straight (in the guide), this is exact: the
-    body in the tank is the old one, lengthened at the tip by one more section bent like the
-    last. In between, a section spans two old sections of different curvature and can only
-    approximate them.
-
-    Raises:
-        ValueError: ``delta`` is not in ``[0, l]``.
-
-    """
-    if not 0.0 <= delta <= section_length:
-        raise ValueError(f"can slide by 0 to {section_length:g} cm, not {delta:g}")
-    t = delta / section_length
-    theta, phi = np.array(posture.theta), np.array(posture.phi)
-    bend = np.stack([theta * np.cos(phi), theta * np.sin(phi)])
-    bend[:, :-1] = (1 - t) * bend[:, :-1] + t * bend[:, 1:]
-    moved = Posture(posture.dis + delta, np.hypot(*bend), np.arctan2(bend[1], bend[0]))
-    return align(moved, posture)
-
-
 def _sub_step(
-    planner: Planner,
+    planner: PlanningContext,
     current: Posture,
     tip_from: np.ndarray,
     tip_to: np.ndarray,
