@@ -85,8 +85,11 @@ def test_guide_leads_through_the_hatch():
         centre = guide.origin + (np.floor((target - guide.origin) / guide.size) + 0.5) * guide.size
         p = starts.copy()
         # P is the distance-to-go of the GuideField of the target's cell centre
-        np.testing.assert_allclose(guide(p, np.repeat(target[None], len(p), 0), ids)[0],
-                                   GuideField(tank, centre)(p), rtol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(
+            guide(p, np.repeat(target[None], len(p), 0), ids)[0],
+            GuideField(tank, centre)(p),
+            rtol=1e-6,
+        )
         for _ in range(150):
             _, way = guide(p, np.repeat(target[None], len(p), 0), ids)
             p = p + 2.0 * way
@@ -202,3 +205,48 @@ def test_sb3_adapter_trains_ppo_and_sac_her():
     )
     sac.learn(160)
     assert sac.num_timesteps == 160
+
+
+def test_train_cli_ppo_on_the_batched_env(tmp_path):
+    """configs/ppo_ftl.yaml, shrunk: 16 rows of the batched env, tags read back, model loads."""
+    import yaml
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    from aftir_rl.agents.sb3 import load_run
+    from aftir_rl.train import main
+
+    config = yaml.safe_load(open("configs/ppo_ftl.yaml"))
+    config.update(
+        total_timesteps=512, n_envs=16, eval_freq=512, eval_targets=2, checkpoint_freq=512
+    )
+    config["hyperparameters"].update(
+        n_steps=16, batch_size=128, n_epochs=1, policy_kwargs={"net_arch": [16]}
+    )
+    path = tmp_path / "ppo.yaml"
+    path.write_text(yaml.safe_dump(config))
+    assert main(["ppo", "--config", str(path), "--logdir", str(tmp_path), "--no-progress"]) == 0
+    (run,) = [p for p in tmp_path.iterdir() if p.is_dir()]
+    events = EventAccumulator(str(run))
+    events.Reload()
+    tags = set(events.Tags()["scalars"])
+    assert {"eval/success_rate", "eval/tip_error_cm", "eval/collision_rate"} <= tags
+    assert "train/value_loss" in tags and "time/fps" in tags
+    algo, loaded, _, model = load_run(run)  # rebuilt with the run's env_kwargs (the guide)
+    assert algo == "ppo" and loaded.env_kwargs["guide"] is True
+    guided = gym.make(ENV_ID, guide=True).observation_space["observation"]
+    assert model.observation_space["observation"].shape == guided.shape
+
+
+def test_config_limits_for_the_batched_env():
+    from aftir_rl.agents.sb3_config import SB3Config, check_sb3_config
+    from aftir_rl.errors import ConfigError
+
+    ok = SB3Config(env_id=ENV_ID, n_envs=1024, env_kwargs={"guide": True})
+    check_sb3_config(ok, "ppo", "test")
+    with pytest.raises(ConfigError, match="n_envs"):
+        check_sb3_config(SB3Config(env_id=ENV_ID, n_envs=5000), "ppo", "test")
+    with pytest.raises(ConfigError, match="n_envs"):
+        check_sb3_config(SB3Config(env_id="AFTIR-Arm-v0", n_envs=128), "ppo", "test")
+    her = SB3Config(env_id=ENV_ID, her=True, env_kwargs={"guide": True})
+    with pytest.raises(ConfigError, match="guide"):
+        check_sb3_config(her, "sac", "test")

@@ -199,8 +199,10 @@ def check_sb3_config(config: SB3Config, algo: str, source: str) -> None:
     """
     from aftir_rl.safety import registered_env_id
 
-    registered_env_id(config.env_id, source)
+    bare = registered_env_id(config.env_id, source)
     for key, (lo, hi) in _CONFIG_RANGES.items():
+        if key == "n_envs" and bare in BATCHED_ENV_IDS:
+            hi = MAX_BATCHED_ENVS  # rows of one numpy batch, not processes
         _check_range(getattr(config, key), lo, hi, f"{source}: {key}", integer=True)
     aliases = getattr(ALGORITHMS[algo], "policy_aliases", {})
     if config.policy not in aliases:
@@ -325,6 +327,10 @@ ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
         "start_height": (int, float),
     },
 }
+#: Envs with a batched implementation: ``n_envs`` are rows of one process (at most
+#: :data:`MAX_BATCHED_ENVS`), not subprocesses (at most 64).
+BATCHED_ENV_IDS = ("AFTIR-ArmFTL-v0",)
+MAX_BATCHED_ENVS = 4096
 #: The envs SB3 algorithms train on.
 SB3_ENV_IDS = ("AFTIR-ArmReach-v0", "AFTIR-Arm-v0", "AFTIR-ArmFull-v0", "AFTIR-ArmFTL-v0")
 #: Goal-conditioned envs (``Dict`` observations with ``compute_reward``): the ones HER takes.
