@@ -56,6 +56,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -64,6 +65,7 @@ from aftir_rl.atomic import write_json
 from aftir_rl.bench_outcomes import Outcome, Row, method_outcome
 from aftir_rl.bench_outcomes import _Planners as _Planners  # for aftir_rl.distributed
 from aftir_rl.bench_outcomes import sb3_outcomes as sb3_outcomes
+from aftir_rl.cli_args import add_margin_option, add_ray_options
 from aftir_rl.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.errors import AftirError
 from aftir_rl.posture.registry import REGISTRY
@@ -151,15 +153,15 @@ def run_benchmark(
     same rows, and a task that fails is an outcome holding its error.
     """
     table: dict[str, Sequence[str]] = dict(methods or METHODS_FOR)
+    options: dict[str, Any] = {
+        "seed": seed,
+        "margin": margin,
+        "bridge_seconds": bridge_seconds,
+        "rrt_seconds": rrt_seconds,
+    }
     if ray is not None:
         from aftir_rl.distributed import benchmark_on_ray, ray_session
 
-        options = {
-            "seed": seed,
-            "margin": margin,
-            "bridge_seconds": bridge_seconds,
-            "rrt_seconds": rrt_seconds,
-        }
         with ray_session(ray, workers):
             return benchmark_on_ray(sets, table, options, models, progress)
     planners = _Planners()
@@ -171,11 +173,7 @@ def run_benchmark(
                 planner = planners(tank)
                 if progress:
                     progress(f"{name} {method} {tuple(np.round(target, 1))}")
-                row.outcomes.append(
-                    method_outcome(
-                        planner, method, target, seed, margin, bridge_seconds, rrt_seconds
-                    )
-                )
+                row.outcomes.append(method_outcome(planner, method, target, **options))
             rows.append(row)
     for run_dir in models:
         rows += sb3_outcomes(run_dir, sets)
@@ -189,7 +187,7 @@ def _fmt(value: float, digits: str = ".2f") -> str:
 
 
 def format_table(rows: Sequence[Row]) -> str:
-    """The markdown table of the README."""
+    """The markdown table of docs/benchmarks.md."""
     lines = [
         "| set | method | targets | success | tip error (cm) | min clearance (cm) | "
         "FTL deviation (cm) | path (cm) | s / target | note |",
@@ -253,22 +251,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--json", metavar="PATH", help="also write every outcome as JSON")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-    parser.add_argument(
-        "--margin",
-        type=float,
-        default=DEFAULT_MARGIN,
-        metavar="CM",
-        help=f"clearance the q_table+ftl motions keep (default {DEFAULT_MARGIN:g} cm)",
+    add_margin_option(
+        parser, f"clearance the q_table+ftl motions keep (default {DEFAULT_MARGIN:g} cm)"
     )
-    parser.add_argument(
-        "--ray",
-        metavar="ADDRESS",
-        help="run the items as Ray tasks: local (a Ray on this machine), auto or HOST:PORT (a "
-        "cluster started with ray start); needs aftir_rl[ray]",
-    )
-    parser.add_argument(
-        "--workers", type=int, metavar="N", help="CPUs of --ray local (default: every core)"
-    )
+    add_ray_options(parser, "run the items")
     args = parser.parse_args(argv)
     if args.n_random < 1 or not 0 < args.rrt_seconds < math.inf:
         parser.error("--n-random must be at least 1 and --rrt-seconds positive and finite")
@@ -290,16 +276,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         sets = {k: v for k, v in target_sets(args.n_random, args.seed).items() if k in args.sets}
         progress = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
-        rows = run_benchmark(
-            sets,
-            rrt_seconds=args.rrt_seconds,
-            models=args.model,
-            progress=progress,
-            bridge_seconds=args.bridge_seconds,
-            margin=args.margin,
-            ray=args.ray,
-            workers=args.workers,
-        )
+        options = ("rrt_seconds", "bridge_seconds", "margin", "ray", "workers")
+        chosen = {name: getattr(args, name) for name in options}
+        rows = run_benchmark(sets, models=args.model, progress=progress, **chosen)
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -323,7 +302,8 @@ def _check_inputs(models: Sequence[str], json_path: str | None) -> str:
         run = Path(run_dir)
         if not (run / "model.zip").exists():
             return f"{run_dir}: no model.zip; give a run directory of python -m aftir_rl.train"
-        from aftir_rl.agents.sb3 import load_run, sb3_config_from_run
+        from aftir_rl.agents.sb3 import sb3_config_from_run
+        from aftir_rl.run import load_sb3_run
         from aftir_rl.safety import read_json
 
         try:
@@ -331,7 +311,7 @@ def _check_inputs(models: Sequence[str], json_path: str | None) -> str:
         except AftirError as exc:
             return f"{run_dir}: config.json is missing or not a training run's ({exc})"
         try:  # the model too, before any benchmark work (nothing in it is unpickled)
-            load_run(run)
+            load_sb3_run(run)
         except AftirError as exc:
             return str(exc)
     if json_path is not None:

@@ -12,6 +12,7 @@ import functools
 import math
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -22,10 +23,10 @@ from numpy.typing import ArrayLike
 from aftir_rl.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.errors import AftirError, PlanningError
 from aftir_rl.posture.registry import get_method
+from aftir_rl.run import learn_cells, load_q_table_config, load_sb3_run
 
 if TYPE_CHECKING:
     from aftir_rl.envs.arm import ArmEnv
-    from aftir_rl.envs.tank_grid import TankGridEnv
 
 __all__ = [
     "Outcome",
@@ -134,27 +135,21 @@ def posture_outcome(planner: Any, target: ArrayLike, method: str) -> Outcome:
     return Outcome(True, result.error_cm, result.clearance_cm, seconds=seconds, posture=posture)
 
 
-def _learned_cells(planner: Any, target: ArrayLike, seed: int) -> list[Any] | Outcome:
-    """Q-learning on ``target`` and its greedy cell path, or the Outcome that says why not."""
-    import gymnasium as gym
+def _after_learning(
+    planner: Any, target: ArrayLike, seed: int, finish: Callable[[list[Any], float], Outcome]
+) -> Outcome:
+    """Q-learning on ``target``, then ``finish(cells, start)`` on its greedy cell path.
 
-    from aftir_rl.agents.q_table import QLearning, greedy_rollout
-
-    config = _q_table_config()
+    The Outcome that says why not when the target cannot be learned or the greedy path fails.
+    """
     start = time.perf_counter()
     try:
-        env = gym.make(
-            "AFTIR-Tank-v0", tank=planner.tank, target=tuple(np.asarray(target, dtype=float))
-        )
+        cells, reached = learn_cells(planner.tank, target, _q_table_config(), seed)
     except AftirError as exc:
         return Outcome(False, ran=False, note=_short(exc))
-    agent = QLearning.from_config(env, config, seed=seed)
-    agent.learn(config.episodes)
-    states, reached = greedy_rollout(agent, env)
     if not reached:
         return Outcome(False, seconds=time.perf_counter() - start, note="greedy path fails")
-    raster = cast("TankGridEnv", env.unwrapped).raster
-    return [raster.cell(s) for s in states]
+    return finish(cells, start)
 
 
 def q_table_outcome(
@@ -163,22 +158,20 @@ def q_table_outcome(
     """filomat2018's pipeline on one target: Q-learning, greedy path, postures along it."""
     from aftir_rl.posture.trajectory import plan_trajectory
 
-    start = time.perf_counter()
-    cells = _learned_cells(planner, target, seed)
-    if isinstance(cells, Outcome):
-        return cells
-    points = [planner.tank.raster.cell_center(c) for c in cells]
-    trajectory = plan_trajectory(planner, points, target, bridge_seconds=bridge_seconds, seed=seed)
-    seconds = time.perf_counter() - start
-    m = trajectory.measures(planner.scene)
-    return Outcome(
-        trajectory.complete,
-        m["tip_error_cm"],
-        m["min_clearance_cm"],
-        m["path_cm"],
-        seconds,
-        note=trajectory.note if trajectory.blocked_moves else "",
-    )
+    def postures(cells: list[Any], start: float) -> Outcome:
+        points = [planner.tank.raster.cell_center(c) for c in cells]
+        trajectory = plan_trajectory(
+            planner, points, target, bridge_seconds=bridge_seconds, seed=seed
+        )
+        seconds = time.perf_counter() - start
+        m = trajectory.measures(planner.scene)
+        note = trajectory.note if trajectory.blocked_moves else ""
+        path = m["path_cm"]
+        return Outcome(
+            trajectory.complete, m["tip_error_cm"], m["min_clearance_cm"], path, seconds, note=note
+        )
+
+    return _after_learning(planner, target, seed, postures)
 
 
 def q_table_ftl_outcome(
@@ -187,31 +180,24 @@ def q_table_ftl_outcome(
     """Q-learning, its greedy path, and a follow-the-leader motion along it keeping ``margin``."""
     from aftir_rl.motion.plan import plan_motion
 
-    start = time.perf_counter()
-    cells = _learned_cells(planner, target, seed)
-    if isinstance(cells, Outcome):
-        return cells
-    plan = plan_motion(planner.tank, target, cells, margin=margin)
-    seconds = time.perf_counter() - start
-    if not plan.complete:
-        return Outcome(False, seconds=seconds, note=_short(PlanningError(plan.reason or "")))
-    assert plan.tip_error_cm is not None and plan.min_clearance_cm is not None
-    assert plan.tip_path_length_cm is not None and plan.ftl_deviation_cm is not None
-    return Outcome(
-        True,
-        plan.tip_error_cm,
-        plan.min_clearance_cm,
-        plan.tip_path_length_cm,
-        seconds,
-        deviation_cm=plan.ftl_deviation_cm[0],
-    )
+    def motion(cells: list[Any], start: float) -> Outcome:
+        plan = plan_motion(planner.tank, target, cells, margin=margin)
+        seconds = time.perf_counter() - start
+        if not plan.complete:
+            return Outcome(False, seconds=seconds, note=_short(PlanningError(plan.reason or "")))
+        assert plan.tip_error_cm is not None and plan.min_clearance_cm is not None
+        assert plan.tip_path_length_cm is not None and plan.ftl_deviation_cm is not None
+        tip, clearance, path = plan.tip_error_cm, plan.min_clearance_cm, plan.tip_path_length_cm
+        deviation = plan.ftl_deviation_cm[0]
+        return Outcome(True, tip, clearance, path, seconds, deviation_cm=deviation)
+
+    return _after_learning(planner, target, seed, motion)
 
 
 @functools.cache
 def _q_table_config() -> Any:
     """``configs/q_table.yaml``, read once per process."""
     from aftir_rl.config import CONFIG_DIR
-    from aftir_rl.train import load_q_table_config
 
     return load_q_table_config(CONFIG_DIR / "q_table.yaml")
 
@@ -249,18 +235,17 @@ def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray
     """
     import gymnasium as gym
 
-    from aftir_rl.agents.sb3 import evaluate_policy_on_targets, load_run
+    from aftir_rl.agents.sb3 import evaluate_policy_on_targets
 
-    # config.json checked key by key, the model loaded without unpickling (agents.sb3.load_run)
-    algo, run_config, env_id, model = load_run(run_dir)
-    config = {"env_id": run_config.env_id}
+    run = load_sb3_run(run_dir)
+    env_id, model = run.env_id, run.model
     lo, hi = cast("ArmEnv", gym.make(env_id).unwrapped).target_region
     rows = []
     for name in ("filomat2018", "bay1", "bay2"):
         targets = [t for tank, t in sets.get(name, []) if tank == "b737_center"]
         if not targets:
             continue
-        row = Row(name, f"{algo} ({config['env_id']})")
+        row = Row(name, f"{run.algo} ({run.config.env_id})")
         for target in targets:
             if np.any(target < lo) or np.any(target > hi):
                 row.outcomes.append(Outcome(False, ran=False, note="outside the env's targets"))
@@ -284,6 +269,7 @@ def method_outcome(
     planner: Any,
     method: str,
     target: ArrayLike,
+    *,
     seed: int = 0,
     margin: float = DEFAULT_MARGIN,
     bridge_seconds: float = DEFAULT_BRIDGE_SECONDS,

@@ -12,8 +12,9 @@ import math
 import sys
 from collections.abc import Sequence
 
+from aftir_rl.cli_args import add_margin_option, add_target_option, check_margin
 from aftir_rl.config import DEFAULT_MARGIN
-from aftir_rl.errors import AftirError, ConfigError, PlanningError
+from aftir_rl.errors import AftirError, PlanningError
 from aftir_rl.posture.context import PlannedPosture
 from aftir_rl.posture.planner import Planner
 from aftir_rl.posture.registry import AUTO, METHOD_NAMES, REGISTRY
@@ -53,13 +54,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         prog="python -m aftir_rl.plan",
         description="Plan a collision-free posture (dis, theta, phi) of the arm reaching a target.",
     )
-    parser.add_argument(
-        "--target",
-        nargs=3,
-        type=float,
-        required=True,
-        metavar=("X", "Y", "Z"),
-        help="target point in cm (frame S: origin at the access panel)",
+    add_target_option(
+        parser, "target point in cm (frame S: origin at the access panel)", required=True
     )
     parser.add_argument("--tank", default="b737_center", help="tank name or YAML path")
     parser.add_argument(
@@ -69,17 +65,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help=f"auto: TSM beyond the baffle, TGA otherwise (default); {methods}",
     )
     parser.add_argument("--json", action="store_true", help="print the posture JSON")
-    parser.add_argument(
-        "--margin",
-        type=float,
-        default=DEFAULT_MARGIN,
-        metavar="CM",
-        help=f"clearance the arm's surface keeps from the tank (default {DEFAULT_MARGIN:g} cm)",
+    add_margin_option(
+        parser, f"clearance the arm's surface keeps from the tank (default {DEFAULT_MARGIN:g} cm)"
     )
     args = parser.parse_args(argv)
     try:
-        if not 0 <= args.margin <= 20:
-            raise ConfigError(f"--margin must be between 0 and 20 cm, got {args.margin}")
+        check_margin(args.margin)
         result = Planner(args.tank).plan(args.target, method=args.method)
         if result.clearance_cm < args.margin:
             raise PlanningError(

@@ -32,28 +32,27 @@ from __future__ import annotations
 
 import math
 import time
-import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from itertools import product
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.collision import point_clearance, points_clear
 from aftir_rl.errors import PlanningError
+from aftir_rl.motion.closing import close_batch, push_away, route_clearance
 from aftir_rl.motion.ftl import Route, clip_kappa, kappa_to_angles
-from aftir_rl.robot import ArmSpec, body_points, section_transforms, tip_jacobian, tip_position
+from aftir_rl.motion.guide import _NEIGHBOURS as _NEIGHBOURS  # for aftir_rl.envs.ftl_batch
+from aftir_rl.motion.guide import GuideField, corridor
+from aftir_rl.robot import ArmSpec, section_transforms
 from aftir_rl.tank import Tank
 
-__all__ = ["RouteSettings", "RouteResult", "GuideField", "plan_route"]
-
-_NEIGHBOURS = np.array([d for d in product((-1, 0, 1), repeat=3) if any(d)], dtype=np.int64)
+__all__ = ["RouteSettings", "RouteResult", "GuideField", "plan_route", "route_clearance"]
 
 
 @dataclass(frozen=True)
 class RouteSettings:
-    """Knobs of the route search (defaults measured on the reference tank, see the README).
+    """Knobs of the route search (defaults measured on the reference tank, see docs/benchmarks.md).
 
     Attributes:
         margin: clearance the arm's surface keeps from everything [cm].
@@ -115,118 +114,6 @@ class RouteResult:
     notes: list[str] = field(default_factory=list)
 
 
-class GuideField:
-    """Distance-to-go [cm] to a target through the free space of a tank, on a fine grid.
-
-    The grid has cells of half the raster's size (10 cm in the reference tank). A grid point is
-    free when it keeps the arm's radius from every solid and wall; two neighbouring points
-    (26-neighbourhood) are joined when the midpoint between them is free too, so a thin wall
-    such as the 4 cm baffle cuts every edge across it except through the hatch. Distances are
-    Euclidean along the edges, relaxed with numpy until they settle. ``allowed`` (on the raster)
-    restricts the field to a corridor.
-    """
-
-    def __init__(
-        self, tank: Tank, target: ArrayLike, allowed: NDArray[np.bool_] | None = None
-    ) -> None:
-        raster = tank.raster
-        self.size = float(raster.cell_size) / 2
-        self.origin = np.array(raster.origin, dtype=np.float64)
-        self.shape = np.array(raster.shape) * 2
-        free, edges = _grid_edges(tank, self.size)
-        if allowed is not None:
-            free = free & np.repeat(np.repeat(np.repeat(allowed, 2, 0), 2, 1), 2, 2)
-        self.free, self.edges = free, edges
-        target = np.asarray(target, dtype=np.float64)
-        centres = self.origin + (np.indices(tuple(self.shape)).transpose(1, 2, 3, 0) + 0.5) * (
-            self.size
-        )
-        dist = np.full(tuple(self.shape), np.inf)
-        near = np.linalg.norm(centres - target, axis=-1)
-        seed = free & (near <= 1.75 * self.size)
-        if not seed.any():
-            seed = free & (near <= near[free].min() + 1e-9) if free.any() else seed
-        dist[seed] = near[seed]
-        steps = np.linalg.norm(_NEIGHBOURS, axis=1) * self.size
-        for _ in range(int(self.shape.sum()) * 4):
-            new = dist.copy()
-            for e, (d, w) in enumerate(zip(_NEIGHBOURS, steps)):
-                # dist[x] <- dist[x + d] + w where the edge x -> x + d exists
-                src = _shifted(dist, -d)
-                new = np.minimum(new, np.where(edges[e] & free, src + w, np.inf))
-            new = np.where(free, new, np.inf)
-            if np.array_equal(new, dist):
-                break
-            dist = new
-        self.dist = dist
-        self.target = target
-
-    def __call__(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Distance-to-go of points ``(..., 3)``; ``inf`` where no reachable grid point is near.
-
-        A point uses its own grid cell and the neighbours joined to it by an edge (so nothing
-        leaks through a thin wall), each at its distance plus the straight line to it.
-        """
-        p = np.asarray(points, dtype=np.float64)
-        cell = np.clip(np.floor((p - self.origin) / self.size).astype(np.int64), 0, self.shape - 1)
-        own = self.dist[cell[..., 0], cell[..., 1], cell[..., 2]]
-        centre = self.origin + (cell + 0.5) * self.size
-        best = own + np.linalg.norm(p - centre, axis=-1)
-        for e, d in enumerate(_NEIGHBOURS):
-            c = cell + d
-            ok = np.all((c >= 0) & (c < self.shape), axis=-1)
-            cc = np.where(ok[..., None], c, 0)
-            joined = self.edges[e][cell[..., 0], cell[..., 1], cell[..., 2]] & ok
-            dd = self.dist[cc[..., 0], cc[..., 1], cc[..., 2]]
-            v = dd + np.linalg.norm(p - (self.origin + (cc + 0.5) * self.size), axis=-1)
-            best = np.minimum(best, np.where(joined, v, np.inf))
-        near = np.linalg.norm(p - self.target, axis=-1)
-        return np.where(near < self.size, np.minimum(best, near), best)
-
-
-def _shifted(a: NDArray[np.float64], d: NDArray[np.int64]) -> NDArray[np.float64]:
-    """``out[x] = a[x - d]`` with ``inf`` where ``x - d`` is outside."""
-    out = np.full_like(a, np.inf)
-    src = tuple(slice(max(0, -k), a.shape[i] - max(0, k)) for i, k in enumerate(d))
-    dst = tuple(slice(max(0, k), a.shape[i] - max(0, -k)) for i, k in enumerate(d))
-    out[dst] = a[src]
-    return out
-
-
-#: Per tank (by value, held weakly) and grid size: free grid points and edges.
-_EDGE_CACHE: weakref.WeakKeyDictionary[
-    Tank, dict[float, tuple[NDArray[np.bool_], NDArray[np.bool_]]]
-] = weakref.WeakKeyDictionary()
-
-
-def _grid_edges(tank: Tank, size: float) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
-    """Free grid points and, per neighbour direction, whether the edge's midpoint is free."""
-    cache = _EDGE_CACHE.setdefault(tank, {})
-    if size not in cache:
-        shape = tuple(int(n) * 2 for n in tank.raster.shape)
-        origin = np.array(tank.raster.origin, dtype=np.float64)
-        centres = origin + (np.indices(shape).transpose(1, 2, 3, 0) + 0.5) * size
-        r = tank.arm.radius
-        free = point_clearance(tank, centres) >= r
-        edges = np.zeros((len(_NEIGHBOURS),) + shape, dtype=bool)
-        for e, d in enumerate(_NEIGHBOURS):
-            mid = centres + 0.5 * size * d
-            target_free = _shifted(free.astype(np.float64), -d) == 1.0
-            edges[e] = free & target_free & (point_clearance(tank, mid) >= r)
-        cache[size] = (free, edges)
-    return cache[size]
-
-
-def _corridor(tank: Tank, cells: Sequence[Sequence[int]], grow: int) -> NDArray[np.bool_]:
-    mask = np.zeros(tank.raster.shape, dtype=bool)
-    shape = np.array(tank.raster.shape)
-    for c in cells:
-        lo = np.clip(np.asarray(c) - grow, 0, shape)
-        hi = np.clip(np.asarray(c) + grow + 1, 0, shape)
-        mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]] = True
-    return mask
-
-
 def _changes(max_change: float) -> NDArray[np.float64]:
     """The set of ``Δκ`` moves: none, and 3 sizes in 8 directions (25 moves)."""
     out = [(0.0, 0.0)]
@@ -246,143 +133,6 @@ def _section_samples(
     pts = np.einsum("bij,bkj->bki", rot, local[..., :3, 3]) + pos[:, None, :]
     end_rot = rot @ local[:, -1, :3, :3]
     return pts, end_rot, pts[:, -1, :]
-
-
-def route_clearance(tank: Tank, arm: ArmSpec, route: Route, per_section: int = 20) -> float:
-    """Smallest clearance [cm] of the final body of ``route`` (its surface, radius included)."""
-    theta, phi = kappa_to_angles(route.kappa)
-    pts = body_points(route.lead, theta, phi, route.section_length, per_section)
-    return float(point_clearance(tank, pts).min()) - arm.radius
-
-
-def _close_batch(
-    lead: NDArray[np.float64],
-    kappa: NDArray[np.float64],
-    target: NDArray[np.float64],
-    l: float,
-    theta_max: float,
-    free: int = 3,
-    iterations: int = 40,
-    lead_range: tuple[ArrayLike, ArrayLike] | None = (-25.0, 60.0),
-) -> list[tuple[float, NDArray[np.float64]] | None]:
-    """Put each route's tip on ``target``: damped least squares on its lead and last ``κ``.
-
-    ``kappa`` is ``(C, M, 2)``: C candidate routes of one depth, solved together (one batched
-    forward kinematics per iteration). The lead moves the whole route along the panel's axis
-    (its derivative is ``(0, 0, 1)``): with sections of fixed length, a continuous lead is what
-    lets a route end exactly at any distance. Steps are bounded (0.3 rad, 10 cm), ``κ`` stays
-    within the joint limit and the lead within ``lead_range`` (None: the lead stays as given, for
-    routes already threaded through the tank by the beam). Returns ``(lead, κ)`` of each
-    candidate, or None where it did not converge to 1e-6 cm.
-    """
-    kap = np.array(kappa, dtype=np.float64)
-    lead = np.array(lead, dtype=np.float64)
-    lo, hi = lead_range if lead_range is not None else (lead, lead)
-    lead = np.clip(lead, lo, hi)
-    c, m = kap.shape[:2]
-    j0 = max(0, m - free)
-    nk = 2 * (m - j0)
-    unit_z = np.array([0.0, 0.0, 1.0])
-
-    def joints(p: NDArray[np.float64]) -> tuple[ArrayLike, ArrayLike, ArrayLike]:
-        # the last sections' κ, flattened in p (C, R, nk), after the fixed ones of each route
-        fixed = np.broadcast_to(kap[:, None, :j0], p.shape[:2] + (j0, 2))
-        theta, phi = kappa_to_angles(np.concatenate([fixed, p.reshape(p.shape[:2] + (-1, 2))], 2))
-        return lead[:, None], theta, phi
-
-    for _ in range(iterations):
-        # forward differences of the tip in the free κ (C, 3, nk)
-        tip, jac_t = tip_jacobian(kap[:, j0:].reshape(c, nk), l, central=False, joints=joints)
-        err = target - tip
-        norm = np.linalg.norm(err, axis=1)
-        done = norm < 1e-7
-        if done.all():
-            break
-        jac_k = np.swapaxes(jac_t, 1, 2)  # (C, nk, 3)
-        # the lead's column is in cm, the angles' in cm/rad: scale it like 1/l rad per cm
-        free_lead = 1.0 if lead_range is not None else 0.0
-        jac = np.concatenate([jac_k, np.broadcast_to(unit_z * l * free_lead, (c, 1, 3))], axis=1)
-        damping = np.where(norm > 5, 1e-6, 1e-8) * l * l
-        a = np.swapaxes(jac, 1, 2) @ jac + damping[:, None, None] * np.eye(3)
-        step = np.einsum("cvi,ci->cv", jac, np.linalg.solve(a, err[..., None])[..., 0])
-        step[done] = 0.0
-        dk, dlead = step[:, :nk], step[:, nk] * l
-        size = np.linalg.norm(dk, axis=1)
-        scale = np.minimum(
-            np.minimum(1.0, 0.3 / np.maximum(size, 1e-12)), 10.0 / np.maximum(np.abs(dlead), 1e-12)
-        )
-        kap[:, j0:] = clip_kappa(kap[:, j0:] + (dk * scale[:, None]).reshape(c, -1, 2), theta_max)
-        lead = np.clip(lead + dlead * scale, lo, hi)
-    theta, phi = kappa_to_angles(kap)
-    ok = np.linalg.norm(target - tip_position(lead, theta, phi, l), axis=1) < 1e-6
-    return [(float(lead[i]), kap[i]) if ok[i] else None for i in range(c)]
-
-
-def _push_away(
-    tank: Tank,
-    arm: ArmSpec,
-    route: Route,
-    target: NDArray[np.float64],
-    goal: float,
-    iterations: int = 12,
-    step: float = 0.04,
-) -> Route:
-    """Raise a route's clearance while its end stays on ``target`` (clearance as an objective).
-
-    Gradient ascent on a soft minimum of the body's clearance over every ``κ`` and the lead,
-    projected into the null space of the tip's Jacobian, then put back on the target by a few
-    Gauss-Newton steps. Stops when the clearance reaches ``goal`` [cm] or stops improving;
-    returns the best route seen (the input if nothing better).
-    """
-    l = route.section_length
-    x0 = np.concatenate([[route.lead / l], route.kappa.reshape(-1)])
-    n = len(x0)
-    eps = 1e-5
-
-    def unpack(x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        kap = clip_kappa(x[..., 1:].reshape(x.shape[:-1] + (-1, 2)), arm.theta_max)
-        return x[..., 0] * l, kap
-
-    def evaluate(xs: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        lead, kap = unpack(xs)
-        theta, phi = kappa_to_angles(kap)
-        pts = body_points(lead, theta, phi, l, 10)
-        clear = point_clearance(tank, pts) - arm.radius  # (B, P)
-        soft = -np.log(np.sum(np.exp(-2.0 * (clear - clear.min(axis=1, keepdims=True))), axis=1))
-        return clear.min(axis=1) + soft / 2.0, pts[:, -1, :]
-
-    x, best_x, best_c = x0.copy(), x0.copy(), route_clearance(tank, arm, route)
-    for _ in range(iterations):
-        trial = x[None, :] + eps * np.vstack([np.zeros(n), np.eye(n)])
-        value, tips = evaluate(trial)
-        grad = (value[1:] - value[0]) / eps
-        jac = ((tips[1:] - tips[0]) / eps).T  # (3, n)
-        pinv = np.linalg.pinv(jac)
-        direction = grad - pinv @ (jac @ grad)
-        norm = np.linalg.norm(direction)
-        if norm < 1e-9:
-            break
-        x = x + step * direction / norm
-        for _ in range(4):  # back onto the target
-            lead, kap = unpack(x)
-            theta, phi = kappa_to_angles(kap)
-            err = target - tip_position(lead, theta, phi, l)
-            if np.linalg.norm(err) < 1e-8:
-                break
-            x = x + pinv @ err
-        lead, kap = unpack(x)
-        x = np.concatenate([[lead / l], kap.reshape(-1)])
-        theta, phi = kappa_to_angles(kap)
-        if np.linalg.norm(target - tip_position(lead, theta, phi, l)) > 1e-6 or lead < -25.0:
-            break
-        c = route_clearance(tank, arm, Route(float(lead), kap, l))
-        if c <= best_c + 1e-3:
-            break
-        best_x, best_c = x.copy(), c
-        if c >= goal:
-            break
-    lead, kap = unpack(best_x)
-    return Route(float(lead), kap, l)
 
 
 def plan_route(
@@ -418,7 +168,7 @@ def plan_route(
         )
     attempts: list[tuple[str, NDArray[np.bool_] | None]] = []
     if cells is not None and tank.cell_size is not None:
-        attempts.append(("learned path", _corridor(tank, cells, settings.corridor)))
+        attempts.append(("learned path", corridor(tank, cells, settings.corridor)))
     attempts.append(("whole tank", None))
     notes: list[str] = []
     for name, allowed in attempts:
@@ -474,7 +224,7 @@ def _beam(
         need = settings.margin + 0.5 * settings.slack
         if need - 3.0 < rc < need:
             # a near miss: move the body away from the tank, the tip staying on the target
-            route = _push_away(tank, arm, route, target, need)
+            route = push_away(tank, arm, route, target, need)
             rc = route_clearance(tank, arm, route)
             kap, lead = route.kappa, route.lead
         if rc < need:
@@ -499,7 +249,7 @@ def _beam(
         shapes += [np.outer((-1.0) ** np.arange(extra), toward) * a for a in (0.5, 1.0)]
         starts = np.array([shape for shape in shapes for _ in leads])
         seeds = np.tile(leads, len(shapes))
-        closed = _close_batch(seeds, starts, target, l, arm.theta_max, extra)
+        closed = close_batch(seeds, starts, target, l, arm.theta_max, extra)
         for out in closed:
             if out is not None:
                 best = _keep(best, out[1], out[0], max(out[0], 0.0), extra)
@@ -586,7 +336,7 @@ def _beam(
                 if settings.lead_shift > 0
                 else None
             )
-            closed = _close_batch(
+            closed = close_batch(
                 lead[picks], starts, target, l, arm.theta_max, free=extra + 1, lead_range=window
             )
             for i, out in zip(picks, closed):
