@@ -1,0 +1,237 @@
+"""What ``AFTIR-ArmFTL-v0``'s single and vector env share: rewards, goals, arguments, spaces."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import ArrayLike, NDArray
+
+from aftir_rl.collision import point_clearance
+from aftir_rl.envs.ftl_batch import bay_region
+from aftir_rl.envs.ftl_model import FTLBatch
+from aftir_rl.errors import AftirError, ConfigError, InvalidActionError, TargetError
+from aftir_rl.tank import Tank, load_tank
+
+#: Reward of a success and penalty of a contact.
+SUCCESS_REWARD = 10.0
+CONTACT_PENALTY = 10.0
+#: Progress reward per cm of distance-to-go.
+PROGRESS_PER_CM = 0.1
+
+
+def _distance(a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
+    """Euclidean distance over the last axis, in float64 (goals are stored as float32)."""
+    diff = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
+    return np.sqrt(np.einsum("...i,...i->...", diff, diff))
+
+
+def _info_arrays(info: Any, size: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Previous tips ``(size, 3)`` and contact flags ``(size,)`` from one dict or many."""
+    try:
+        if isinstance(info, Mapping):
+            prev = np.asarray(info["prev_achieved_goal"], dtype=np.float64).reshape(-1, 3)
+            contact = np.asarray(info["contact"], dtype=bool).reshape(-1)
+        else:
+            items = list(np.asarray(info, dtype=object).reshape(-1))
+            prev = np.array([i["prev_achieved_goal"] for i in items], dtype=np.float64)
+            contact = np.array([bool(i["contact"]) for i in items])
+    except (KeyError, TypeError) as exc:
+        raise AftirError(
+            f"compute_reward needs the step's info (missing {exc}); with SB3's HerReplayBuffer "
+            "pass replay_buffer_kwargs={'copy_info_dict': True}"
+        ) from None
+    prev = np.broadcast_to(prev, (size, 3)) if len(prev) == 1 else prev
+    contact = np.broadcast_to(contact, (size,)) if len(contact) == 1 else contact
+    return prev, contact
+
+
+class _GoalReward:
+    """The reward, terminations and goal spaces shared by the single and the vector env."""
+
+    batch: FTLBatch
+    tank: Tank
+
+    def compute_reward(
+        self, achieved_goal: ArrayLike, desired_goal: ArrayLike, info: Any
+    ) -> NDArray[np.float64] | float:
+        """The step reward for tips ``achieved_goal`` and targets ``desired_goal`` [cm].
+
+        Vectorised over leading axes. ``info`` is the step's info dict (``prev_achieved_goal``,
+        ``contact``), or a sequence / object array of them, one per row (HER's relabelling).
+        """
+        a = np.asarray(achieved_goal, dtype=np.float64)
+        g = np.asarray(desired_goal, dtype=np.float64)
+        shape = np.broadcast_shapes(a.shape, g.shape)[:-1]
+        a2 = np.broadcast_to(a, shape + (3,)).reshape(-1, 3)
+        g2 = np.broadcast_to(g, shape + (3,)).reshape(-1, 3)
+        prev, contact = _info_arrays(info, len(a2))
+        d = _distance(a2, g2)
+        d_prev = _distance(prev, g2)
+        reward = PROGRESS_PER_CM * (d_prev - d)
+        if self.batch.shaping:
+            reward += PROGRESS_PER_CM * self._cells(prev, g2) - PROGRESS_PER_CM * self._cells(
+                a2, g2
+            )
+        success = (d < self.batch.success_tolerance) & ~contact
+        reward = reward + SUCCESS_REWARD * success - CONTACT_PENALTY * contact
+        out = reward.reshape(shape)
+        return float(out) if out.ndim == 0 else out
+
+    def _cells(self, p: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``cell · e(p, g)`` [cm]: the raster detour from ``p``'s cell to ``g``'s."""
+        raster = self.tank.raster
+        shape = np.array(raster.shape)
+        origin = np.array(raster.origin)
+
+        def flat(x: NDArray[np.float64]) -> NDArray[np.int64]:
+            c = np.clip(np.floor((x - origin) / raster.cell_size).astype(np.int64), 0, shape - 1)
+            return (c[:, 0] * shape[1] + c[:, 1]) * shape[2] + c[:, 2]
+
+        assert self.batch.detour is not None
+        return raster.cell_size * self.batch.detour[flat(p), flat(g)].astype(np.float64)
+
+    def compute_terminated(
+        self, achieved_goal: ArrayLike, desired_goal: ArrayLike, info: Any
+    ) -> NDArray[np.bool_] | bool:
+        """Success (tip within tolerance, no contact) or contact, vectorised like the reward."""
+        a = np.asarray(achieved_goal, dtype=np.float64)
+        g = np.asarray(desired_goal, dtype=np.float64)
+        shape = np.broadcast_shapes(a.shape, g.shape)[:-1]
+        d = _distance(
+            np.broadcast_to(a, shape + (3,)).reshape(-1, 3),
+            np.broadcast_to(g, shape + (3,)).reshape(-1, 3),
+        )
+        _, contact = _info_arrays(info, len(d))
+        out = ((d < self.batch.success_tolerance) | contact).reshape(shape)
+        return bool(out) if out.ndim == 0 else out
+
+    def _goal_space(self) -> spaces.Box:
+        lo = np.array(self.tank.box_min) - 100.0
+        hi = np.array(self.tank.box_max) + 100.0
+        return spaces.Box(lo.astype(np.float32), hi.astype(np.float32), (3,), np.float32)
+
+    def _goal_clip(self, points: NDArray[np.float64]) -> NDArray[np.float32]:
+        """Points as the goal space holds them: clipped to its bounds, float32."""
+        lo = np.array(self.tank.box_min) - 100.0
+        hi = np.array(self.tank.box_max) + 100.0
+        return np.clip(points, lo, hi).astype(np.float32)
+
+
+def _check_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
+    options = dict(options or {})
+    unknown = sorted(set(options) - {"target"})
+    if unknown:
+        raise ConfigError(f"unknown reset option {unknown[0]!r}; use 'target'")
+    return options
+
+
+class _Setup:
+    """Argument checking and derived settings shared by the single and the vector env."""
+
+    def _setup(
+        self,
+        tank: str | Path | Tank,
+        n_sections: int | None,
+        batch: int,
+        target: Sequence[float] | None,
+        bay: int | None,
+        target_clearance: float,
+        success_tolerance: float,
+        margin: float,
+        kappa_step: float,
+        push_step: float,
+        start_height: float,
+        samples_per_section: int,
+        shaping: bool,
+        guide: bool = False,
+    ) -> None:
+        self.tank = load_tank(tank)
+        arm = self.tank.arm
+        n = arm.max_sections if n_sections is None else int(n_sections)
+        if not 1 <= n <= arm.max_sections:
+            raise ConfigError(f"n_sections must be in 1..{arm.max_sections}, got {n_sections}")
+        for name, value in (
+            ("kappa_step", kappa_step),
+            ("push_step", push_step),
+            ("success_tolerance", success_tolerance),
+        ):
+            if not 0 < value < math.inf:
+                raise ConfigError(f"{name} must be positive and finite, got {value}")
+        if push_step > arm.section_length:
+            raise ConfigError(f"push_step must be at most the section length, got {push_step}")
+        if not 0 <= margin < 20 or not 0 <= target_clearance < 100:
+            raise ConfigError("margin must be in [0, 20) cm and target_clearance in [0, 100) cm")
+        if samples_per_section < 2:
+            raise ConfigError(f"samples_per_section must be at least 2, got {samples_per_section}")
+        if not 0 <= start_height < arm.section_length:
+            raise ConfigError(f"start_height must be in [0, {arm.section_length:g}) cm")
+        self.region = bay_region(self.tank, bay)
+        self.bay = bay
+        self.target_clearance = float(target_clearance)
+        self.batch = FTLBatch(
+            self.tank,
+            n,
+            batch,
+            samples_per_section,
+            kappa_step,
+            push_step,
+            start_height,
+            margin,
+            success_tolerance,
+            shaping,
+            guide,
+        )
+        self.start_tip = np.array([0.0, 0.0, float(start_height)])
+        self.fixed_target = None if target is None else self._check_target(target)
+
+    def _check_target(self, target: Any) -> NDArray[np.float64]:
+        try:
+            t = np.asarray(target, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            t = np.zeros(0)
+        if t.shape != (3,) or not np.all(np.isfinite(t)) or not self.tank.contains_point(t):
+            raise TargetError(f"target {target!r} is not a point (x, y, z) inside the tank box")
+        clear = float(point_clearance(self.tank, t[None])[0])
+        need = self.tank.arm.radius + self.batch.margin
+        if clear < need:
+            raise TargetError(
+                f"target {target!r} lies {clear:.1f} cm from the tank's surfaces; the tip needs "
+                f"at least {need:g} cm (radius + margin)"
+            )
+        return t
+
+    def _spaces(self) -> tuple[spaces.Box[np.float32], spaces.Dict]:
+        action = spaces.Box(-1.0, 1.0, (3,), np.float32)
+        goal = self._goal_space()  # type: ignore[attr-defined]
+        obs = spaces.Dict(
+            {
+                "observation": spaces.Box(-10.0, 10.0, (self.batch.obs_size,), np.float32),
+                "achieved_goal": goal,
+                "desired_goal": goal,
+            }
+        )
+        return action, obs
+
+    def _obs_dict(self, rows: slice | NDArray[np.int64]) -> dict[str, NDArray[np.float32]]:
+        b = self.batch
+        return {
+            "observation": np.clip(b.observation()[rows], -10.0, 10.0),
+            "achieved_goal": self._goal_clip(b.tip[rows]),  # type: ignore[attr-defined]
+            "desired_goal": b.target[rows].astype(np.float32),
+        }
+
+    def _check_action(self, action: Any, shape: tuple[int, ...] | None) -> NDArray[np.float64]:
+        try:
+            a = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError):
+            a = np.zeros(0)
+        if a.shape != shape or not np.all(np.isfinite(a)):
+            raise InvalidActionError(
+                f"invalid action of shape {a.shape}: expected {shape} finite values in [-1, 1]"
+            )
+        return np.clip(a, -1.0, 1.0)
