@@ -24,6 +24,7 @@ ENV_IDS: tuple[str, ...] = (
     "AFTIR-TankGoal-v0",
     "AFTIR-Arm-v0",
     "AFTIR-ArmReach-v0",
+    "AFTIR-ArmFull-v0",
     "AFTIR-ArmFTL-v0",
 )
 
