@@ -29,7 +29,7 @@ lint: $(STAMP)
 	$(PY) -m ruff format --check aftir_rl tests benchmarks
 	$(PY) -m mypy
 
-bench: $(STAMP)  ## every benchmark table of the README (about 20 minutes)
+bench: $(STAMP)  ## every benchmark table of docs/benchmarks.md (about 20 minutes)
 	$(PY) benchmarks/bench_tank.py
 	$(PY) benchmarks/bench_posture.py
 	$(PY) benchmarks/bench_icra2014.py
