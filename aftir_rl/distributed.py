@@ -384,13 +384,10 @@ def evaluate_on_ray(
     """
     from aftir_rl.errors import CheckpointError
     from aftir_rl.evaluate import evaluate_run
+    from aftir_rl.run import run_kind
 
     for r in runs:  # a path that is no run directory is the user's error, before any task
-        run = Path(r)
-        if not (
-            (run / "q_table.npz").exists()
-            or ((run / "model.zip").exists() and (run / "config.json").exists())
-        ):
+        if run_kind(r) not in ("q_table", "sb3"):
             raise CheckpointError(
                 f"{r}: not a run directory (no q_table.npz, nor model.zip with config.json)"
             )
