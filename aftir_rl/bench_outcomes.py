@@ -26,7 +26,7 @@ from aftir_rl.posture.registry import get_method
 from aftir_rl.run import learn_cells, load_q_table_config, load_sb3_run
 
 if TYPE_CHECKING:
-    from aftir_rl.envs.arm import ArmEnv
+    from aftir_rl.envs.arm_ftl import ArmFTLEnv
 
 __all__ = [
     "Outcome",
@@ -239,7 +239,10 @@ def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray
 
     run = load_sb3_run(run_dir)
     env_id, model = run.env_id, run.model
-    lo, hi = cast("ArmEnv", gym.make(env_id).unwrapped).target_region
+    kwargs = dict(run.config.env_kwargs or {})  # the env the model was trained on (spaces)
+    env = gym.make(env_id, **kwargs).unwrapped
+    # where the env draws its targets: ArmEnv's target_region, the FTL env's (bay) region
+    lo, hi = getattr(env, "target_region", None) or cast("ArmFTLEnv", env).region
     rows = []
     for name in ("filomat2018", "bay1", "bay2"):
         targets = [t for tank, t in sets.get(name, []) if tank == "b737_center"]
@@ -250,7 +253,9 @@ def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray
             if np.any(target < lo) or np.any(target > hi):
                 row.outcomes.append(Outcome(False, ran=False, note="outside the env's targets"))
                 continue
-            metrics, _ = evaluate_policy_on_targets(model, env_id, [target], clearance=True)
+            metrics, _ = evaluate_policy_on_targets(
+                model, env_id, [target], clearance=True, env_kwargs=kwargs
+            )
             row.outcomes.append(
                 Outcome(
                     bool(metrics["success_rate"]),

@@ -297,8 +297,11 @@ def _evaluate_q_table(run: QTableRun, motion: str, margin: float) -> dict[str, A
 def _evaluate_sb3(run: SB3Run, targets: list[np.ndarray] | None) -> dict[str, Any]:
     from aftir_rl.agents.sb3 import evaluate_policy_on_targets, evaluation_targets
 
-    targets = targets or evaluation_targets(run.env_id, run.config.eval_targets)
-    metrics, _ = evaluate_policy_on_targets(run.model, run.env_id, targets, clearance=True)
+    kwargs = dict(run.config.env_kwargs or {})  # the env the model was trained on (spaces)
+    targets = targets or evaluation_targets(run.env_id, run.config.eval_targets, env_kwargs=kwargs)
+    metrics, _ = evaluate_policy_on_targets(
+        run.model, run.env_id, targets, clearance=True, env_kwargs=kwargs
+    )
     note = f"{metrics['collision_rate']:.0%} collided" if metrics["collision_rate"] else ""
     agent = f"{run.algo} ({run.config.env_id})"
     return {"agent": agent, "targets": len(targets), **metrics, "note": note}

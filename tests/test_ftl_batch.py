@@ -235,6 +235,11 @@ def test_train_cli_ppo_on_the_batched_env(tmp_path):
     assert algo == "ppo" and loaded.env_kwargs["guide"] is True
     guided = gym.make(ENV_ID, guide=True).observation_space["observation"]
     assert model.observation_space["observation"].shape == guided.shape
+    # evaluate (and bench --model) make the env with the run's env_kwargs, so the shapes fit
+    from aftir_rl.run import evaluate_run
+
+    row = evaluate_run(run, targets=[np.array([200.0, 120.0, 50.0])])
+    assert row["targets"] == 1 and 0.0 <= row["success_rate"] <= 1.0
 
 
 def test_config_limits_for_the_batched_env():
