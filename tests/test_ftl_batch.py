@@ -255,3 +255,36 @@ def test_config_limits_for_the_batched_env():
     her = SB3Config(env_id=ENV_ID, her=True, env_kwargs={"guide": True})
     with pytest.raises(ConfigError, match="guide"):
         check_sb3_config(her, "sac", "test")
+
+
+def test_field_guide_cache_starts_again_and_holders_ask_again():
+    from aftir_rl.envs.ftl_batch import FieldGuide
+
+    tank = load_tank("b737_center")
+    guide = FieldGuide(tank)
+    guide.capacity = 2
+    targets = np.array([[200.0, 120.0, 50.0], [30.0, 20.0, 60.0], [150.0, 100.0, 30.0]])
+    first = guide.field_ids(targets[:2])
+    assert guide.generation == 0 and len(set(first.tolist())) == 2
+    again = guide.field_ids(targets[2:])  # a third cell: the cache starts again
+    assert guide.generation == 1
+    tips = np.array([[0.0, 0.0, 10.0]])
+    fresh = FieldGuide(tank)
+    expect = fresh(tips, targets[2:], fresh.field_ids(targets[2:]))[0]
+    np.testing.assert_allclose(guide(tips, targets[2:], again)[0], expect)
+    # an env batch whose ids went void asks again before it observes
+    env = ArmFTLVectorEnv(num_envs=2, guide=True)
+    env.reset(seed=0)
+    batch = env.batch
+    capacity = batch.guide.capacity  # the guide is shared by the tank's envs: put it back
+    batch.guide.capacity = len(batch.guide._rows)  # full: the next new cell starts it again
+    try:
+        env.reset(seed=1, options={"target": (150.0, 100.0, 30.0)})
+        obs = batch.observation()
+    finally:
+        batch.guide.capacity = capacity
+    to_go = obs[:, -10] * 100
+    direct = FieldGuide(tank)
+    ids = direct.field_ids(batch.target)
+    expect = np.minimum(direct(batch.tip, batch.target, ids)[0], 1000)
+    np.testing.assert_allclose(to_go, expect, rtol=1e-5)

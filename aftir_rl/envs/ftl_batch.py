@@ -267,7 +267,8 @@ class FieldGuide:
     the raster's cell, points that keep the arm's radius from every surface, 26-neighbour edges
     whose midpoints are free too, so a thin wall is crossed only through its hatch), built for
     the centre of the target's grid cell the first time a target falls in that cell and kept
-    (at most :data:`MAX_GUIDE_VALUES` values in all; the cache starts again when full).
+    (at most :data:`MAX_GUIDE_VALUES` values in all, :attr:`capacity` fields; the cache starts
+    again when full, and :attr:`generation` tells holders of ids to ask again).
     :meth:`__call__` returns, for each tip, the distance-to-go ``P`` [cm] (its cell's or a
     joined neighbour's distance plus the straight line to that grid point, as ``GuideField``
     does) and the unit vector towards the joined neighbour that minimises it: the next waypoint.
@@ -285,9 +286,11 @@ class FieldGuide:
         self._tank = tank
         self._field_cls = GuideField
         n = int(np.prod(self.shape))
-        self._capacity = max(1, MAX_GUIDE_VALUES // n)
+        self.capacity = max(1, MAX_GUIDE_VALUES // n)
+        #: Incremented whenever the cache starts again: ids from an older generation are void.
+        self.generation = 0
         self._rows: dict[int, int] = {}
-        self._table = np.empty((min(64, self._capacity), n), dtype=np.float32)
+        self._table = np.empty((min(64, self.capacity), n), dtype=np.float32)
 
     def _flat(self, cell: NDArray[np.int64]) -> NDArray[np.int64]:
         return (cell[..., 0] * self.shape[1] + cell[..., 1]) * self.shape[2] + cell[..., 2]
@@ -303,13 +306,14 @@ class FieldGuide:
         for i, key in enumerate(keys.tolist()):
             row = self._rows.get(key)
             if row is None:
-                if len(self._rows) >= self._capacity:
-                    self._rows.clear()  # full: start again (ids given out before stay valid
-                    # until their rows are overwritten, i.e. until the next reset of that row)
+                if len(self._rows) >= self.capacity:
+                    # full: start again; ids given out before are void (see generation)
+                    self._rows.clear()
+                    self.generation += 1
                 row = len(self._rows)
                 if row >= len(self._table):
                     grown = np.empty(
-                        (min(2 * len(self._table), self._capacity),) + self._table.shape[1:],
+                        (min(2 * len(self._table), self.capacity),) + self._table.shape[1:],
                         np.float32,
                     )
                     grown[: len(self._table)] = self._table

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.envs.ftl_batch import clearance_grid, field_guide, raster_distance_table
+from aftir_rl.errors import ConfigError
 from aftir_rl.motion.ftl import kappa_to_angles
 from aftir_rl.robot import body_points, section_transforms
 from aftir_rl.tank import Tank
@@ -136,6 +137,12 @@ class FTLBatch:
         self.obs_size = 14 + 3 * self.n + (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)
         self.guide = field_guide(tank) if guide else None
         self.guide_ids = np.zeros(self.b, dtype=np.int64)
+        self._guide_generation = self.guide.generation if self.guide is not None else 0
+        if self.guide is not None and self.guide.capacity < 2 * self.b:
+            raise ConfigError(
+                f"the guide keeps {self.guide.capacity} target fields of this tank's grid, too "
+                f"few for {self.b} envs; use fewer envs or guide=False"
+            )
         self.obs_size += 10 if guide else 0
         self.refresh()
 
@@ -184,6 +191,9 @@ class FTLBatch:
             self.points[:, self.k_samples :: self.k_samples, 2][:, -3:] / 100.0,
         ]
         if self.guide is not None:
+            if self._guide_generation != self.guide.generation:  # the cache started again
+                self.guide_ids = self.guide.field_ids(self.target)
+                self._guide_generation = self.guide.generation
             to_go, direction = self.guide(self.tip, self.target, self.guide_ids)
             to_go = np.minimum(to_go, 1000.0)
             # in the frame the steered κ bends in, where steering towards them is simplest
@@ -224,7 +234,11 @@ class FTLBatch:
         self.s[rows] = self.start_height
         self.target[rows] = targets
         if self.guide is not None:
+            generation = self.guide.generation
             self.guide_ids[rows] = self.guide.field_ids(self.target[rows])
+            if self.guide.generation != generation:  # other rows' ids are void: ask again
+                self.guide_ids = self.guide.field_ids(self.target)
+                self._guide_generation = self.guide.generation
         if refresh:
             self.refresh()
 
