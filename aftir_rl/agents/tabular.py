@@ -11,6 +11,7 @@ and the ``.npz`` checkpoint (:mod:`aftir_rl.agents.checkpoint`).
 from __future__ import annotations
 
 import os
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, TypeVar
@@ -82,7 +83,7 @@ def episode_bar(enabled: bool, total: int, desc: str) -> Any:
     return tqdm(total=total, desc=desc, unit="ep", leave=False)
 
 
-class TabularAgent:
+class TabularAgent(ABC):
     """ε-greedy tabular Q-learning: hyperparameters, counters, ε schedule, log and checkpoints.
 
     The constructor is :class:`~aftir_rl.agents.q_table.QLearning`'s (its docstring has the
@@ -128,6 +129,7 @@ class TabularAgent:
         self.metadata: dict[str, Any] = {}
         self._setup(env)
 
+    @abstractmethod
     def _setup(self, env: Any) -> None:
         """Make the table (and the random generator) for ``env``."""
         raise NotImplementedError
@@ -172,6 +174,7 @@ class TabularAgent:
         logger.dump(step=self.num_timesteps)
 
     # ------------------------------------------------------------------ persistence
+    @abstractmethod
     def _arrays(self) -> dict[str, NDArray[Any]]:
         """The arrays a checkpoint holds (the table first)."""
         raise NotImplementedError
@@ -180,10 +183,12 @@ class TabularAgent:
         """Metadata a checkpoint holds before the hyperparameters (the env's, for instance)."""
         return {}
 
+    @abstractmethod
     def _rng_state(self) -> Any:
         """The random generator's state, as JSON."""
         raise NotImplementedError
 
+    @abstractmethod
     def _set_rng_state(self, state: Any) -> None:
         """Restore the random generator from :meth:`_rng_state`'s value (checked on reading)."""
         raise NotImplementedError
@@ -208,6 +213,7 @@ class TabularAgent:
         return write_npz(npz_path(path), self._arrays(), meta, compressed=self.COMPRESSED)
 
     @staticmethod
+    @abstractmethod
     def read_checkpoint(path: str | os.PathLike[str]) -> tuple[Any, ...]:
         """The checked arrays of a checkpoint, then its metadata.
 
@@ -217,6 +223,7 @@ class TabularAgent:
         """
         raise NotImplementedError
 
+    @abstractmethod
     def _restore(self, path: str | os.PathLike[str], checkpoint: tuple[Any, ...]) -> None:
         """Take the tables of :meth:`read_checkpoint`'s ``checkpoint`` read from ``path``.
 

@@ -127,7 +127,6 @@ class FTLBatch:
         self.success_tolerance, self.shaping = float(success_tolerance), bool(shaping)
         self.s_max = self.n * self.l
         self.detour = raster_detour_table(tank) if shaping else None
-        self.distance = tank.distance
         self.grid = clearance_grid(tank)
         self._deep = tank.box_min[2] - tank.panel.radius - 1.0
         self.kappa = np.zeros((self.b, self.n, 2))
