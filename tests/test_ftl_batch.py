@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from aftir_rl.collision import point_clearance
+from aftir_rl.collision import CollisionScene, point_clearance
 from aftir_rl.envs.arm_ftl import ArmFTLEnv, ArmFTLVectorEnv
 from aftir_rl.envs.ftl_batch import (
     clearance_grid,
@@ -14,8 +14,9 @@ from aftir_rl.envs.ftl_batch import (
     field_guide,
     raster_distance_table,
 )
+from aftir_rl.envs.ftl_model import FTLBatch
 from aftir_rl.motion.ftl import kappa_to_angles
-from aftir_rl.robot import body_points, forward_kinematics
+from aftir_rl.robot import Posture, body_points, forward_kinematics
 from aftir_rl.tank import load_tank
 
 ENV_ID = "AFTIR-ArmFTL-v0"
@@ -55,6 +56,49 @@ def test_body_clearance_below_the_floor_uses_the_base():
         env.step(np.array([*rng.uniform(-1, 1, 2), 1.0], dtype=np.float32))
         exact = point_clearance(env.tank, env.batch.points[0]).min() - env.tank.arm.radius
         assert env.batch.body_clearance[0] == pytest.approx(exact, abs=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("name", "count"),
+    [("b737_center", 10_000), ("single_cabin", 3000), ("open_space_obstacles1", 3000)],
+)
+def test_contact_verdicts_against_python_fcl(name, count):
+    """The batched env's contact verdicts on random FTL postures, against python-fcl's capsules.
+
+    The env checks backbone samples ``l/10`` apart; python-fcl, capsules between the same samples.
+    Every sample lies on a capsule's axis, and every point of a capsule's axis is within
+    :meth:`CollisionScene.sample_margin` (half the spacing, the sagitta and 0.1 cm: 2.7 cm for
+    50 cm sections) of a sample, so the env's clearance is never more than that band above
+    python-fcl's, and the verdicts may differ only for python-fcl clearances within the band
+    below the margin (the stated conservative margin of a contact check on samples).
+    """
+    tank = load_tank(name)
+    rng = np.random.default_rng(7)
+    margin = 1.0
+    batch = FTLBatch(tank, tank.arm.max_sections, count, 10, 0.1, 5.0, 10.0, margin, 2.0, False)
+    n = batch.n
+    # routes from straight to sharply bent, any deployment
+    r = rng.uniform(0, 1, (count, n)) ** 2 * tank.arm.theta_max * rng.uniform(0, 1, (count, 1))
+    a = rng.uniform(-np.pi, np.pi, (count, n))
+    batch.kappa = np.stack([r * np.cos(a), r * np.sin(a)], -1)
+    batch.s = rng.uniform(0, batch.s_max, count)
+    batch.k = np.minimum(np.floor(batch.s / batch.l).astype(np.int64), n - 1)
+    batch.refresh()
+    scene = CollisionScene(tank, links_per_section=10)
+    fcl_clear = np.array(
+        [scene.clearance(Posture(batch.dis[i], batch.theta[i], batch.phi[i])) for i in range(count)]
+    )
+    env_clear = batch.body_clearance
+    band = scene.sample_margin(10)
+    # both kinds of posture are there, and many near the margin
+    assert 0.1 < batch.contact.mean() < 0.95
+    assert (np.abs(fcl_clear - margin) < 10.0).sum() >= 50
+    free = fcl_clear > 0
+    assert (env_clear[free] - fcl_clear[free]).max() <= band
+    differ = batch.contact != (fcl_clear < margin)
+    assert (fcl_clear[differ] >= margin - band).all()
+    assert (fcl_clear[differ] < margin).all()  # the env's contact is always python-fcl's
 
 
 def test_raster_distance_table_against_bfs():

@@ -20,7 +20,11 @@ floor), i.e. a ``κ`` history, plus the tip's arc length ``s`` [cm] along it:
 envs; no python-fcl in the step. *Contact* is a sample whose surface clearance (distance minus the
 arm's radius) is below ``margin`` (1 cm; the panel guide below the floor counts as a wall). Between
 two samples ``δ`` apart the backbone can come closer than the samples by at most ``δ/2`` (2.5 cm at
-the default sampling); the check is on the samples, as stated.
+the default sampling); the check is on the samples, as stated. The tests cross-check it with
+python-fcl's capsules on 16,000 random postures in three tanks: a contact of the env is always
+one of python-fcl's, and the verdicts differ only where python-fcl's clearance lies within
+:meth:`~aftir_rl.collision.CollisionScene.sample_margin` (2.7 cm at 50 cm sections) below the
+margin.
 
 **Goal-conditioned** (Gymnasium-Robotics / panda-gym): observations are
 ``Dict(observation, achieved_goal, desired_goal)``; ``achieved_goal`` is the tip and
