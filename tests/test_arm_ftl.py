@@ -180,12 +180,48 @@ def test_targets_per_bay_and_by_option():
     np.testing.assert_allclose(obs["desired_goal"], [230, 140, 90])
 
 
+def test_detour_bias_draws_more_targets_behind_obstacles():
+    """detour_bias weights targets by 1 + their raster detour; 0 leaves the draws unchanged."""
+    from aftir_rl.agents.sb3_eval import evaluation_targets
+    from aftir_rl.envs.ftl_model import raster_cells
+
+    def targets(**kwargs):
+        env = ArmFTLEnv(bay=2, **kwargs)
+        return np.array([env.reset(seed=i)[1]["target"] for i in range(300)]), env
+
+    plain, env = targets()
+    np.testing.assert_array_equal(plain, targets(detour_bias=0.0)[0])
+    biased, _ = targets(detour_bias=1.0)
+    again, _ = targets(detour_bias=1.0)
+    np.testing.assert_array_equal(biased, again)  # seeded
+    row = raster_detour_table(env.tank)[raster_cells(env.tank, env.start_tip)]
+    detour = {name: row[raster_cells(env.tank, t)] for name, t in (("u", plain), ("b", biased))}
+    # the expected detour under density ∝ (1 + e), from the uniform draws: E[e(1+e)] / E[1+e]
+    expected = (detour["u"] * (1 + detour["u"])).mean() / (1 + detour["u"]).mean()
+    assert detour["b"].mean() == pytest.approx(expected, rel=0.15)
+    assert detour["b"].mean() > 1.3 * detour["u"].mean()
+    assert (point_clearance(env.tank, biased) >= 10.0).all()
+    # evaluations draw uniformly whatever the training bias
+    np.testing.assert_array_equal(
+        evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2, "detour_bias": 1.0}),
+        evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2}),
+    )
+    vec = gym.make_vec(
+        ENV_ID, num_envs=4, vectorization_mode="vector_entry_point", bay=2, detour_bias=0.5
+    )
+    obs, _ = vec.reset(seed=11)
+    singles = [ArmFTLEnv(bay=2, detour_bias=0.5).reset(seed=11 + i)[1]["target"] for i in range(4)]
+    np.testing.assert_allclose(obs["desired_goal"], np.array(singles, dtype=np.float32))
+
+
 @pytest.mark.parametrize(
     "kwargs, error",
     [
         ({"bay": 3}, ConfigError),
         ({"push_step": 80.0}, ConfigError),
         ({"n_sections": 0}, ConfigError),
+        ({"detour_bias": 1.5}, ConfigError),
+        ({"detour_bias": -0.1}, ConfigError),
         ({"target": (0, 60, 50)}, TargetError),
         ({"target": (500, 0, 10)}, TargetError),
     ],

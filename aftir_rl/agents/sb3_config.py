@@ -325,8 +325,12 @@ ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
         "kappa_step": (int, float),
         "push_step": (int, float),
         "start_height": (int, float),
+        "detour_bias": (int, float),
     },
 }
+#: Env keyword arguments that only bias how training draws its targets: evaluation targets are
+#: drawn without them, so every run of an env is measured on the same targets.
+TRAINING_ONLY_KWARGS = ("detour_bias",)
 #: Envs with a batched implementation: ``n_envs`` are rows of one process (at most
 #: :data:`MAX_BATCHED_ENVS`), not subprocesses (at most 64).
 BATCHED_ENV_IDS = ("AFTIR-ArmFTL-v0",)

@@ -22,6 +22,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import Image
 
+from aftir_rl.agents.sb3_config import TRAINING_ONLY_KWARGS
 from aftir_rl.atomic import atomic_open
 
 __all__ = [
@@ -37,8 +38,13 @@ __all__ = [
 def evaluation_targets(
     env_id: str, count: int, seed: int = 12345, env_kwargs: dict[str, Any] | None = None
 ) -> list[np.ndarray]:
-    """A fixed set of targets drawn by the env's own sampler with a fixed seed."""
-    env = gym.make(env_id, **(env_kwargs or {}))
+    """A fixed set of targets drawn by the env's own sampler with a fixed seed.
+
+    The keys of :data:`~aftir_rl.agents.sb3_config.TRAINING_ONLY_KWARGS` are left out: the
+    targets are those of the env as evaluated, not as its training drew them.
+    """
+    kwargs = {k: v for k, v in (env_kwargs or {}).items() if k not in TRAINING_ONLY_KWARGS}
+    env = gym.make(env_id, **kwargs)
     targets = []
     for i in range(count):
         _, info = env.reset(seed=seed + i)

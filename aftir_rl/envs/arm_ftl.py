@@ -71,7 +71,6 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
-from aftir_rl.envs.ftl_batch import draw_targets
 from aftir_rl.envs.ftl_goal import _check_options, _distance, _GoalReward, _Setup
 from aftir_rl.envs.ftl_model import FTLBatch, ftl_kappa_batch, raster_detour_table
 from aftir_rl.errors import ConfigError, TargetError
@@ -135,6 +134,11 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
       shortest way (:class:`~aftir_rl.envs.ftl_batch.FieldGuide`), ``(target − tip)/100`` and
       the tip's heading. These depend on the goal, so HER's relabelled goals would not match them:
       use it with PPO, not HER.
+    - ``detour_bias`` (0): the fraction of drawn targets whose density is weighted by
+      ``1 + e``, ``e`` the detour of the raster's shortest way from the start beyond the straight
+      (Manhattan) one, in cells: targets behind obstacles (in bay 2, far from the hatch) come up
+      more often; the other targets are uniform as before. A curriculum knob for training; the
+      evaluations of ``train`` and ``evaluate`` draw their targets uniformly.
     - ``render_mode``: ``"rgb_array"``.
 
     ``reset(options={"target": (x, y, z)})`` sets the target of one episode.
@@ -160,6 +164,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         samples_per_section: int = 10,
         shaping: bool = False,
         guide: bool = False,
+        detour_bias: float = 0.0,
         render_mode: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -180,6 +185,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
             samples_per_section,
             shaping,
             guide,
+            detour_bias,
         )
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
@@ -228,13 +234,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         elif self.fixed_target is not None:
             target = self.fixed_target
         else:
-            target = draw_targets(
-                [self.np_random],
-                self.batch.grid,
-                self.region,
-                self.target_clearance,
-                self.start_tip,
-            )[0]
+            target = self._draw_targets([self.np_random])[0]
         self.batch.reset_rows(np.array([0]), target[None])
         self._tips = [self.tip]
         info = {"distance_cm": float(np.linalg.norm(self.tip - target)), "target": target.copy()}
@@ -311,6 +311,7 @@ class ArmFTLVectorEnv(
         samples_per_section: int = 10,
         shaping: bool = False,
         guide: bool = False,
+        detour_bias: float = 0.0,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
     ) -> None:
@@ -336,6 +337,7 @@ class ArmFTLVectorEnv(
             samples_per_section,
             shaping,
             guide,
+            detour_bias,
         )
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
@@ -360,9 +362,7 @@ class ArmFTLVectorEnv(
         if self.fixed_target is not None:
             return np.repeat(self.fixed_target[None], len(rows), axis=0)
         rngs = [self._rngs[i] for i in rows]
-        return draw_targets(
-            rngs, self.batch.grid, self.region, self.target_clearance, self.start_tip
-        )
+        return self._draw_targets(rngs)
 
     def reset(
         self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None

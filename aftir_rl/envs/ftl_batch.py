@@ -181,6 +181,8 @@ def draw_targets(
     region: tuple[NDArray[np.float64], NDArray[np.float64]],
     clearance: float,
     start: NDArray[np.float64],
+    biased: float = 0.0,
+    weight: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
 ) -> NDArray[np.float64]:
     """One target per generator: uniform in ``region``, ``clearance`` [cm] from every surface.
 
@@ -188,10 +190,18 @@ def draw_targets(
     from every surface and 20 cm from ``start``; its first such candidate is its target (the
     grid's bounds settle most candidates, the rest are computed exactly, so the verdicts are the
     exact ones). Shape ``(len(rngs), 3)``.
+
+    With ``biased > 0`` each generator first draws whether its target is biased (probability
+    ``biased``); a biased one keeps each free candidate with probability ``weight(candidate)``
+    (points ``(..., 3)`` → values in ``[0, 1]``), so targets are drawn with density proportional to
+    ``weight``. ``biased = 0`` draws nothing more: the targets are the same as without it.
     """
     lo, hi = region
     out = np.empty((len(rngs), 3))
     todo = np.arange(len(rngs))
+    if biased > 0 and weight is None:
+        raise ConfigError("draw_targets: biased > 0 needs a weight function")
+    want = np.array([biased > 0 and rng.random() < biased for rng in rngs], dtype=bool)
     for _ in range(200):
         if not len(todo):
             return out
@@ -202,6 +212,11 @@ def draw_targets(
         if unsure.any():
             ok[unsure] = grid.distance(cand[unsure]) >= clearance
         ok &= np.linalg.norm(cand - start, axis=-1) >= 20.0
+        if want[todo].any():
+            assert weight is not None
+            rows = np.flatnonzero(want[todo])
+            keep = np.stack([rngs[int(todo[r])].random(64) for r in rows]) < weight(cand[rows])
+            ok[rows] &= keep
         found = ok.any(1)
         rows = np.flatnonzero(found)
         out[todo[rows]] = cand[rows, ok[rows].argmax(1)]

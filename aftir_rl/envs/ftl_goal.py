@@ -12,8 +12,8 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.collision import point_clearance
-from aftir_rl.envs.ftl_batch import bay_region
-from aftir_rl.envs.ftl_model import FTLBatch
+from aftir_rl.envs.ftl_batch import bay_region, draw_targets
+from aftir_rl.envs.ftl_model import FTLBatch, raster_cells, raster_detour_table
 from aftir_rl.errors import AftirError, ConfigError, InvalidActionError, TargetError
 from aftir_rl.tank import Tank, load_tank
 
@@ -84,16 +84,9 @@ class _GoalReward:
 
     def _cells(self, p: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
         """``cell · e(p, g)`` [cm]: the raster detour from ``p``'s cell to ``g``'s."""
-        raster = self.tank.raster
-        shape = np.array(raster.shape)
-        origin = np.array(raster.origin)
-
-        def flat(x: NDArray[np.float64]) -> NDArray[np.int64]:
-            c = np.clip(np.floor((x - origin) / raster.cell_size).astype(np.int64), 0, shape - 1)
-            return (c[:, 0] * shape[1] + c[:, 1]) * shape[2] + c[:, 2]
-
         assert self.batch.detour is not None
-        return raster.cell_size * self.batch.detour[flat(p), flat(g)].astype(np.float64)
+        cells = self.batch.detour[raster_cells(self.tank, p), raster_cells(self.tank, g)]
+        return self.tank.raster.cell_size * cells.astype(np.float64)
 
     def compute_terminated(
         self, achieved_goal: ArrayLike, desired_goal: ArrayLike, info: Any
@@ -149,6 +142,7 @@ class _Setup:
         samples_per_section: int,
         shaping: bool,
         guide: bool = False,
+        detour_bias: float = 0.0,
     ) -> None:
         self.tank = load_tank(tank)
         arm = self.tank.arm
@@ -168,6 +162,11 @@ class _Setup:
             raise ConfigError("margin must be in [0, 20) cm and target_clearance in [0, 100) cm")
         if samples_per_section < 2:
             raise ConfigError(f"samples_per_section must be at least 2, got {samples_per_section}")
+        if not 0 <= detour_bias <= 1:
+            raise ConfigError(f"detour_bias must be in [0, 1], got {detour_bias}")
+        if detour_bias > 0 and self.tank.cell_size is None:
+            raise ConfigError("detour_bias needs a tank with a raster (cell_size)")
+        self.detour_bias = float(detour_bias)
         if not 0 <= start_height < arm.section_length:
             raise ConfigError(f"start_height must be in [0, {arm.section_length:g}) cm")
         self.region = bay_region(self.tank, bay)
@@ -188,6 +187,23 @@ class _Setup:
         )
         self.start_tip = np.array([0.0, 0.0, float(start_height)])
         self.fixed_target = None if target is None else self._check_target(target)
+
+    def _draw_targets(self, rngs: Sequence[np.random.Generator]) -> NDArray[np.float64]:
+        """One target per generator (:func:`~aftir_rl.envs.ftl_batch.draw_targets`)."""
+        return draw_targets(
+            rngs,
+            self.batch.grid,
+            self.region,
+            self.target_clearance,
+            self.start_tip,
+            self.detour_bias,
+            self._detour_weight if self.detour_bias > 0 else None,
+        )
+
+    def _detour_weight(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``(1 + e) / (1 + e_max)``: ``e`` the raster detour [cells] from the start's cell."""
+        row = raster_detour_table(self.tank)[raster_cells(self.tank, self.start_tip)]
+        return (1.0 + row[raster_cells(self.tank, points)]) / (1.0 + row.max())
 
     def _check_target(self, target: Any) -> NDArray[np.float64]:
         try:
