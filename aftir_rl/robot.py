@@ -161,25 +161,36 @@ def section_transforms(theta: ArrayLike, phi: ArrayLike, arc: ArrayLike) -> NDAr
         np.asarray(phi, dtype=np.float64),
         np.asarray(arc, dtype=np.float64),
     )
-    ct, st = np.cos(theta), np.sin(theta)
     cp, sp = np.cos(phi), np.sin(phi)
     one_minus_cos, sinc = _bend_terms(theta)
     radial = arc * one_minus_cos
     out = np.zeros(theta.shape + (4, 4))
-    out[..., 0, 0] = cp * cp * ct + sp * sp
-    out[..., 0, 1] = cp * sp * (ct - 1.0)
-    out[..., 0, 2] = cp * st
+    out[..., :3, :3] = _bend_rotations(theta, cp, sp)
     out[..., 0, 3] = radial * cp
-    out[..., 1, 0] = out[..., 0, 1]
-    out[..., 1, 1] = sp * sp * ct + cp * cp
-    out[..., 1, 2] = sp * st
     out[..., 1, 3] = radial * sp
-    out[..., 2, 0] = -cp * st
-    out[..., 2, 1] = -sp * st
-    out[..., 2, 2] = ct
     out[..., 2, 3] = arc * sinc
     out[..., 3, 3] = 1.0
     return out
+
+
+def _bend_rotations(
+    theta: NDArray[np.float64], cp: NDArray[np.float64], sp: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Rotations ``(..., 3, 3)`` of arcs bent by ``θ`` in the plane at ``φ`` (``cos φ``, ``sin φ``)."""
+    ct, st = np.cos(theta), np.sin(theta)
+    off = cp * sp * (ct - 1.0)
+    rows = (
+        cp * cp * ct + sp * sp,
+        off,
+        cp * st,
+        off,
+        sp * sp * ct + cp * cp,
+        sp * st,
+        -cp * st,
+        -sp * st,
+        ct,
+    )
+    return np.stack(rows, axis=-1).reshape(theta.shape + (3, 3))
 
 
 def _as_batch(
@@ -261,7 +272,7 @@ def body_points(
     local[..., 1, :] = arc * one_minus_cos * sp[..., None]
     local[..., 2, :] = arc * sinc
     # Base rotation of every section: the product of the rotations of the sections before it.
-    end_rot = section_transforms(theta, phi, section_length)[..., :3, :3]
+    end_rot = _bend_rotations(theta, cp, sp)
     base_rot = np.empty(lead + (n, 3, 3))
     rot = np.broadcast_to(np.eye(3), lead + (3, 3))
     for i in range(n):
