@@ -176,7 +176,7 @@ def section_transforms(theta: ArrayLike, phi: ArrayLike, arc: ArrayLike) -> NDAr
 def _bend_rotations(
     theta: NDArray[np.float64], cp: NDArray[np.float64], sp: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """Rotations ``(..., 3, 3)`` of arcs bent by ``θ`` in the plane at ``φ`` (``cos φ``, ``sin φ``)."""
+    """Rotations ``(..., 3, 3)`` of arcs bent by ``θ`` in the plane at ``φ`` (given as cos, sin)."""
     ct, st = np.cos(theta), np.sin(theta)
     off = cp * sp * (ct - 1.0)
     rows = (

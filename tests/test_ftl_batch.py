@@ -299,6 +299,15 @@ def test_config_limits_for_the_batched_env():
     her = SB3Config(env_id=ENV_ID, her=True, env_kwargs={"guide": True})
     with pytest.raises(ConfigError, match="guide"):
         check_sb3_config(her, "sac", "test")
+    # HER samples finished episodes: learning may not start before every env has one
+    early = {"learning_starts": 1000}
+    check_sb3_config(SB3Config(env_id=ENV_ID, her=True, hyperparameters=early), "sac", "test")
+    with pytest.raises(ConfigError, match="learning_starts >= 4800"):
+        check_sb3_config(
+            SB3Config(env_id=ENV_ID, her=True, n_envs=16, hyperparameters=early), "sac", "test"
+        )
+    with pytest.raises(ConfigError, match="learning_starts"):
+        check_sb3_config(SB3Config(env_id=ENV_ID, her=True), "td3", "test")  # SB3's 100
 
 
 def test_field_guide_cache_starts_again_and_holders_ask_again():

@@ -16,6 +16,7 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
+import gymnasium as gym
 from stable_baselines3 import PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 
@@ -367,6 +368,8 @@ def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:
             f"{source}: env_kwargs.guide: the guide observes the goal, which HER relabels; "
             "use guide with PPO, or her without guide"
         )
+    if config.her:
+        _check_her_start(config, algo, bare, source)
     allowed = ENV_KWARGS.get(bare, {})
     for key, value in config.env_kwargs.items():
         if key not in allowed:
@@ -379,6 +382,23 @@ def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:
             raise ConfigError(f"{source}: env_kwargs.{key}: unexpected value {brief(value)}")
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(f"{source}: env_kwargs.{key}: expected a finite number")
+
+
+def _check_her_start(config: SB3Config, algo: str, env_id: str, source: str) -> None:
+    """HER samples only finished episodes: learning must not start before every env has one.
+
+    ``learning_starts`` counts the steps of all ``n_envs`` envs together, so each env has made
+    ``learning_starts / n_envs`` of them when the first gradient step needs a finished episode.
+    """
+    limit = gym.spec(env_id).max_episode_steps
+    default = inspect.signature(ALGORITHMS[algo]).parameters["learning_starts"].default
+    starts = config.hyperparameters.get("learning_starts", default)
+    if limit is not None and starts < config.n_envs * limit:
+        raise ConfigError(
+            f"{source}: hyperparameters.learning_starts: {starts} steps over {config.n_envs} envs "
+            f"may end before any episode does ({env_id} episodes last up to {limit} steps), and "
+            f"HER samples finished episodes only; use learning_starts >= {config.n_envs * limit}"
+        )
 
 
 def constructor_keys(algo: str) -> set[str]:
