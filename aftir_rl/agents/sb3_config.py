@@ -419,8 +419,8 @@ def build_model(
 ) -> BaseAlgorithm:
     """A new model of ``algo`` for ``env`` from a checked ``config``.
 
-    ``evaluation``: a one-transition replay buffer (off-policy algorithms), for a model only
-    loaded to act.
+    ``evaluation``: a one-transition replay buffer (off-policy algorithms) or a two-step rollout
+    buffer (PPO, so its batch size cannot warn), for a model only loaded to act.
 
     Raises:
         ConfigError: the algorithm refuses the hyperparameters.
@@ -434,6 +434,8 @@ def build_model(
     if evaluation and "buffer_size" in constructor_keys(algo):
         hyper["buffer_size"] = 1
         hyper.pop("optimize_memory_usage", None)
+    if evaluation and "n_steps" in constructor_keys(algo):
+        hyper["n_steps"] = hyper["batch_size"] = 2
     try:
         return ALGORITHMS[algo](config.policy, env, seed=seed, verbose=0, **hyper)
     except (ValueError, TypeError, AssertionError, KeyError) as exc:
