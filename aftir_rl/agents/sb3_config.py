@@ -13,6 +13,7 @@ import dataclasses
 import inspect
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -419,8 +420,9 @@ def build_model(
 ) -> BaseAlgorithm:
     """A new model of ``algo`` for ``env`` from a checked ``config``.
 
-    ``evaluation``: a one-transition replay buffer (off-policy algorithms) or a two-step rollout
-    buffer (PPO, so its batch size cannot warn), for a model only loaded to act.
+    ``evaluation``: a one-transition replay buffer (off-policy algorithms), for a model only
+    loaded to act; PPO's warning that its batch size does not divide a one-env rollout (the
+    run trained with more envs) is not shown then.
 
     Raises:
         ConfigError: the algorithm refuses the hyperparameters.
@@ -434,10 +436,11 @@ def build_model(
     if evaluation and "buffer_size" in constructor_keys(algo):
         hyper["buffer_size"] = 1
         hyper.pop("optimize_memory_usage", None)
-    if evaluation and "n_steps" in constructor_keys(algo):
-        hyper["n_steps"] = hyper["batch_size"] = 2
     try:
-        return ALGORITHMS[algo](config.policy, env, seed=seed, verbose=0, **hyper)
+        with warnings.catch_warnings():
+            if evaluation:
+                warnings.filterwarnings("ignore", "You have specified a mini-batch size")
+            return ALGORITHMS[algo](config.policy, env, seed=seed, verbose=0, **hyper)
     except (ValueError, TypeError, AssertionError, KeyError) as exc:
         raise ConfigError(
             f"{algo.upper()} refuses these hyperparameters: {shorten(str(exc) or repr(exc), 200)}"
