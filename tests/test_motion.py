@@ -131,6 +131,7 @@ def test_pad_then_align_is_the_same_arm(planner):
     assert aligned.phi[0] == 1.0  # a straight section takes the reference's phi
 
 
+@pytest.mark.slow
 def test_trajectory_moves_are_what_it_reports(planner):
     # A bay-1 cell path: (10, 0, 10) .. (30, 20, 50) then the exact target.
     points = [(10, 0, 10), (30, 0, 10), (30, 0, 30), (30, 0, 50), (30, 20, 50)]

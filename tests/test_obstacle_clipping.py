@@ -47,6 +47,7 @@ def test_icra2014_table2_rows(row):
     assert not CollisionScene(planner.tank).check(p).collides
 
 
+@pytest.mark.slow
 def test_paper_mode_stops_in_the_target_plane_zone():
     planner = Planner(ROWS[1])
     result = obstacle_clipping(planner, TARGET, r_target=1.0, refine=False)
