@@ -183,7 +183,6 @@ def test_targets_per_bay_and_by_option():
 def test_detour_bias_draws_more_targets_behind_obstacles():
     """detour_bias weights targets by 1 + their raster detour; 0 leaves the draws unchanged."""
     from aftir_rl.agents.sb3_eval import evaluation_targets
-    from aftir_rl.envs.ftl_model import raster_cells
 
     def targets(**kwargs):
         env = ArmFTLEnv(bay=2, **kwargs)
@@ -194,8 +193,9 @@ def test_detour_bias_draws_more_targets_behind_obstacles():
     biased, _ = targets(detour_bias=1.0)
     again, _ = targets(detour_bias=1.0)
     np.testing.assert_array_equal(biased, again)  # seeded
-    row = raster_detour_table(env.tank)[raster_cells(env.tank, env.start_tip)]
-    detour = {name: row[raster_cells(env.tank, t)] for name, t in (("u", plain), ("b", biased))}
+    raster = env.tank.raster
+    row = raster_detour_table(env.tank)[raster.cell_indices(env.start_tip)]
+    detour = {name: row[raster.cell_indices(t)] for name, t in (("u", plain), ("b", biased))}
     # the expected detour under density ∝ (1 + e), from the uniform draws: E[e(1+e)] / E[1+e]
     expected = (detour["u"] * (1 + detour["u"])).mean() / (1 + detour["u"]).mean()
     assert detour["b"].mean() == pytest.approx(expected, rel=0.15)

@@ -61,6 +61,17 @@ def test_point_cell_round_trip(tank):
         r.point_to_cell((300, 0, 10))
 
 
+def test_cell_indices_are_point_to_cell_vectorised(tank):
+    r = tank.raster
+    rng = np.random.default_rng(4)
+    pts = rng.uniform(tank.box_min, tank.box_max, (500, 3))
+    want = [r.index(r.point_to_cell(p)) for p in pts]
+    np.testing.assert_array_equal(r.cell_indices(pts), want)
+    np.testing.assert_array_equal(r.cell_indices(pts.reshape(25, 20, 3)).reshape(-1), want)
+    # outside the box: the nearest cell
+    assert r.cell_indices((300.0, 0.0, 10.0)) == r.index(r.point_to_cell((240.0, 0.0, 10.0)))
+
+
 def test_target_errors(tank):
     with pytest.raises(TargetError, match="outside"):
         tank.target_cell((0, 0, -5))

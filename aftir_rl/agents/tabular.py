@@ -132,7 +132,6 @@ class TabularAgent(ABC):
     @abstractmethod
     def _setup(self, env: Any) -> None:
         """Make the table (and the random generator) for ``env``."""
-        raise NotImplementedError
 
     @classmethod
     def _keywords(cls) -> list[str]:
@@ -177,7 +176,6 @@ class TabularAgent(ABC):
     @abstractmethod
     def _arrays(self) -> dict[str, NDArray[Any]]:
         """The arrays a checkpoint holds (the table first)."""
-        raise NotImplementedError
 
     def _describe(self) -> dict[str, Any]:
         """Metadata a checkpoint holds before the hyperparameters (the env's, for instance)."""
@@ -186,12 +184,10 @@ class TabularAgent(ABC):
     @abstractmethod
     def _rng_state(self) -> Any:
         """The random generator's state, as JSON."""
-        raise NotImplementedError
 
     @abstractmethod
     def _set_rng_state(self, state: Any) -> None:
         """Restore the random generator from :meth:`_rng_state`'s value (checked on reading)."""
-        raise NotImplementedError
 
     def save(self, path: str | os.PathLike[str], extra: dict[str, Any] | None = None) -> Path:
         """Write the table and metadata to ``path`` (``.npz``) atomically.
@@ -221,7 +217,6 @@ class TabularAgent(ABC):
             CheckpointError: missing, corrupt or not this agent's checkpoint.
 
         """
-        raise NotImplementedError
 
     @abstractmethod
     def _restore(self, path: str | os.PathLike[str], checkpoint: tuple[Any, ...]) -> None:
@@ -231,7 +226,6 @@ class TabularAgent(ABC):
             CheckpointError: they do not fit this agent's env.
 
         """
-        raise NotImplementedError
 
     @classmethod
     def load(cls: type[A], path: str | os.PathLike[str], env: Any) -> A:

@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.collision import point_clearance
 from aftir_rl.envs.ftl_batch import bay_region, draw_targets
-from aftir_rl.envs.ftl_model import FTLBatch, raster_cells, raster_detour_table
+from aftir_rl.envs.ftl_model import FTLBatch, raster_detour_table
 from aftir_rl.errors import AftirError, ConfigError, InvalidActionError, TargetError
 from aftir_rl.tank import Tank, load_tank
 
@@ -85,7 +85,8 @@ class _GoalReward:
     def _cells(self, p: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
         """``cell · e(p, g)`` [cm]: the raster detour from ``p``'s cell to ``g``'s."""
         assert self.batch.detour is not None
-        cells = self.batch.detour[raster_cells(self.tank, p), raster_cells(self.tank, g)]
+        raster = self.tank.raster
+        cells = self.batch.detour[raster.cell_indices(p), raster.cell_indices(g)]
         return self.tank.raster.cell_size * cells.astype(np.float64)
 
     def compute_terminated(
@@ -202,8 +203,9 @@ class _Setup:
 
     def _detour_weight(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(1 + e) / (1 + e_max)``: ``e`` the raster detour [cells] from the start's cell."""
-        row = raster_detour_table(self.tank)[raster_cells(self.tank, self.start_tip)]
-        return (1.0 + row[raster_cells(self.tank, points)]) / (1.0 + row.max())
+        raster = self.tank.raster
+        row = raster_detour_table(self.tank)[raster.cell_indices(self.start_tip)]
+        return (1.0 + row[raster.cell_indices(points)]) / (1.0 + row.max())
 
     def _check_target(self, target: Any) -> NDArray[np.float64]:
         try:

@@ -21,7 +21,7 @@ from aftir_rl.motion.ftl import kappa_to_angles
 from aftir_rl.robot import body_points, section_transforms
 from aftir_rl.tank import Tank
 
-__all__ = ["FTLBatch", "ftl_kappa_batch", "raster_cells", "raster_detour_table", "RAY_DISTANCES"]
+__all__ = ["FTLBatch", "ftl_kappa_batch", "raster_detour_table", "RAY_DISTANCES"]
 
 #: Directions of the sensing rays from the tip: the tip's heading, then ±x, ±y, ±z.
 _RAY_AXES = np.array(
@@ -82,15 +82,6 @@ def raster_detour_table(tank: Tank) -> NDArray[np.int32]:
     detour.setflags(write=False)
     _DETOUR_CACHE[tank] = detour
     return detour
-
-
-def raster_cells(tank: Tank, points: NDArray[np.float64]) -> NDArray[np.int64]:
-    """Flat raster cell indices of points ``(..., 3)`` [cm], clipped into the raster."""
-    raster = tank.raster
-    shape = np.array(raster.shape)
-    c = np.floor((np.asarray(points) - np.array(raster.origin)) / raster.cell_size)
-    c = np.clip(c.astype(np.int64), 0, shape - 1)
-    return (c[..., 0] * shape[1] + c[..., 1]) * shape[2] + c[..., 2]
 
 
 _DETOUR_CACHE: weakref.WeakKeyDictionary[Tank, NDArray[np.int32]] = weakref.WeakKeyDictionary()

@@ -75,6 +75,17 @@ class Raster:
         cell = np.minimum(np.floor(rel).astype(int), upper - 1)
         return (int(cell[0]), int(cell[1]), int(cell[2]))
 
+    def cell_indices(self, points: ArrayLike) -> NDArray[np.int64]:
+        """Flat indices (:meth:`index`) of the cells holding points ``(..., 3)`` [cm], vectorised.
+
+        Points outside the box count as in the nearest cell (clipped), unlike
+        :meth:`point_to_cell`, which refuses them.
+        """
+        rel = (np.asarray(points, dtype=np.float64) - np.array(self.origin)) / self.cell_size
+        shape = np.array(self.shape)
+        c = np.clip(np.floor(rel).astype(np.int64), 0, shape - 1)
+        return (c[..., 0] * shape[1] + c[..., 1]) * shape[2] + c[..., 2]
+
     def cell_center(self, cell: Sequence[int]) -> NDArray[np.float64]:
         """Centre of ``cell`` [cm]."""
         return np.array(self.origin) + (np.asarray(cell, dtype=np.float64) + 0.5) * self.cell_size
