@@ -116,6 +116,13 @@ def main() -> None:
     rows.append(
         (f"{ENV_ID} vector env, 256 envs, guide", vector_rate(256, 20 * args.steps, guide=True))
     )
+    field = {"guide": True, "shaping": "field"}
+    rows.append(
+        (
+            f"{ENV_ID} vector env, 256 envs, guide + field shaping",
+            vector_rate(256, 20 * args.steps, **field),
+        )
+    )
     ppo_rate, share = ppo_env_share(256, 10 * args.steps)
     print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, one process\n")
     print("| env | steps/s | vs single ArmFTL |")

@@ -35,7 +35,10 @@ def rollout(env, actions, seed):
     return out
 
 
-@pytest.mark.parametrize("kwargs", [{}, {"bay": 2, "shaping": True}, {"n_sections": 7}])
+@pytest.mark.parametrize(
+    "kwargs",
+    [{}, {"bay": 2, "shaping": True}, {"n_sections": 7}, {"guide": True, "shaping": "field"}],
+)
 def test_env_checkers(kwargs):
     env = gym.make(ENV_ID, **kwargs)
     gym_check_env(env.unwrapped, skip_render_check=True)
@@ -53,7 +56,7 @@ def test_spaces_and_registration():
     assert env.unwrapped.batch.n == 12
 
 
-@pytest.mark.parametrize("shaping", [False, True])
+@pytest.mark.parametrize("shaping", [False, True, "field"])
 def test_compute_reward_matches_step_rewards_in_batches(shaping):
     env = gym.make(ENV_ID, shaping=shaping, max_episode_steps=60)
     rng = np.random.default_rng(1)
@@ -100,6 +103,38 @@ def test_shaping_rewards_the_way_through_the_hatch():
     assert detour(np.array([[100.0, 70.0, 50.0]]), target)[0] == 0.0
     # Same bay: nothing in the way.
     assert detour(np.array([[-40.0, 0.0, 20.0]]), np.array([[200.0, 30.0, 60.0]]))[0] == 0
+
+
+def test_field_shaping_pays_the_guide_fields_progress():
+    """With ``shaping="field"`` progress plus shaping is the progress along the guide field's
+    cost-to-go ``P``: over any rollout the non-terminal rewards sum to ``(P_start − P_end)/10``."""
+    env = gym.make(ENV_ID, shaping="field", bay=2, max_episode_steps=40).unwrapped
+    fields = env.batch.fields
+    rng = np.random.default_rng(3)
+    for seed in range(3):
+        obs, info = env.reset(seed=seed)
+        target = info["target"][None]
+        ids = fields.field_ids(target)
+        start = fields(obs["achieved_goal"][None].astype(float), target, ids)[0][0]
+        total = 0.0
+        for _ in range(25):
+            a = np.array([*rng.uniform(-0.5, 0.5, 2), 1.0], dtype=np.float32)
+            obs, r, term, _, info = env.step(a)
+            if term:
+                break
+            total += r
+        if term:
+            continue
+        end = fields(env.batch.tip.copy(), target, ids)[0][0]
+        assert total == pytest.approx((start - end) / 10, abs=1e-6)
+    # the cost-to-go through the hatch: a tip in bay 1 beside the hatch is nearer than one
+    # straight below a target behind the baffle, though the straight line says otherwise
+    target = np.array([[0.0, 110.0, 50.0]])
+    ids = fields.field_ids(target)
+    near_hatch, below = np.array([[100.0, 40.0, 50.0]]), np.array([[0.0, 40.0, 50.0]])
+    assert fields(near_hatch, target, ids)[0] < fields(below, target, ids)[0]
+    with pytest.raises(ConfigError, match="shaping"):
+        gym.make(ENV_ID, shaping="euclid")
 
 
 def test_raster_detour_table_against_bfs(tank):

@@ -131,7 +131,7 @@ def test_guide_leads_through_the_hatch():
         # P is the distance-to-go of the GuideField of the target's cell centre
         np.testing.assert_allclose(
             guide(p, np.repeat(target[None], len(p), 0), ids)[0],
-            GuideField(tank, centre)(p),
+            GuideField(tank, centre, None, guide.clearance_cost)(p),
             rtol=1e-6,
         )
         for _ in range(150):
@@ -145,6 +145,49 @@ def test_guide_leads_through_the_hatch():
     for _ in range(150):
         assert point_clearance(tank, p)[0] > 0
         p = p + 2.0 * guide(p, targets[-1:], ids)[1]
+
+
+def test_lookahead_follows_the_shortest_way():
+    """Each hop goes to the neighbour that satisfies the field's Bellman equation, the way
+    reaches the target (ending on it), and clearance as a cost keeps the way off the hatch's
+    edges where the plain field hugs them."""
+    from aftir_rl.motion.route import GuideField
+
+    tank = load_tank("b737_center")
+    guide = field_guide(tank)
+    target = np.array([[-40.0, 120.0, 30.0]])  # behind the baffle, far from the hatch
+    (row,) = guide.field_ids(target)
+    dist = guide._table[row].astype(np.float64)
+    field = GuideField(tank, target[0], None, guide.clearance_cost)
+    shape = tuple(guide.shape)
+    rng = np.random.default_rng(0)
+    cells = rng.choice(np.flatnonzero(np.isfinite(dist)), 300, replace=False)
+    for c in cells:
+        n = guide._next[row, c]
+        if n == c:  # only the target's own points stay
+            assert dist[c] <= 1.75 * guide.size
+            continue
+        d = np.subtract(np.unravel_index(n, shape), np.unravel_index(c, shape))
+        (e,) = np.flatnonzero((guide.neighbours == d).all(1))
+        assert guide.edges[e][np.unravel_index(c, shape)]
+        w = field.weights[e]
+        w = w[np.unravel_index(c, shape)] if np.ndim(w) else w
+        assert dist[n] + w == pytest.approx(dist[c], rel=1e-5)
+    # from the start, hop by hop: the points lead through the hatch to the target itself
+    p = np.array([[0.0, 0.0, 10.0]])
+    crossings = []
+    for _ in range(60):
+        nxt = guide.lookahead(p, target, np.array([row]), (1,))[:, 0]
+        if (p[0, 1] - 60) * (nxt[0, 1] - 60) <= 0 and p[0, 1] != nxt[0, 1]:
+            crossings.append((p[0] + nxt[0]) / 2)
+        p = nxt
+    np.testing.assert_array_equal(p, target)
+    assert len(crossings) == 1 and 80 < crossings[0][0] < 120 and 30 < crossings[0][2] < 70
+    # the plain field's way crosses at the hatch's near edge, the costed one further in
+    plain = GuideField(tank, target[0])
+    assert plain.weights[0] == pytest.approx(guide.size * np.sqrt(3))
+    np.testing.assert_array_equal(GuideField(tank, target[0]).dist, plain.dist)
+    assert crossings[0][0] > 90
 
 
 def test_draw_targets_are_free_and_reproducible():
@@ -173,16 +216,20 @@ def test_guide_observation():
     env = gym.make(ENV_ID, guide=True)
     plain = gym.make(ENV_ID)
     obs, _ = env.reset(seed=0)
-    assert obs["observation"].shape[0] == plain.observation_space["observation"].shape[0] + 10
+    assert obs["observation"].shape[0] == plain.observation_space["observation"].shape[0] + 16
     # straight arm: the steering frame is the world's
-    tail = obs["observation"][-6:-3]
+    tail = obs["observation"][-12:-9]
     np.testing.assert_allclose(tail, (obs["desired_goal"] - obs["achieved_goal"]) / 100, atol=1e-5)
-    np.testing.assert_allclose(obs["observation"][-3:], [0, 0, 1], atol=1e-6)
+    np.testing.assert_allclose(obs["observation"][-9:-6], [0, 0, 1], atol=1e-6)
+    # ... and the lookahead's unit directions are the world's
+    batch = env.unwrapped.batch
+    ahead = batch.guide.lookahead(batch.tip, batch.target, batch.target_fields())[0] - batch.tip[0]
+    ahead /= np.linalg.norm(ahead, axis=1, keepdims=True)
+    np.testing.assert_allclose(obs["observation"][-6:], ahead.reshape(-1), atol=1e-6)
     # after a bend and a push past a section end, the frame is the frozen section's end frame
     rng = np.random.default_rng(0)
     for _ in range(14):
         obs, *_ = env.step(np.array([*rng.uniform(-1, 1, 2), 1.0], dtype=np.float32))
-    batch = env.unwrapped.batch
     assert batch.k[0] >= 1
     frame = route_frame(batch.kappa[0], batch.k[0], batch.l)
     np.testing.assert_allclose(batch.steering_frames()[0], frame, atol=1e-9)
@@ -290,8 +337,12 @@ def test_config_limits_for_the_batched_env():
     from aftir_rl.agents.sb3_config import SB3Config, check_sb3_config
     from aftir_rl.errors import ConfigError
 
-    ok = SB3Config(env_id=ENV_ID, n_envs=1024, env_kwargs={"guide": True})
+    ok = SB3Config(env_id=ENV_ID, n_envs=1024, env_kwargs={"guide": True, "shaping": "field"})
     check_sb3_config(ok, "ppo", "test")
+    for shaping in ("euclid", "True", 1):
+        bad = SB3Config(env_id=ENV_ID, env_kwargs={"shaping": shaping})
+        with pytest.raises(ConfigError, match="env_kwargs.shaping"):
+            check_sb3_config(bad, "ppo", "test")
     with pytest.raises(ConfigError, match="n_envs"):
         check_sb3_config(SB3Config(env_id=ENV_ID, n_envs=5000), "ppo", "test")
     with pytest.raises(ConfigError, match="n_envs"):
@@ -336,7 +387,7 @@ def test_field_guide_cache_starts_again_and_holders_ask_again():
         obs = batch.observation()
     finally:
         batch.guide.capacity = capacity
-    to_go = obs[:, -10] * 100
+    to_go = obs[:, -16] * 100
     direct = FieldGuide(tank)
     ids = direct.field_ids(batch.target)
     expect = np.minimum(direct(batch.tip, batch.target, ids)[0], 1000)

@@ -319,7 +319,7 @@ ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
     "AFTIR-ArmFull-v0": {"bay": (int, type(None))},
     "AFTIR-ArmFTL-v0": {
         "bay": (int, type(None)),
-        "shaping": (bool,),
+        "shaping": (bool, str),
         "guide": (bool,),
         "target_clearance": (int, float),
         "success_tolerance": (int, float),
@@ -330,6 +330,8 @@ ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
         "detour_bias": (int, float),
     },
 }
+#: Env keyword arguments whose values are one of a few.
+ENV_KWARG_CHOICES: dict[str, tuple[object, ...]] = {"shaping": (False, True, "raster", "field")}
 #: Env keyword arguments that only bias how training draws its targets: evaluation targets are
 #: drawn without them, so every run of an env is measured on the same targets.
 TRAINING_ONLY_KWARGS = ("detour_bias",)
@@ -383,6 +385,12 @@ def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:
             raise ConfigError(f"{source}: env_kwargs.{key}: unexpected value {brief(value)}")
         if isinstance(value, float) and not math.isfinite(value):
             raise ConfigError(f"{source}: env_kwargs.{key}: expected a finite number")
+        choices = ENV_KWARG_CHOICES.get(key)
+        if choices is not None and not any(type(value) is type(c) and value == c for c in choices):
+            names = ", ".join(str(c).lower() if isinstance(c, bool) else str(c) for c in choices)
+            raise ConfigError(
+                f"{source}: env_kwargs.{key}: expected one of {names}, got {brief(value)}"
+            )
 
 
 def _check_her_start(config: SB3Config, algo: str, env_id: str, source: str) -> None:

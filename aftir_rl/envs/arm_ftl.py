@@ -52,6 +52,14 @@ all-pairs raster distances are computed once per tank (numpy relaxation, < 0.5 s
 so the term costs nothing per step and HER can relabel it. Measured with and without: see
 ``benchmarks/bench_arm_ftl.py`` and the README.
 
+``shaping="field"`` takes the potential from the guide's free-space field instead
+(:class:`~aftir_rl.envs.ftl_batch.FieldGuide`, the motion planner's field on a grid of half the
+raster's cell with clearance as a cost): ``Φ(p) = −(P(p, g) − d)/10``, ``P`` the field's
+cost-to-go, so ``(d_prev − d)/10 + ΔΦ`` is the progress along ``P`` itself: through the hatch's
+middle, not along its edge, and without the 20 cm raster's steps. ``P`` of a relabelled goal
+needs that goal's field (built once per 10 cm cell, about 35 ms), so it suits PPO better than
+HER.
+
 **Batched.** :class:`ArmFTLVectorEnv` (``gym.make_vec(..., vectorization_mode=
 "vector_entry_point")``) steps ``num_envs`` arms in one numpy pass; both classes share
 :class:`FTLBatch`, so a vector env seeded ``seed`` gives row ``i`` exactly the transitions of a
@@ -127,13 +135,17 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
       ``np_random``, uniformly among points ``target_clearance`` (10 cm) from every surface and
       20 cm from the start, in ``bay`` (1, 2, or None for the whole tank).
     - ``success_tolerance`` (2 cm), ``margin`` (1 cm), ``kappa_step`` (0.1 rad), ``push_step``
-      (5 cm), ``start_height`` (10 cm), ``samples_per_section`` (10), ``shaping`` (False).
+      (5 cm), ``start_height`` (10 cm), ``samples_per_section`` (10).
+    - ``shaping`` (False): the reward's potential term, ``True`` or ``"raster"`` (the raster
+      BFS's detour) or ``"field"`` (the guide field's cost-to-go; module docstring).
     - ``guide`` (False): append to ``observation`` what the way to *this* target looks like: the
       free-space distance-to-go (cm/100, at most 10), then, in the frame the steered section
       bends in (:meth:`FTLBatch.steering_frames`), the unit way to the next point of the
-      shortest way (:class:`~aftir_rl.envs.ftl_batch.FieldGuide`), ``(target − tip)/100`` and
-      the tip's heading. These depend on the goal, so HER's relabelled goals would not match them:
-      use it with PPO, not HER.
+      shortest way (:class:`~aftir_rl.envs.ftl_batch.FieldGuide`), ``(target − tip)/100``,
+      the tip's heading, and the unit directions to the points of that way 3 and 6 grid steps
+      ahead (about 30-50 and 60-100 cm; :meth:`FieldGuide.lookahead`), so the policy sees a turn
+      coming while the arm can still bend into it. These depend on the goal, so HER's relabelled
+      goals would not match them: use it with PPO, not HER.
     - ``detour_bias`` (0): the fraction of drawn targets whose density is weighted by
       ``1 + e``, ``e`` the detour of the raster's shortest way from the start beyond the straight
       (Manhattan) one, in cells: targets behind obstacles (in bay 2, far from the hatch) come up
@@ -162,7 +174,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         push_step: float = 5.0,
         start_height: float = 10.0,
         samples_per_section: int = 10,
-        shaping: bool = False,
+        shaping: bool | str = False,
         guide: bool = False,
         detour_bias: float = 0.0,
         render_mode: str | None = None,
@@ -309,7 +321,7 @@ class ArmFTLVectorEnv(
         push_step: float = 5.0,
         start_height: float = 10.0,
         samples_per_section: int = 10,
-        shaping: bool = False,
+        shaping: bool | str = False,
         guide: bool = False,
         detour_bias: float = 0.0,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,

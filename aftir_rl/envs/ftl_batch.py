@@ -45,8 +45,13 @@ __all__ = [
 GRID_SPACING = 2.0
 #: Largest number of grid nodes a tank may ask for (about 8 bytes each).
 MAX_GRID_NODES = 8_000_000
-#: Largest number of distance-to-go values :class:`FieldGuide` keeps (4 bytes each).
+#: Largest number of distance-to-go values :class:`FieldGuide` keeps (8 bytes each, with the
+#: next-step table).
 MAX_GUIDE_VALUES = 50_000_000
+#: ``clearance_cost`` of :class:`FieldGuide`'s fields: ways keep off surfaces where they can.
+GUIDE_CLEARANCE_COST = 2.0
+#: Grid steps ahead of the tip of :meth:`FieldGuide.lookahead`'s points.
+LOOKAHEAD_HOPS = (3, 6)
 
 
 class ClearanceGrid:
@@ -288,9 +293,16 @@ class FieldGuide:
     joined neighbour's distance plus the straight line to that grid point, as ``GuideField``
     does) and the unit vector towards the joined neighbour that minimises it: the next waypoint.
     In the target's own cell both are the straight line to the target.
+
+    The fields are built with ``clearance_cost`` (:data:`GUIDE_CLEARANCE_COST`; see
+    ``GuideField``): edges near a surface cost more, so the way passes through the middle of the
+    hatch rather than along its edge, where an arm that cannot bend sharper than ``θ_max`` per
+    section would cut the corner. With each field the next grid point of its shortest way is kept
+    for every grid point, so :meth:`lookahead` follows the way several steps ahead in a few
+    gathers.
     """
 
-    def __init__(self, tank: Tank) -> None:
+    def __init__(self, tank: Tank, clearance_cost: float = GUIDE_CLEARANCE_COST) -> None:
         from aftir_rl.motion.route import _NEIGHBOURS, GuideField
 
         lo, hi = np.asarray(tank.box_min, float), np.asarray(tank.box_max, float)
@@ -298,6 +310,8 @@ class FieldGuide:
         self.size, self.origin = probe.size, probe.origin
         self.shape = np.asarray(probe.shape, dtype=np.int64)
         self.edges, self.neighbours = probe.edges, np.asarray(_NEIGHBOURS, dtype=np.int64)
+        self._edges_flat = self.edges.reshape(len(self.neighbours), -1)
+        self.clearance_cost = float(clearance_cost)
         self._tank = tank
         self._field_cls = GuideField
         n = int(np.prod(self.shape))
@@ -306,6 +320,7 @@ class FieldGuide:
         self.generation = 0
         self._rows: dict[int, int] = {}
         self._table = np.empty((min(64, self.capacity), n), dtype=np.float32)
+        self._next = np.empty((min(64, self.capacity), n), dtype=np.int32)
 
     def _flat(self, cell: NDArray[np.int64]) -> NDArray[np.int64]:
         return (cell[..., 0] * self.shape[1] + cell[..., 1]) * self.shape[2] + cell[..., 2]
@@ -327,12 +342,13 @@ class FieldGuide:
                     self.generation += 1
                 row = len(self._rows)
                 if row >= len(self._table):
-                    grown = np.empty(
-                        (min(2 * len(self._table), self.capacity),) + self._table.shape[1:],
-                        np.float32,
-                    )
+                    size = min(2 * len(self._table), self.capacity)
+                    grown = np.empty((size,) + self._table.shape[1:], np.float32)
                     grown[: len(self._table)] = self._table
                     self._table = grown
+                    nxt = np.empty((size,) + self._next.shape[1:], np.int32)
+                    nxt[: len(self._next)] = self._next
+                    self._next = nxt
                 cell = np.array(
                     [
                         key // (self.shape[1] * self.shape[2]),
@@ -341,9 +357,59 @@ class FieldGuide:
                     ]
                 )
                 centre = self.origin + (cell + 0.5) * self.size
-                self._table[row] = self._field_cls(self._tank, centre).dist.reshape(-1)
+                field = self._field_cls(self._tank, centre, None, self.clearance_cost)
+                self._table[row] = field.dist.reshape(-1)
+                self._next[row] = self._descent(field.dist, field.weights)
                 self._rows[key] = row
             out[i] = row
+        return out
+
+    def _descent(
+        self, dist: NDArray[np.float64], weights: Sequence[NDArray[np.float64] | float]
+    ) -> NDArray[np.int32]:
+        """Per grid point (flat), the joined neighbour the shortest way goes to next (flat).
+
+        A point where no neighbour lowers the distance-to-go (the target's, an unreachable one)
+        points to itself.
+        """
+        from aftir_rl.motion.guide import _shifted
+
+        shape = tuple(int(v) for v in self.shape)
+        flat = np.arange(int(np.prod(shape))).reshape(shape)
+        best, nxt = np.full_like(dist, np.inf), flat.copy()
+        for e, (d, w) in enumerate(zip(self.neighbours, weights)):
+            via = np.where(self.edges[e], _shifted(dist, -d) + w, np.inf)
+            better = via < best
+            best = np.where(better, via, best)
+            nxt = np.where(better, flat + int(self._flat(d)), nxt)
+        # a seed point (the target's) is nearer than any way through a neighbour
+        nxt = np.where(dist < best - 1e-9, flat, nxt)
+        return nxt.reshape(-1).astype(np.int32)
+
+    def lookahead(
+        self,
+        p: NDArray[np.float64],
+        g: NDArray[np.float64],
+        ids: NDArray[np.int64],
+        hops: Sequence[int] = LOOKAHEAD_HOPS,
+    ) -> NDArray[np.float64]:
+        """Points ``(B, len(hops), 3)`` [cm] of the shortest ways from the tips ``p`` ahead.
+
+        Each is where the way reaches after that many ``hops`` (increasing; grid steps of 10-17
+        cm from the tip's grid point). A way that reaches the target's grid point ends at the
+        target ``g`` itself.
+        """
+        cell = self._flat(self._cell(p))
+        home = self._flat(self._cell(g))
+        out = np.empty((len(p), len(hops), 3))
+        done = 0
+        for j, h in enumerate(hops):
+            for _ in range(h - done):
+                cell = self._next[ids, cell].astype(np.int64)
+            done = h
+            c = np.stack(np.unravel_index(cell, tuple(self.shape)), -1)
+            centre = self.origin + (c + 0.5) * self.size
+            out[:, j] = np.where((cell == home)[:, None], g, centre)
         return out
 
     def __call__(
@@ -356,19 +422,17 @@ class FieldGuide:
         cell = self._cell(p)
         own = self._table[ids, self._flat(cell)].astype(np.float64)
         value = own + np.linalg.norm(p - (self.origin + (cell + 0.5) * self.size), axis=-1)
-        best = np.full(len(p), np.inf)
-        way = np.zeros((len(p), 3))
-        for e, d in enumerate(self.neighbours):
-            c = cell + d
-            ok = np.all((c >= 0) & (c < self.shape), axis=-1)
-            c = np.where(ok[:, None], c, 0)
-            ok &= self.edges[e][cell[:, 0], cell[:, 1], cell[:, 2]]
-            step = self.origin + (c + 0.5) * self.size - p
-            v = self._table[ids, self._flat(c)] + np.linalg.norm(step, axis=-1)
-            v = np.where(ok, v, np.inf)
-            better = v < best
-            best = np.where(better, v, best)
-            way = np.where(better[:, None], step, way)
+        # every joined neighbour at once, (B, 26): its distance plus the straight line to it
+        c = cell[:, None, :] + self.neighbours[None]
+        ok = np.all((c >= 0) & (c < self.shape), axis=-1)
+        c = np.where(ok[..., None], c, 0)
+        ok &= self._edges_flat[:, self._flat(cell)].T
+        step = self.origin + (c + 0.5) * self.size - p[:, None, :]
+        v = self._table[ids[:, None], self._flat(c)] + np.sqrt(np.einsum("bni,bni->bn", step, step))
+        v = np.where(ok, v, np.inf)
+        pick = np.argmin(v, axis=1)  # the first of equals, as a scan in neighbour order
+        rows = np.arange(len(p))
+        best, way = v[rows, pick], step[rows, pick]
         value = np.minimum(value, best)
         home = np.all(cell == self._cell(g), axis=-1) | ~np.isfinite(best)
         straight = g - p

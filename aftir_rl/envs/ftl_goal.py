@@ -74,9 +74,8 @@ class _GoalReward:
         d_prev = _distance(prev, g2)
         reward = PROGRESS_PER_CM * (d_prev - d)
         if self.batch.shaping:
-            reward += PROGRESS_PER_CM * self._cells(prev, g2) - PROGRESS_PER_CM * self._cells(
-                a2, g2
-            )
+            detour = self._cells if self.batch.shaping == "raster" else self._field_detour
+            reward += PROGRESS_PER_CM * (detour(prev, g2) - detour(a2, g2))
         success = (d < self.batch.success_tolerance) & ~contact
         reward = reward + SUCCESS_REWARD * success - CONTACT_PENALTY * contact
         out = reward.reshape(shape)
@@ -88,6 +87,17 @@ class _GoalReward:
         raster = self.tank.raster
         cells = self.batch.detour[raster.cell_indices(p), raster.cell_indices(g)]
         return self.tank.raster.cell_size * cells.astype(np.float64)
+
+    def _field_detour(self, p: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``P(p, g) − |p − g|`` [cm]: the guide field's cost-to-go beyond the straight line."""
+        fields = self.batch.fields
+        assert fields is not None
+        generation = fields.generation
+        ids = fields.field_ids(g)
+        if fields.generation != generation:  # the cache started again during the call
+            ids = fields.field_ids(g)
+        to_go, _ = fields(p, g, ids)
+        return np.minimum(to_go, 1000.0) - _distance(p, g)
 
     def compute_terminated(
         self, achieved_goal: ArrayLike, desired_goal: ArrayLike, info: Any
@@ -116,6 +126,17 @@ class _GoalReward:
         return np.clip(points, lo, hi).astype(np.float32)
 
 
+#: The ``shaping`` values and the potential each one adds.
+SHAPING_KINDS = {False: "", True: "raster", "raster": "raster", "field": "field"}
+
+
+def _shaping_kind(shaping: Any) -> str:
+    """``""``, ``"raster"`` or ``"field"`` for a ``shaping`` argument (``True`` is the raster)."""
+    if isinstance(shaping, bool | str) and shaping in SHAPING_KINDS:
+        return SHAPING_KINDS[shaping]
+    raise ConfigError(f"shaping must be false, true, 'raster' or 'field', got {shaping!r}")
+
+
 def _check_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
     options = dict(options or {})
     unknown = sorted(set(options) - {"target"})
@@ -141,11 +162,12 @@ class _Setup:
         push_step: float,
         start_height: float,
         samples_per_section: int,
-        shaping: bool,
+        shaping: bool | str,
         guide: bool = False,
         detour_bias: float = 0.0,
     ) -> None:
         self.tank = load_tank(tank)
+        shaping = _shaping_kind(shaping)
         arm = self.tank.arm
         n = arm.max_sections if n_sections is None else int(n_sections)
         if not 1 <= n <= arm.max_sections:
@@ -165,8 +187,8 @@ class _Setup:
             raise ConfigError(f"samples_per_section must be at least 2, got {samples_per_section}")
         if not 0 <= detour_bias <= 1:
             raise ConfigError(f"detour_bias must be in [0, 1], got {detour_bias}")
-        if detour_bias > 0 and self.tank.cell_size is None:
-            raise ConfigError("detour_bias needs a tank with a raster (cell_size)")
+        if (detour_bias > 0 or shaping) and self.tank.cell_size is None:
+            raise ConfigError("detour_bias and shaping need a tank with a raster (cell_size)")
         self.detour_bias = float(detour_bias)
         if not 0 <= start_height < arm.section_length:
             raise ConfigError(f"start_height must be in [0, {arm.section_length:g}) cm")

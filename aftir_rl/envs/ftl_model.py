@@ -15,7 +15,12 @@ import weakref
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.envs.ftl_batch import clearance_grid, field_guide, raster_distance_table
+from aftir_rl.envs.ftl_batch import (
+    LOOKAHEAD_HOPS,
+    clearance_grid,
+    field_guide,
+    raster_distance_table,
+)
 from aftir_rl.errors import ConfigError
 from aftir_rl.motion.ftl import kappa_to_angles
 from aftir_rl.robot import body_points, section_transforms
@@ -100,7 +105,8 @@ class FTLBatch:
         start_height: the tip's height above the floor at reset [cm].
         margin: clearance the arm's surface keeps; less is a contact [cm].
         success_tolerance: tip-to-target distance of a success [cm].
-        shaping: whether the raster-detour potential term is in the reward.
+        shaping: the reward's potential term: ``""`` (none), ``"raster"`` (the raster's detour)
+            or ``"field"`` (the guide field's detour).
         guide: whether the observation holds the goal-dependent guide (see :class:`ArmFTLEnv`).
 
     """
@@ -116,7 +122,7 @@ class FTLBatch:
         start_height: float,
         margin: float,
         success_tolerance: float,
-        shaping: bool,
+        shaping: str,
         guide: bool = False,
     ) -> None:
         self.tank, self.arm = tank, tank.arm
@@ -124,9 +130,9 @@ class FTLBatch:
         self.l = float(self.arm.section_length)
         self.kappa_step, self.push_step = float(kappa_step), float(push_step)
         self.start_height, self.margin = float(start_height), float(margin)
-        self.success_tolerance, self.shaping = float(success_tolerance), bool(shaping)
+        self.success_tolerance, self.shaping = float(success_tolerance), str(shaping)
         self.s_max = self.n * self.l
-        self.detour = raster_detour_table(tank) if shaping else None
+        self.detour = raster_detour_table(tank) if shaping == "raster" else None
         self.grid = clearance_grid(tank)
         self._deep = tank.box_min[2] - tank.panel.radius - 1.0
         self.kappa = np.zeros((self.b, self.n, 2))
@@ -135,14 +141,16 @@ class FTLBatch:
         self.target = np.zeros((self.b, 3))
         self.obs_size = 14 + 3 * self.n + (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)
         self.guide = field_guide(tank) if guide else None
+        #: The guide's fields, for the observation or the ``"field"`` shaping.
+        self.fields = field_guide(tank) if guide or shaping == "field" else None
         self.guide_ids = np.zeros(self.b, dtype=np.int64)
-        self._guide_generation = self.guide.generation if self.guide is not None else 0
-        if self.guide is not None and self.guide.capacity < 2 * self.b:
+        self._guide_generation = self.fields.generation if self.fields is not None else 0
+        if self.fields is not None and self.fields.capacity < 2 * self.b:
             raise ConfigError(
-                f"the guide keeps {self.guide.capacity} target fields of this tank's grid, too "
+                f"the guide keeps {self.fields.capacity} target fields of this tank's grid, too "
                 f"few for {self.b} envs; use fewer envs or guide=False"
             )
-        self.obs_size += 10 if guide else 0
+        self.obs_size += 10 + 3 * len(LOOKAHEAD_HOPS) if guide else 0
         self.refresh()
 
     # -- geometry
@@ -190,20 +198,28 @@ class FTLBatch:
             self.points[:, self.k_samples :: self.k_samples, 2][:, -3:] / 100.0,
         ]
         if self.guide is not None:
-            if self._guide_generation != self.guide.generation:  # the cache started again
-                self.guide_ids = self.guide.field_ids(self.target)
-                self._guide_generation = self.guide.generation
-            to_go, direction = self.guide(self.tip, self.target, self.guide_ids)
+            to_go, direction = self.guide(self.tip, self.target, self.target_fields())
             to_go = np.minimum(to_go, 1000.0)
             # in the frame the steered κ bends in, where steering towards them is simplest
             frame = self.steering_frames()
+            ahead = self.guide.lookahead(self.tip, self.target, self.guide_ids) - self.tip[:, None]
+            ahead /= np.maximum(np.linalg.norm(ahead, axis=-1, keepdims=True), 1e-9)
             parts += [
                 (to_go / 100.0)[:, None],
                 np.einsum("bji,bj->bi", frame, direction),
                 np.einsum("bji,bj->bi", frame, self.target - self.tip) / 100.0,
                 np.einsum("bji,bj->bi", frame, self.heading),
+                np.einsum("bji,bhj->bhi", frame, ahead).reshape(self.b, -1),
             ]
         return np.concatenate(parts, axis=1).astype(np.float32)
+
+    def target_fields(self) -> NDArray[np.int64]:
+        """The guide's field ids of the targets, ``(B,)`` (asked again after a restart)."""
+        assert self.fields is not None
+        if self._guide_generation != self.fields.generation:  # the cache started again
+            self.guide_ids = self.fields.field_ids(self.target)
+            self._guide_generation = self.fields.generation
+        return self.guide_ids
 
     def steering_frames(self) -> NDArray[np.float64]:
         """Rotations ``(B, 3, 3)`` of the frames the steered sections bend in.
@@ -232,12 +248,12 @@ class FTLBatch:
         self.k[rows] = 0
         self.s[rows] = self.start_height
         self.target[rows] = targets
-        if self.guide is not None:
-            generation = self.guide.generation
-            self.guide_ids[rows] = self.guide.field_ids(self.target[rows])
-            if self.guide.generation != generation:  # other rows' ids are void: ask again
-                self.guide_ids = self.guide.field_ids(self.target)
-                self._guide_generation = self.guide.generation
+        if self.fields is not None:
+            generation = self.fields.generation
+            self.guide_ids[rows] = self.fields.field_ids(self.target[rows])
+            if self.fields.generation != generation:  # other rows' ids are void: ask again
+                self.guide_ids = self.fields.field_ids(self.target)
+                self._guide_generation = self.fields.generation
         if refresh:
             self.refresh()
 

@@ -34,16 +34,26 @@ class GuideField:
     such as the 4 cm baffle cuts every edge across it except through the hatch. Distances are
     Euclidean along the edges, relaxed with numpy until they settle. ``allowed`` (on the raster)
     restricts the field to a corridor.
+
+    ``clearance_cost`` ``α`` (0: plain lengths) makes an edge near a surface dearer, so the
+    shortest way keeps away from surfaces where it can (clearance as a cost, after Kuntz et al.):
+    each end of an edge whose surface clearance ``c`` (centre clearance minus the arm's radius)
+    is below :data:`CLEARANCE_RANGE` adds ``α·(1 − c/CLEARANCE_RANGE)/2`` times the edge's
+    length.
     """
 
     def __init__(
-        self, tank: Tank, target: ArrayLike, allowed: NDArray[np.bool_] | None = None
+        self,
+        tank: Tank,
+        target: ArrayLike,
+        allowed: NDArray[np.bool_] | None = None,
+        clearance_cost: float = 0.0,
     ) -> None:
         raster = tank.raster
         self.size = float(raster.cell_size) / 2
         self.origin = np.array(raster.origin, dtype=np.float64)
         self.shape = np.array(raster.shape) * 2
-        free, edges = _grid_edges(tank, self.size)
+        free, edges, clear = _grid_edges(tank, self.size)
         if allowed is not None:
             free = free & np.repeat(np.repeat(np.repeat(allowed, 2, 0), 2, 1), 2, 2)
         self.free, self.edges = free, edges
@@ -57,10 +67,17 @@ class GuideField:
         if not seed.any():
             seed = free & (near <= near[free].min() + 1e-9) if free.any() else seed
         dist[seed] = near[seed]
-        steps = np.linalg.norm(_NEIGHBOURS, axis=1) * self.size
+        lengths = np.linalg.norm(_NEIGHBOURS, axis=1) * self.size
+        weights: list[NDArray[np.float64] | float] = list(lengths)
+        if clearance_cost > 0:
+            cost = clearance_cost * np.clip(1.0 - (clear - tank.arm.radius) / CLEARANCE_RANGE, 0, 1)
+            weights = [
+                w * (1.0 + (cost + _shifted(cost, -d)) / 2) for d, w in zip(_NEIGHBOURS, lengths)
+            ]
+        self.weights = weights
         for _ in range(int(self.shape.sum()) * 4):
             new = dist.copy()
-            for e, (d, w) in enumerate(zip(_NEIGHBOURS, steps)):
+            for e, (d, w) in enumerate(zip(_NEIGHBOURS, weights)):
                 # dist[x] <- dist[x + d] + w where the edge x -> x + d exists
                 src = _shifted(dist, -d)
                 new = np.minimum(new, np.where(edges[e] & free, src + w, np.inf))
@@ -103,27 +120,36 @@ def _shifted(a: NDArray[np.float64], d: NDArray[np.int64]) -> NDArray[np.float64
     return out
 
 
-#: Per tank (by value, held weakly) and grid size: free grid points and edges.
+#: Per tank (by value, held weakly) and grid size: free grid points, edges, clearances.
 _EDGE_CACHE: weakref.WeakKeyDictionary[
-    Tank, dict[float, tuple[NDArray[np.bool_], NDArray[np.bool_]]]
+    Tank, dict[float, tuple[NDArray[np.bool_], NDArray[np.bool_], NDArray[np.float64]]]
 ] = weakref.WeakKeyDictionary()
 
+#: Surface clearance [cm] below which ``clearance_cost`` makes an edge dearer.
+CLEARANCE_RANGE = 15.0
 
-def _grid_edges(tank: Tank, size: float) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
-    """Free grid points and, per neighbour direction, whether the edge's midpoint is free."""
+
+def _grid_edges(
+    tank: Tank, size: float
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_], NDArray[np.float64]]:
+    """Free grid points, edges and the grid points' centre clearances [cm].
+
+    An edge (per neighbour direction) is there where both ends and its midpoint are free.
+    """
     cache = _EDGE_CACHE.setdefault(tank, {})
     if size not in cache:
         shape = tuple(int(n) * 2 for n in tank.raster.shape)
         origin = np.array(tank.raster.origin, dtype=np.float64)
         centres = origin + (np.indices(shape).transpose(1, 2, 3, 0) + 0.5) * size
         r = tank.arm.radius
-        free = point_clearance(tank, centres) >= r
+        clear = point_clearance(tank, centres)
+        free = clear >= r
         edges = np.zeros((len(_NEIGHBOURS),) + shape, dtype=bool)
         for e, d in enumerate(_NEIGHBOURS):
             mid = centres + 0.5 * size * d
             target_free = _shifted(free.astype(np.float64), -d) == 1.0
             edges[e] = free & target_free & (point_clearance(tank, mid) >= r)
-        cache[size] = (free, edges)
+        cache[size] = (free, edges, clear)
     return cache[size]
 
 
