@@ -37,7 +37,12 @@ def rollout(env, actions, seed):
 
 @pytest.mark.parametrize(
     "kwargs",
-    [{}, {"bay": 2, "shaping": True}, {"n_sections": 7}, {"guide": True, "shaping": "field"}],
+    [
+        {},
+        {"bay": 2, "shaping": True},
+        {"n_sections": 7},
+        {"guide": True, "shaping": "field", "steer": "target"},
+    ],
 )
 def test_env_checkers(kwargs):
     env = gym.make(ENV_ID, **kwargs)
@@ -135,6 +140,28 @@ def test_field_shaping_pays_the_guide_fields_progress():
     assert fields(near_hatch, target, ids)[0] < fields(below, target, ids)[0]
     with pytest.raises(ConfigError, match="shaping"):
         gym.make(ENV_ID, shaping="euclid")
+
+
+def test_steer_target_approaches_the_named_bend_at_the_same_rate():
+    env = gym.make(ENV_ID, steer="target").unwrapped
+    env.reset(seed=0)
+    batch, theta_max, step = env.batch, env.arm.theta_max, env.batch.kappa_step
+    want = np.array([0.5, -0.25]) * theta_max
+    path = []
+    for _ in range(12):
+        env.step(np.array([0.5, -0.25, 0.0], dtype=np.float32))
+        path.append(batch.kappa[0, batch.k[0]].copy())
+    path = np.array(path)
+    moves = np.abs(np.diff(np.vstack([[0.0, 0.0], path]), axis=0))
+    assert moves.max() <= step + 1e-12  # no faster than the increments
+    np.testing.assert_allclose(path[-1], want, atol=1e-12)  # and it holds the bend
+    assert np.ceil(np.abs(want).max() / step) <= 12
+    # a corner of the action box names the largest bend on the diagonal
+    for _ in range(40):
+        env.step(np.array([1.0, 1.0, 0.0], dtype=np.float32))
+    np.testing.assert_allclose(batch.kappa[0, batch.k[0]], [theta_max / np.sqrt(2)] * 2)
+    with pytest.raises(ConfigError, match="steer"):
+        gym.make(ENV_ID, steer="rate")
 
 
 def test_raster_detour_table_against_bfs(tank):

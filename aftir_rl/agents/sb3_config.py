@@ -328,10 +328,14 @@ ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
         "push_step": (int, float),
         "start_height": (int, float),
         "detour_bias": (int, float),
+        "steer": (str,),
     },
 }
 #: Env keyword arguments whose values are one of a few.
-ENV_KWARG_CHOICES: dict[str, tuple[object, ...]] = {"shaping": (False, True, "raster", "field")}
+ENV_KWARG_CHOICES: dict[str, tuple[object, ...]] = {
+    "shaping": (False, True, "raster", "field"),
+    "steer": ("increment", "target"),
+}
 #: Env keyword arguments that only bias how training draws its targets: evaluation targets are
 #: drawn without them, so every run of an env is measured on the same targets.
 TRAINING_ONLY_KWARGS = ("detour_bias",)

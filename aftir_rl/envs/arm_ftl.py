@@ -106,9 +106,13 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
     by default), through the hatch for bay-2 targets, without contact.
 
     ## Action Space
-    ``Box(-1, 1, (3,), float32)``: the change of the steered ``κ`` (two components, scaled by
-    ``kappa_step`` [rad], ``|κ|`` clipped to ``θ_max``) and the insertion (scaled by
-    ``push_step`` [cm], ``s`` clipped to ``[0, N·l]``).
+    ``Box(-1, 1, (3,), float32)``: the steering (two components) and the insertion (scaled by
+    ``push_step`` [cm], ``s`` clipped to ``[0, N·l]``). With ``steer="increment"`` (the default)
+    the steering is the change of the steered ``κ`` (scaled by ``kappa_step`` [rad], ``|κ|``
+    clipped to ``θ_max``); with ``steer="target"`` it is the bend the steered section should
+    have, ``κ* = θ_max·a`` (``|κ*|`` clipped to ``θ_max``), which ``κ`` approaches by at most
+    ``kappa_step`` per component and step: the same bending rates, but the policy names a bend
+    rather than a rate, and holds a bend by holding its action.
 
     ## Observation Space
     ``Dict``: ``achieved_goal`` (tip) and ``desired_goal`` (target), ``Box(float32, (3,))`` in cm
@@ -151,6 +155,8 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
       (Manhattan) one, in cells: targets behind obstacles (in bay 2, far from the hatch) come up
       more often; the other targets are uniform as before. A curriculum knob for training; the
       evaluations of ``train`` and ``evaluate`` draw their targets uniformly.
+    - ``steer`` (``"increment"``): what the two steering actions command, a change of ``κ``
+      or ``"target"``, the bend itself (Action Space).
     - ``render_mode``: ``"rgb_array"``.
 
     ``reset(options={"target": (x, y, z)})`` sets the target of one episode.
@@ -177,6 +183,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         shaping: bool | str = False,
         guide: bool = False,
         detour_bias: float = 0.0,
+        steer: str = "increment",
         render_mode: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -198,6 +205,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
             shaping,
             guide,
             detour_bias,
+            steer,
         )
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
@@ -324,6 +332,7 @@ class ArmFTLVectorEnv(
         shaping: bool | str = False,
         guide: bool = False,
         detour_bias: float = 0.0,
+        steer: str = "increment",
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
     ) -> None:
@@ -350,6 +359,7 @@ class ArmFTLVectorEnv(
             shaping,
             guide,
             detour_bias,
+            steer,
         )
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)

@@ -126,6 +126,9 @@ class _GoalReward:
         return np.clip(points, lo, hi).astype(np.float32)
 
 
+#: What the two steering actions may command: a change of the steered ``κ``, or ``κ`` itself.
+STEER_MODES = ("increment", "target")
+
 #: The ``shaping`` values and the potential each one adds.
 SHAPING_KINDS = {False: "", True: "raster", "raster": "raster", "field": "field"}
 
@@ -165,8 +168,11 @@ class _Setup:
         shaping: bool | str,
         guide: bool = False,
         detour_bias: float = 0.0,
+        steer: str = "increment",
     ) -> None:
         self.tank = load_tank(tank)
+        if steer not in STEER_MODES:
+            raise ConfigError(f"steer must be 'increment' or 'target', got {steer!r}")
         shaping = _shaping_kind(shaping)
         arm = self.tank.arm
         n = arm.max_sections if n_sections is None else int(n_sections)
@@ -207,6 +213,7 @@ class _Setup:
             success_tolerance,
             shaping,
             guide,
+            steer,
         )
         self.start_tip = np.array([0.0, 0.0, float(start_height)])
         self.fixed_target = None if target is None else self._check_target(target)

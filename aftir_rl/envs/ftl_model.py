@@ -108,6 +108,8 @@ class FTLBatch:
         shaping: the reward's potential term: ``""`` (none), ``"raster"`` (the raster's detour)
             or ``"field"`` (the guide field's detour).
         guide: whether the observation holds the goal-dependent guide (see :class:`ArmFTLEnv`).
+        steer: ``"increment"`` (actions change the steered ``κ``) or ``"target"`` (they name the
+            bend ``κ`` approaches at ``kappa_step`` per component and step).
 
     """
 
@@ -124,6 +126,7 @@ class FTLBatch:
         success_tolerance: float,
         shaping: str,
         guide: bool = False,
+        steer: str = "increment",
     ) -> None:
         self.tank, self.arm = tank, tank.arm
         self.n, self.b, self.k_samples = int(n_sections), int(batch), int(samples_per_section)
@@ -132,6 +135,7 @@ class FTLBatch:
         self.start_height, self.margin = float(start_height), float(margin)
         self.success_tolerance, self.shaping = float(success_tolerance), str(shaping)
         self.s_max = self.n * self.l
+        self.steer = str(steer)
         self.detour = raster_detour_table(tank) if shaping == "raster" else None
         self.grid = clearance_grid(tank)
         self._deep = tank.box_min[2] - tank.panel.radius - 1.0
@@ -261,10 +265,17 @@ class FTLBatch:
         """Apply actions ``(B, 3)`` in ``[-1, 1]``; return the previous tips ``(B, 3)``."""
         prev = self.tip.copy()
         rows = np.arange(self.b)
-        steered = self.kappa[rows, self.k] + action[:, :2] * self.kappa_step
-        norm = np.hypot(steered[:, 0], steered[:, 1])
+        lead = self.kappa[rows, self.k]
         limit = self.arm.theta_max
-        steered *= np.where(norm > limit, limit / np.maximum(norm, 1e-12), 1.0)[:, None]
+        if self.steer == "target":
+            want = action[:, :2] * limit
+            norm = np.hypot(want[:, 0], want[:, 1])
+            want *= np.where(norm > limit, limit / np.maximum(norm, 1e-12), 1.0)[:, None]
+            steered = lead + np.clip(want - lead, -self.kappa_step, self.kappa_step)
+        else:
+            steered = lead + action[:, :2] * self.kappa_step
+            norm = np.hypot(steered[:, 0], steered[:, 1])
+            steered *= np.where(norm > limit, limit / np.maximum(norm, 1e-12), 1.0)[:, None]
         self.kappa[rows, self.k] = steered
         self.s = np.clip(self.s + action[:, 2] * self.push_step, 0.0, self.s_max)
         new_k = np.minimum(np.floor(self.s / self.l).astype(np.int64), self.n - 1)
