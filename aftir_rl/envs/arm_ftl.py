@@ -57,7 +57,7 @@ so the term costs nothing per step and HER can relabel it. Measured with and wit
 raster's cell with clearance as a cost): ``Φ(p) = −(P(p, g) − d)/10``, ``P`` the field's
 cost-to-go, so ``(d_prev − d)/10 + ΔΦ`` is the progress along ``P`` itself: through the hatch's
 middle, not along its edge, and without the 20 cm raster's steps. ``P`` of a relabelled goal
-needs that goal's field (built once per 10 cm cell, about 35 ms), so it suits PPO better than
+needs that goal's field (built once per 10 cm cell, about 28 ms), so it suits PPO better than
 HER.
 
 **Batched.** :class:`ArmFTLVectorEnv` (``gym.make_vec(..., vectorization_mode=
