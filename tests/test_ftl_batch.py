@@ -183,11 +183,42 @@ def test_lookahead_follows_the_shortest_way():
         p = nxt
     np.testing.assert_array_equal(p, target)
     assert len(crossings) == 1 and 80 < crossings[0][0] < 120 and 30 < crossings[0][2] < 70
-    # the plain field's way crosses at the hatch's near edge, the costed one further in
-    plain = GuideField(tank, target[0])
-    assert plain.weights[0] == pytest.approx(guide.size * np.sqrt(3))
-    np.testing.assert_array_equal(GuideField(tank, target[0]).dist, plain.dist)
+    # the costed way crosses the hatch away from its edges (the plain one: at x = 85)
     assert crossings[0][0] > 90
+    # both fields, plain and costed, are the shortest ways: Dijkstra over the same edges agrees
+    for f in (GuideField(tank, target[0]), field):
+        np.testing.assert_allclose(f.dist, dijkstra(f), rtol=1e-9)
+
+
+def dijkstra(field):
+    """Shortest distances to the field's seeds by Dijkstra (heapq) over its edges and weights."""
+    import heapq
+
+    from aftir_rl.motion.guide import _NEIGHBOURS
+
+    shape = tuple(int(v) for v in field.shape)
+    dist = np.full(shape, np.inf)
+    seeds = np.isfinite(field.dist) & (field.dist <= 1.75 * field.size)
+    heap = [(float(field.dist[c]), c) for c in map(tuple, np.argwhere(seeds))]
+    for d0, c in heap:
+        dist[c] = d0
+    heapq.heapify(heap)
+    while heap:
+        d0, y = heapq.heappop(heap)
+        if d0 > dist[y]:
+            continue
+        for e, d in enumerate(_NEIGHBOURS):  # x -> y = x + d
+            x = tuple(np.subtract(y, d))
+            if not all(0 <= x[i] < shape[i] for i in range(3)):
+                continue
+            if not (field.edges[e][x] and field.free[x]):
+                continue
+            w = field.weights[e]
+            nd = d0 + float(w[x] if np.ndim(w) else w)
+            if nd < dist[x]:
+                dist[x] = nd
+                heapq.heappush(heap, (nd, x))
+    return dist
 
 
 def test_draw_targets_are_free_and_reproducible():
