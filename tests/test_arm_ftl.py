@@ -116,14 +116,15 @@ def test_field_shaping_pays_the_guide_fields_progress():
     env = gym.make(ENV_ID, shaping="field", bay=2, max_episode_steps=40).unwrapped
     fields = env.batch.fields
     rng = np.random.default_rng(3)
+    checked = 0
     for seed in range(3):
         obs, info = env.reset(seed=seed)
         target = info["target"][None]
         ids = fields.field_ids(target)
         start = fields(obs["achieved_goal"][None].astype(float), target, ids)[0][0]
         total = 0.0
-        for _ in range(25):
-            a = np.array([*rng.uniform(-0.5, 0.5, 2), 1.0], dtype=np.float32)
+        for _ in range(12):  # 60 cm in, bending a little: no contact, no success
+            a = np.array([*rng.uniform(-0.3, 0.3, 2), 1.0], dtype=np.float32)
             obs, r, term, _, info = env.step(a)
             if term:
                 break
@@ -132,6 +133,8 @@ def test_field_shaping_pays_the_guide_fields_progress():
             continue
         end = fields(env.batch.tip.copy(), target, ids)[0][0]
         assert total == pytest.approx((start - end) / 10, abs=1e-6)
+        checked += 1
+    assert checked >= 2  # the sums were compared, not skipped
     # the cost-to-go through the hatch: a tip in bay 1 beside the hatch is nearer than one
     # straight below a target behind the baffle, though the straight line says otherwise
     target = np.array([[0.0, 110.0, 50.0]])

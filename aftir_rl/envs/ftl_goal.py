@@ -75,7 +75,10 @@ class _GoalReward:
         reward = PROGRESS_PER_CM * (d_prev - d)
         if self.batch.shaping:
             detour = self._cells if self.batch.shaping == "raster" else self._field_detour
-            reward += PROGRESS_PER_CM * (detour(prev, g2) - detour(a2, g2))
+            # both ends in one call: one field lookup per goal, not two
+            both = detour(np.concatenate([prev, a2]), np.concatenate([g2, g2]))
+            before, after = np.split(both, 2)
+            reward += PROGRESS_PER_CM * (before - after)
         success = (d < self.batch.success_tolerance) & ~contact
         reward = reward + SUCCESS_REWARD * success - CONTACT_PENALTY * contact
         out = reward.reshape(shape)

@@ -144,9 +144,9 @@ class FTLBatch:
         self.s = np.full(self.b, self.start_height)
         self.target = np.zeros((self.b, 3))
         self.obs_size = 14 + 3 * self.n + (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)
-        self.guide = field_guide(tank) if guide else None
         #: The guide's fields, for the observation or the ``"field"`` shaping.
         self.fields = field_guide(tank) if guide or shaping == "field" else None
+        self.guide = self.fields if guide else None
         self.guide_ids = np.zeros(self.b, dtype=np.int64)
         self._guide_generation = self.fields.generation if self.fields is not None else 0
         if self.fields is not None and self.fields.capacity < 2 * self.b:
