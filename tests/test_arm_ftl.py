@@ -15,6 +15,7 @@ from aftir_rl.envs.arm_ftl import (
     ftl_kappa_batch,
     raster_detour_table,
 )
+from aftir_rl.envs.ftl_goal import CONTACT_PENALTY, MAX_STEP_COST
 from aftir_rl.errors import AftirError, ConfigError, InvalidActionError, TargetError
 from aftir_rl.motion.ftl import Route, ftl_postures, kappa_to_angles, route_points
 from aftir_rl.robot import body_points
@@ -87,6 +88,31 @@ def test_compute_reward_matches_step_rewards_in_batches(shaping):
     assert np.all(same[~contact] >= 10.0 - 1.0)
     terminated = base.compute_terminated(achieved, desired, infos)
     np.testing.assert_array_equal(terminated, [s[4] for s in steps])
+
+
+def test_step_cost_is_paid_on_every_step_and_bounded():
+    rng = np.random.default_rng(3)
+    actions = rng.uniform(-1, 1, (150, 3)).astype(np.float32)
+    actions[:, 2] = np.abs(actions[:, 2])
+    plain = rollout(gym.make(ENV_ID, max_episode_steps=40), actions, seed=4)
+    env = gym.make(ENV_ID, max_episode_steps=40, step_cost=0.02)
+    costed = rollout(env, actions, seed=4)
+    for a, b in zip(plain, costed):  # the same transitions, each reward 0.02 lower
+        np.testing.assert_array_equal(a[2]["achieved_goal"], b[2]["achieved_goal"])
+        assert a[4:6] == b[4:6]
+        assert b[3] == pytest.approx(a[3] - 0.02, abs=1e-12)
+    assert any(s[4] for s in costed)  # episodes ended on contact or success, not only by time
+    achieved = np.array([s[2]["achieved_goal"] for s in costed])
+    desired = np.array([s[2]["desired_goal"] for s in costed])
+    infos = np.array([s[6] for s in costed], dtype=object)
+    np.testing.assert_array_equal(
+        env.unwrapped.compute_reward(achieved, desired, infos), [s[3] for s in costed]
+    )
+    # 300 steps of the largest cost stay below the contact penalty: touching never pays
+    assert 300 * MAX_STEP_COST < CONTACT_PENALTY
+    for bad in (-0.01, 0.031, float("nan"), "0.01", True):
+        with pytest.raises(ConfigError, match="step_cost"):
+            ArmFTLEnv(step_cost=bad)
 
 
 def test_compute_reward_without_infos_is_an_error():

@@ -329,6 +329,7 @@ ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
         "start_height": (int, float),
         "detour_bias": (int, float),
         "steer": (str,),
+        "step_cost": (int, float),
     },
 }
 #: Env keyword arguments whose values are one of a few.

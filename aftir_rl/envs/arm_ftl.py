@@ -38,6 +38,7 @@ it raises :class:`~aftir_rl.errors.AftirError` rather than returning a different
 **Reward** (per step, ``d`` = distance from tip to target [cm])::
 
     r = (d_prev − d) / 10  +  shaping · (Φ(tip) − Φ(tip_prev))  +  10·success  −  10·contact
+        − step_cost
 
 The progress term is itself potential-based (``Φ = −d/10``, γ = 1). The switchable shaping term
 (Ng, Harada & Russell 1999, with γ = 1 as for the progress term; the optimal policy of the
@@ -127,7 +128,8 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
 
     ## Rewards
     Progress ``(d_prev − d)/10`` [per cm], the raster-detour potential term when ``shaping``,
-    ``+10`` on success, ``−10`` on contact: :meth:`compute_reward` (module docstring).
+    ``+10`` on success, ``−10`` on contact, ``−step_cost`` per step: :meth:`compute_reward`
+    (module docstring).
 
     ## Episode End
     Terminated on success (tip within ``success_tolerance`` and no contact) or contact (surface
@@ -157,6 +159,11 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
       evaluations of ``train`` and ``evaluate`` draw their targets uniformly.
     - ``steer`` (``"increment"``): what the two steering actions command, a change of ``κ``
       or ``"target"``, the bend itself (Action Space).
+    - ``step_cost`` (0): a cost paid on every step (at most 0.03, so that ending an episode
+      on contact, −10, never pays better than waiting out the 300 steps). A policy that
+      stops a few cm short of a target it cannot reach by pushing on earns 0 per step there
+      without it; with it, stopping costs ``step_cost/(1 − γ)``, and pulling back to bend
+      again becomes worth trying.
     - ``render_mode``: ``"rgb_array"``.
 
     ``reset(options={"target": (x, y, z)})`` sets the target of one episode.
@@ -184,6 +191,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         guide: bool = False,
         detour_bias: float = 0.0,
         steer: str = "increment",
+        step_cost: float = 0.0,
         render_mode: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -206,6 +214,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
             guide,
             detour_bias,
             steer,
+            step_cost,
         )
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
@@ -333,6 +342,7 @@ class ArmFTLVectorEnv(
         guide: bool = False,
         detour_bias: float = 0.0,
         steer: str = "increment",
+        step_cost: float = 0.0,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
     ) -> None:
@@ -360,6 +370,7 @@ class ArmFTLVectorEnv(
             guide,
             detour_bias,
             steer,
+            step_cost,
         )
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)

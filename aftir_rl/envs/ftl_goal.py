@@ -55,6 +55,7 @@ class _GoalReward:
 
     batch: FTLBatch
     tank: Tank
+    step_cost: float
 
     def compute_reward(
         self, achieved_goal: ArrayLike, desired_goal: ArrayLike, info: Any
@@ -80,7 +81,7 @@ class _GoalReward:
             before, after = np.split(both, 2)
             reward += PROGRESS_PER_CM * (before - after)
         success = (d < self.batch.success_tolerance) & ~contact
-        reward = reward + SUCCESS_REWARD * success - CONTACT_PENALTY * contact
+        reward = reward + SUCCESS_REWARD * success - CONTACT_PENALTY * contact - self.step_cost
         out = reward.reshape(shape)
         return float(out) if out.ndim == 0 else out
 
@@ -129,6 +130,10 @@ class _GoalReward:
         return np.clip(points, lo, hi).astype(np.float32)
 
 
+#: The largest ``step_cost``: 300 steps of it stay below the contact penalty, so ending an
+#: episode on contact never pays better than waiting.
+MAX_STEP_COST = 0.03
+
 #: What the two steering actions may command: a change of the steered ``κ``, or ``κ`` itself.
 STEER_MODES = ("increment", "target")
 
@@ -172,6 +177,7 @@ class _Setup:
         guide: bool = False,
         detour_bias: float = 0.0,
         steer: str = "increment",
+        step_cost: float = 0.0,
     ) -> None:
         self.tank = load_tank(tank)
         if steer not in STEER_MODES:
@@ -199,6 +205,13 @@ class _Setup:
         if (detour_bias > 0 or shaping) and self.tank.cell_size is None:
             raise ConfigError("detour_bias and shaping need a tank with a raster (cell_size)")
         self.detour_bias = float(detour_bias)
+        if not (
+            isinstance(step_cost, int | float)
+            and not isinstance(step_cost, bool)
+            and 0 <= step_cost <= MAX_STEP_COST
+        ):
+            raise ConfigError(f"step_cost must be in [0, {MAX_STEP_COST:g}], got {step_cost}")
+        self.step_cost = float(step_cost)
         if not 0 <= start_height < arm.section_length:
             raise ConfigError(f"start_height must be in [0, {arm.section_length:g}) cm")
         self.region = bay_region(self.tank, bay)
