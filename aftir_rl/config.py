@@ -50,6 +50,9 @@ DEFAULT_BRIDGE_SECONDS = 10.0
 #: the guide, along a whole motion (``--margin`` of ``train q_table``, ``plan``, ``evaluate``,
 #: ``bench``).
 DEFAULT_MARGIN = 1.0
+#: The first seed of the targets SB3 training evaluates its runs on (seeds
+#: ``EVAL_SEED .. EVAL_SEED + eval_targets − 1``).
+EVAL_SEED = 12345
 
 
 #: The largest YAML file read [bytes]; tanks and configs are a few kB.

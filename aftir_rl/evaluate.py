@@ -5,8 +5,11 @@ Each run directory is loaded and measured by :func:`aftir_rl.run.evaluate_run`. 
 path is replayed in ``AFTIR-Tank-v0`` and turned into arm postures
 (:func:`aftir_rl.posture.trajectory.plan_trajectory`); success means every waypoint got a posture,
 the last reaches the target and every move between them is collision-free. An SB3 run
-(``model.zip``) is evaluated on its env's fixed evaluation targets (or ``--target``), one
-deterministic episode each. For both the table gives
+(``model.zip``) is evaluated on its env's fixed evaluation targets (or ``--target``, or
+``--random N --seed S``: ``N`` targets its env draws with seeds ``S .. S + N − 1``, which its
+training never measured it on unless they overlap its evaluation seeds
+``12345 .. 12345 + eval_targets − 1``), one deterministic episode each. A training run's
+``best/`` (the best model its evaluations saw) is itself a run directory. For both the table gives
 success rate, tip error, tip path length, the smallest clearance to the tank along the motion
 (for a Q-learning run: its postures and about 50 sampled along the motion, an upper bound) and
 seconds per target; the same numbers go to TensorBoard under ``compare/<run>/...`` in a new
@@ -24,12 +27,43 @@ from pathlib import Path
 import numpy as np
 
 from aftir_rl.cli_args import add_margin_option, add_ray_options, add_target_option, check_margin
-from aftir_rl.config import DEFAULT_MARGIN
-from aftir_rl.errors import AftirError
+from aftir_rl.config import DEFAULT_MARGIN, EVAL_SEED
+from aftir_rl.errors import AftirError, ConfigError
 from aftir_rl.run import evaluate_run
 from aftir_rl.safety import check_writable_dir, cli
 
 __all__ = ["main", "evaluate_run"]
+
+
+#: Most targets ``--random`` may draw, and the first seed it draws them with by default.
+MAX_RANDOM_TARGETS = 10_000
+RANDOM_SEED = 1_000_000
+
+
+def _check_draw(
+    count: int | None, seed: int, targets: list[np.ndarray] | None
+) -> tuple[int, int] | None:
+    """``(count, seed)`` of ``--random``/``--seed``, or None without ``--random``.
+
+    Raises:
+        ConfigError: a count or seed out of range, or ``--random`` beside ``--target``.
+
+    """
+    if count is None:
+        return None
+    if targets:
+        raise ConfigError("give --target or --random, not both")
+    if not 1 <= count <= MAX_RANDOM_TARGETS:
+        raise ConfigError(f"--random must be in 1..{MAX_RANDOM_TARGETS}, got {count}")
+    if not 0 <= seed <= 2**32 - 1 - count:
+        raise ConfigError(f"--seed must be in 0..{2**32 - 1 - count}, got {seed}")
+    return count, seed
+
+
+def _row_name(run: str) -> str:
+    """A run's name in the table: its directory, with its parent for a run's ``best/``."""
+    path = Path(run)
+    return f"{path.parent.name}/best" if path.name == "best" else path.name
 
 
 @cli
@@ -48,11 +82,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         default="ftl",
         help="a Q-table run's motion: follow-the-leader (default) or the papers' postures per cell",
     )
+    parser.add_argument(
+        "--random",
+        type=int,
+        metavar="N",
+        help=f"SB3 runs: N targets drawn by the run's env (1..{MAX_RANDOM_TARGETS}), not "
+        "its fixed evaluation targets",
+    )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=RANDOM_SEED,
+        metavar="S",
+        help=f"first seed of --random's targets (default {RANDOM_SEED}, far from training's "
+        f"{EVAL_SEED})",
+    )
     add_margin_option(parser, f"clearance the arm keeps ({DEFAULT_MARGIN:g} cm)")
     add_ray_options(parser, "evaluate the runs")
     args = parser.parse_args(argv)
     targets = [np.array(t) for t in args.target] if args.target else None
     try:
+        draw = _check_draw(args.random, args.seed, targets)
         check_margin(args.margin)
         check_writable_dir(args.logdir)
         if args.ray is not None or args.workers is not None:
@@ -60,11 +110,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             check_ray_options(args.ray, args.workers)
             with ray_session(args.ray, args.workers):
-                rows = evaluate_on_ray(args.runs, targets, args.motion, args.margin)
-            results = {Path(r).name: row for r, row in zip(args.runs, rows)}
+                rows = evaluate_on_ray(args.runs, targets, args.motion, args.margin, draw=draw)
+            results = {_row_name(r): row for r, row in zip(args.runs, rows)}
         else:
             results = {
-                Path(r).name: evaluate_run(r, targets, args.motion, args.margin) for r in args.runs
+                _row_name(r): evaluate_run(r, targets, args.motion, args.margin, draw)
+                for r in args.runs
             }
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)

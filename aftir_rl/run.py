@@ -294,11 +294,15 @@ def _evaluate_q_table(run: QTableRun, motion: str, margin: float) -> dict[str, A
     }
 
 
-def _evaluate_sb3(run: SB3Run, targets: list[np.ndarray] | None) -> dict[str, Any]:
-    from aftir_rl.agents.sb3 import evaluate_policy_on_targets, evaluation_targets
+def _evaluate_sb3(
+    run: SB3Run, targets: list[np.ndarray] | None, draw: tuple[int, int] | None = None
+) -> dict[str, Any]:
+    from aftir_rl.agents.sb3 import EVAL_SEED, evaluate_policy_on_targets, evaluation_targets
 
     kwargs = dict(run.config.env_kwargs or {})  # the env the model was trained on (spaces)
-    targets = targets or evaluation_targets(run.env_id, run.config.eval_targets, env_kwargs=kwargs)
+    if not targets:
+        count, seed = draw or (run.config.eval_targets, EVAL_SEED)
+        targets = evaluation_targets(run.env_id, count, seed=seed, env_kwargs=kwargs)
     metrics, _ = evaluate_policy_on_targets(
         run.model, run.env_id, targets, clearance=True, env_kwargs=kwargs
     )
@@ -312,13 +316,15 @@ def evaluate_run(
     targets: list[np.ndarray] | None = None,
     motion: str = "ftl",
     margin: float = DEFAULT_MARGIN,
+    draw: tuple[int, int] | None = None,
 ) -> dict[str, Any]:
     """Evaluate one run directory (Q-table or SB3): one row of ``python -m aftir_rl.evaluate``.
 
     A Q-table run is evaluated on the target it was trained for: its greedy path becomes a
     follow-the-leader motion keeping ``margin`` [cm] (``motion="ftl"``) or the papers' postures
-    per cell (``"progressive"``). An SB3 run on ``targets`` (default: its env's fixed evaluation
-    targets), one deterministic episode each.
+    per cell (``"progressive"``). An SB3 run on ``targets``, else on ``draw = (count, seed)``
+    targets drawn by its env (seeds ``seed .. seed + count − 1``), else on the fixed evaluation
+    targets its training measured it on; one deterministic episode each.
 
     Raises:
         CheckpointError: not a run directory this knows, or unreadable files.
@@ -327,4 +333,4 @@ def evaluate_run(
     run = load_run(run_dir, ("q_table", "sb3"))
     if isinstance(run, QTableRun):
         return _evaluate_q_table(run, motion, margin)
-    return _evaluate_sb3(cast(SB3Run, run), targets)
+    return _evaluate_sb3(cast(SB3Run, run), targets, draw)

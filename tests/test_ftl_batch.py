@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -362,6 +364,27 @@ def test_train_cli_ppo_on_the_batched_env(tmp_path):
 
     row = evaluate_run(run, targets=[np.array([200.0, 120.0, 50.0])])
     assert row["targets"] == 1 and 0.0 <= row["success_rate"] <= 1.0
+    # best/: the best evaluated model, a run directory of its own
+    best = run / "best"
+    assert (best / "config.json").read_bytes() == (run / "config.json").read_bytes()
+    kept = json.loads((best / "best.json").read_text())
+    rates = [e.value for e in events.Scalars("eval/success_rate")]
+    assert len(rates) == 2 and kept["success_rate"] == pytest.approx(max(rates))
+    assert 0 < kept["timesteps"] <= json.loads((run / "summary.json").read_text())["timesteps"]
+    assert load_run(best)[0] == "ppo"
+    # evaluate --random N --seed S: the env's own draws with those seeds
+    from aftir_rl.agents.sb3 import evaluation_targets
+    from aftir_rl.evaluate import main as evaluate_main
+
+    drawn = evaluate_run(best, draw=(3, 777))
+    assert drawn["targets"] == 3
+    again = evaluate_run(best, targets=evaluation_targets(ENV_ID, 3, 777, loaded.env_kwargs))
+    assert again["tip_error_cm"] == pytest.approx(drawn["tip_error_cm"])
+    logs = str(tmp_path / "logs")
+    assert evaluate_main([str(best), "--random", "2", "--seed", "5", "--logdir", logs]) == 0
+    assert evaluate_main([str(best), "--random", "0", "--logdir", logs]) == 2
+    both = [str(best), "--random", "2", "--target", "200", "120", "50", "--logdir", logs]
+    assert evaluate_main(both) == 2
 
 
 def test_config_limits_for_the_batched_env():

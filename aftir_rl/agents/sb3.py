@@ -33,6 +33,7 @@ from aftir_rl.agents.sb3_config import (
     sb3_config_from_run,
 )
 from aftir_rl.agents.sb3_eval import (
+    EVAL_SEED,
     ArmEvalCallback,
     AtomicCheckpoint,
     Period,
@@ -45,6 +46,7 @@ from aftir_rl.agents.sb3_load import MAX_MODEL_BYTES, load_model, load_run, newe
 __all__ = [
     "ALGORITHMS",
     "ENV_KWARGS",
+    "EVAL_SEED",
     "GOAL_ENV_IDS",
     "HER_KWARGS",
     "MAX_MODEL_BYTES",

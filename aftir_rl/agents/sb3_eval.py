@@ -5,6 +5,7 @@
 ``eval/tip_error_cm``, ``eval/path_length_cm``, ``eval/collision_rate``,
 ``eval/min_clearance_cm`` and a picture of the tip path and arm under ``paths/eval`` through the
 model's SB3 logger, so SB3 runs and Q-learning runs overlay in one TensorBoard.
+:class:`ArmEvalCallback` also keeps the best model evaluated so far, as a run directory of its own.
 :class:`AtomicCheckpoint` saves the model periodically; every save is atomic (:func:`save_model`:
 temporary file, then rename).
 """
@@ -23,9 +24,11 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import Image
 
 from aftir_rl.agents.sb3_config import TRAINING_ONLY_KWARGS
-from aftir_rl.atomic import atomic_open
+from aftir_rl.atomic import atomic_open, write_json
+from aftir_rl.config import EVAL_SEED
 
 __all__ = [
+    "EVAL_SEED",
     "evaluation_targets",
     "evaluate_policy_on_targets",
     "Period",
@@ -36,9 +39,9 @@ __all__ = [
 
 
 def evaluation_targets(
-    env_id: str, count: int, seed: int = 12345, env_kwargs: dict[str, Any] | None = None
+    env_id: str, count: int, seed: int = EVAL_SEED, env_kwargs: dict[str, Any] | None = None
 ) -> list[np.ndarray]:
-    """A fixed set of targets drawn by the env's own sampler with a fixed seed.
+    """A fixed set of targets drawn by the env's own sampler, reset ``i`` seeded ``seed + i``.
 
     The keys of :data:`~aftir_rl.agents.sb3_config.TRAINING_ONLY_KWARGS` are left out: the
     targets are those of the env as evaluated, not as its training drew them.
@@ -155,7 +158,15 @@ class Period:
 
 
 class ArmEvalCallback(BaseCallback):
-    """Evaluate on fixed targets every ``eval_freq`` environment steps and log the eval tags."""
+    """Evaluate on fixed targets every ``eval_freq`` environment steps and log the eval tags.
+
+    With ``best_dir``, the best model evaluated so far is kept there as a run directory of its
+    own (``model.zip``, a copy of ``config_file`` as ``config.json``, and ``best.json`` with its
+    step count and metrics), so ``python -m aftir_rl.evaluate RUN_DIR/best`` measures it: SB3's
+    ``EvalCallback(best_model_save_path=...)`` pattern. Best means the highest success rate,
+    then the smaller mean tip error. It is chosen on these evaluation targets, so measure it
+    on others (``evaluate --random N --seed S``).
+    """
 
     def __init__(
         self,
@@ -164,6 +175,8 @@ class ArmEvalCallback(BaseCallback):
         eval_freq: int,
         env_kwargs: dict[str, Any] | None = None,
         on_evaluate: Any = None,
+        best_dir: Path | None = None,
+        config_file: Path | None = None,
     ) -> None:
         super().__init__()
         self.env_id, self.targets, self.eval_freq = env_id, targets, eval_freq
@@ -171,6 +184,12 @@ class ArmEvalCallback(BaseCallback):
         self._period = Period(eval_freq)
         #: ``on_evaluate(model, metrics)`` after each evaluation is logged (a sweep's report).
         self.on_evaluate = on_evaluate
+        if (best_dir is None) != (config_file is None):
+            raise ValueError("best_dir and config_file go together")
+        self.best_dir, self.config_file = best_dir, config_file
+        #: ``(success rate, −tip error)`` of the best model kept so far.
+        self.best_score: tuple[float, float] | None = None
+        self.best_metrics: dict[str, float] = {}
 
     def _init_callback(self) -> None:
         self._period.start(self.model.num_timesteps)
@@ -202,11 +221,28 @@ class ArmEvalCallback(BaseCallback):
         self.logger.record(
             "paths/eval", Image(picture, "HWC"), exclude=("stdout", "log", "json", "csv")
         )
+        self._keep_if_best(metrics)
         self.logger.dump(self.num_timesteps)
         self.last_metrics = metrics
         if self.on_evaluate is not None:
             self.on_evaluate(self.model, metrics)
         return metrics
+
+    def _keep_if_best(self, metrics: dict[str, float]) -> None:
+        if self.best_dir is None or self.config_file is None:
+            return
+        error = metrics["tip_error_cm"]
+        score = (metrics["success_rate"], -error if np.isfinite(error) else -np.inf)
+        if self.best_score is not None and score <= self.best_score:
+            return
+        self.best_score = score
+        self.best_metrics = {**metrics, "timesteps": int(self.num_timesteps)}
+        self.best_dir.mkdir(parents=True, exist_ok=True)
+        save_model(self.model, self.best_dir / "model.zip")
+        with atomic_open(self.best_dir / "config.json", "wb") as fh:
+            fh.write(self.config_file.read_bytes())
+        write_json(self.best_dir / "best.json", self.best_metrics)
+        self.logger.record("eval/best_success_rate", metrics["success_rate"])
 
 
 class AtomicCheckpoint(BaseCallback):

@@ -27,11 +27,13 @@ def train_sb3(
     """Train PPO, SAC or TD3 on an arm env; one run directory with the model and its logs.
 
     The run directory holds ``model.zip`` (atomic), ``checkpoints/``, ``config.json``,
-    ``summary.json``, ``progress.csv`` and the TensorBoard events (``rollout/*``, ``train/*``,
-    ``eval/*``, ``paths/eval``, the hyperparameters as text). It is built under a hidden
-    ``.<name>.partial`` name and renamed once ``model.zip`` is written, so an interrupted run never
-    looks finished. On Ctrl-C the model is saved to ``checkpoints/model_<steps>.zip`` of the
-    partial directory, which ``--resume`` continues from. ``on_evaluation(model, metrics)``, if
+    ``summary.json``, ``progress.csv``, the TensorBoard events (``rollout/*``, ``train/*``,
+    ``eval/*``, ``paths/eval``, the hyperparameters as text) and ``best/``, the best model
+    evaluated during training as a run directory of its own (:class:`ArmEvalCallback`). It is
+    built under a hidden ``.<name>.partial`` name and renamed once ``model.zip`` is written, so an
+    interrupted run never looks finished. On Ctrl-C the model is saved to
+    ``checkpoints/model_<steps>.zip`` of the partial directory, which ``--resume`` continues
+    from. ``on_evaluation(model, metrics)``, if
     given, is called after each evaluation is logged (``aftir tune`` reports to Ray Tune there).
 
     Raises:
@@ -108,7 +110,13 @@ def train_sb3(
         write_json(partial / "config.json", params)
         logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
         evaluator = ArmEvalCallback(
-            env_id, targets, config.eval_freq, config.env_kwargs, on_evaluate=on_evaluation
+            env_id,
+            targets,
+            config.eval_freq,
+            config.env_kwargs,
+            on_evaluate=on_evaluation,
+            best_dir=partial / "best",
+            config_file=partial / "config.json",
         )
         callbacks = [evaluator, AtomicCheckpoint(partial / "checkpoints", config.checkpoint_freq)]
         start = time.perf_counter()
@@ -137,6 +145,7 @@ def train_sb3(
             "seconds": seconds,
             "run_dir": str(run_dir),
             **evaluator.last_metrics,
+            "best": evaluator.best_metrics,
         }
         write_json(partial / "summary.json", summary)
         partial.rename(run_dir)
