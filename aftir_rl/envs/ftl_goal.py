@@ -210,7 +210,7 @@ class _Setup:
             and not isinstance(step_cost, bool)
             and 0 <= step_cost <= MAX_STEP_COST
         ):
-            raise ConfigError(f"step_cost must be in [0, {MAX_STEP_COST:g}], got {step_cost}")
+            raise ConfigError(f"step_cost must be in [0, {MAX_STEP_COST:g}], got {step_cost!r}")
         self.step_cost = float(step_cost)
         if not 0 <= start_height < arm.section_length:
             raise ConfigError(f"start_height must be in [0, {arm.section_length:g}) cm")
