@@ -304,6 +304,7 @@ _ANIMATE = """(async () => { const gd = document.getElementById('aftir-view');
   return [before, tipZ()]; })()"""
 
 
+@pytest.mark.slow  # a browser start: 5-20 s on this VM
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="needs Chromium: apt-get install -y chromium")
 def test_page_draws_in_headless_chromium(tmp_path, tank):
     from PIL import Image
