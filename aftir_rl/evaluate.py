@@ -41,16 +41,20 @@ RANDOM_SEED = 1_000_000
 
 
 def _check_draw(
-    count: int | None, seed: int, targets: list[np.ndarray] | None
+    count: int | None, seed: int | None, targets: list[np.ndarray] | None
 ) -> tuple[int, int] | None:
     """``(count, seed)`` of ``--random``/``--seed``, or None without ``--random``.
 
     Raises:
-        ConfigError: a count or seed out of range, or ``--random`` beside ``--target``.
+        ConfigError: a count or seed out of range, ``--random`` beside ``--target``, or
+            ``--seed`` without ``--random``.
 
     """
     if count is None:
+        if seed is not None:
+            raise ConfigError("--seed chooses --random's targets; give --random N too")
         return None
+    seed = RANDOM_SEED if seed is None else seed
     if targets:
         raise ConfigError("give --target or --random, not both")
     if not 1 <= count <= MAX_RANDOM_TARGETS:
@@ -92,7 +96,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--seed",
         type=int,
-        default=RANDOM_SEED,
         metavar="S",
         help=f"first seed of --random's targets (default {RANDOM_SEED}, far from training's "
         f"{EVAL_SEED})",

@@ -383,6 +383,7 @@ def test_train_cli_ppo_on_the_batched_env(tmp_path):
     logs = str(tmp_path / "logs")
     assert evaluate_main([str(best), "--random", "2", "--seed", "5", "--logdir", logs]) == 0
     assert evaluate_main([str(best), "--random", "0", "--logdir", logs]) == 2
+    assert evaluate_main([str(best), "--seed", "5", "--logdir", logs]) == 2
     both = [str(best), "--random", "2", "--target", "200", "120", "50", "--logdir", logs]
     assert evaluate_main(both) == 2
 

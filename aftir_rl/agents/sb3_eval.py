@@ -161,11 +161,11 @@ class ArmEvalCallback(BaseCallback):
     """Evaluate on fixed targets every ``eval_freq`` environment steps and log the eval tags.
 
     With ``best_dir``, the best model evaluated so far is kept there as a run directory of its
-    own (``model.zip``, a copy of ``config_file`` as ``config.json``, and ``best.json`` with its
-    step count and metrics), so ``python -m aftir_rl.evaluate RUN_DIR/best`` measures it: SB3's
-    ``EvalCallback(best_model_save_path=...)`` pattern. Best means the highest success rate,
-    then the smaller mean tip error. It is chosen on these evaluation targets, so measure it
-    on others (``evaluate --random N --seed S``).
+    own (``model.zip``, a copy of the run's ``config.json`` from ``best_dir``'s parent, and
+    ``best.json`` with its step count and metrics), so ``python -m aftir_rl.evaluate
+    RUN_DIR/best`` measures it: SB3's ``EvalCallback(best_model_save_path=...)`` pattern. Best
+    means the highest success rate, then the smaller mean tip error. It is chosen on these
+    evaluation targets, so measure it on others (``evaluate --random N --seed S``).
     """
 
     def __init__(
@@ -176,7 +176,6 @@ class ArmEvalCallback(BaseCallback):
         env_kwargs: dict[str, Any] | None = None,
         on_evaluate: Any = None,
         best_dir: Path | None = None,
-        config_file: Path | None = None,
     ) -> None:
         super().__init__()
         self.env_id, self.targets, self.eval_freq = env_id, targets, eval_freq
@@ -184,9 +183,7 @@ class ArmEvalCallback(BaseCallback):
         self._period = Period(eval_freq)
         #: ``on_evaluate(model, metrics)`` after each evaluation is logged (a sweep's report).
         self.on_evaluate = on_evaluate
-        if (best_dir is None) != (config_file is None):
-            raise ValueError("best_dir and config_file go together")
-        self.best_dir, self.config_file = best_dir, config_file
+        self.best_dir = best_dir
         #: ``(success rate, −tip error)`` of the best model kept so far.
         self.best_score: tuple[float, float] | None = None
         self.best_metrics: dict[str, float] = {}
@@ -229,7 +226,7 @@ class ArmEvalCallback(BaseCallback):
         return metrics
 
     def _keep_if_best(self, metrics: dict[str, float]) -> None:
-        if self.best_dir is None or self.config_file is None:
+        if self.best_dir is None:
             return
         error = metrics["tip_error_cm"]
         score = (metrics["success_rate"], -error if np.isfinite(error) else -np.inf)
@@ -240,7 +237,7 @@ class ArmEvalCallback(BaseCallback):
         self.best_dir.mkdir(parents=True, exist_ok=True)
         save_model(self.model, self.best_dir / "model.zip")
         with atomic_open(self.best_dir / "config.json", "wb") as fh:
-            fh.write(self.config_file.read_bytes())
+            fh.write((self.best_dir.parent / "config.json").read_bytes())
         write_json(self.best_dir / "best.json", self.best_metrics)
         self.logger.record("eval/best_success_rate", metrics["success_rate"])
 

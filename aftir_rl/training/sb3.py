@@ -116,7 +116,6 @@ def train_sb3(
             config.env_kwargs,
             on_evaluate=on_evaluation,
             best_dir=partial / "best",
-            config_file=partial / "config.json",
         )
         callbacks = [evaluator, AtomicCheckpoint(partial / "checkpoints", config.checkpoint_freq)]
         start = time.perf_counter()
