@@ -266,6 +266,11 @@ def test_targets_per_bay_and_by_option():
             t = info["target"]
             assert sign * (t[1] - 60.0) > 2.0
             assert point_clearance(env.unwrapped.tank, t[None])[0] >= 10.0
+    # target_clearance moves the draws' bound, nearer the surfaces and the corners
+    env = gym.make(ENV_ID, bay=2, target_clearance=5.0)
+    near = np.array([env.reset(seed=seed)[1]["target"] for seed in range(40)])
+    clear = point_clearance(env.unwrapped.tank, near)
+    assert (clear >= 5.0).all() and (clear < 10.0).any()
     env = gym.make(ENV_ID)
     obs, info = env.reset(options={"target": (230, 140, 90)})
     np.testing.assert_allclose(obs["desired_goal"], [230, 140, 90])
@@ -297,6 +302,10 @@ def test_detour_bias_draws_more_targets_behind_obstacles():
         evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2, "detour_bias": 1.0}),
         evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2}),
     )
+    # and at the default 10 cm from the surfaces, whatever clearance training drew them with
+    near = evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2, "target_clearance": 5.0})
+    np.testing.assert_array_equal(near, evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2}))
+    assert (point_clearance(env.tank, np.array(near)) >= 10.0).all()
     vec = gym.make_vec(
         ENV_ID, num_envs=4, vectorization_mode="vector_entry_point", bay=2, detour_bias=0.5
     )

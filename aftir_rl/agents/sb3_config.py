@@ -337,9 +337,10 @@ ENV_KWARG_CHOICES: dict[str, tuple[object, ...]] = {
     "shaping": (False, True, "raster", "field"),
     "steer": ("increment", "target"),
 }
-#: Env keyword arguments that only bias how training draws its targets: evaluation targets are
-#: drawn without them, so every run of an env is measured on the same targets.
-TRAINING_ONLY_KWARGS = ("detour_bias",)
+#: Env keyword arguments that only change how training draws its targets (``target_clearance``:
+#: how near the surfaces they may lie; ``detour_bias``: how often behind obstacles): evaluation
+#: targets are drawn without them, so every run of an env is measured on the same targets.
+TRAINING_ONLY_KWARGS = ("detour_bias", "target_clearance")
 #: Envs with a batched implementation: ``n_envs`` are rows of one process (at most
 #: :data:`MAX_BATCHED_ENVS`), not subprocesses (at most 64).
 BATCHED_ENV_IDS = ("AFTIR-ArmFTL-v0",)
