@@ -15,7 +15,8 @@ from aftir_rl.envs.arm_ftl import (
     ftl_kappa_batch,
     raster_detour_table,
 )
-from aftir_rl.envs.ftl_goal import CONTACT_PENALTY, MAX_STEP_COST
+from aftir_rl.envs.ftl_goal import MAX_STEP_COST
+from aftir_rl.envs.ftl_kernel import CONTACT_PENALTY
 from aftir_rl.errors import AftirError, ConfigError, InvalidActionError, TargetError
 from aftir_rl.motion.ftl import Route, ftl_postures, kappa_to_angles, route_points
 from aftir_rl.robot import body_points

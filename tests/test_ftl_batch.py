@@ -436,7 +436,7 @@ def test_field_guide_cache_starts_again_and_holders_ask_again():
     env.reset(seed=0)
     batch = env.batch
     capacity = batch.guide.capacity  # the guide is shared by the tank's envs: put it back
-    batch.guide.capacity = len(batch.guide._rows)  # full: the next new cell starts it again
+    batch.guide.capacity = len(batch.guide)  # full: the next new cell starts it again
     try:
         env.reset(seed=1, options={"target": (150.0, 100.0, 30.0)})
         obs = batch.observation()

@@ -62,15 +62,18 @@ class SB3VectorEnv(VecEnv):
         assert self._actions is not None
         obs, reward, terminated, truncated, info = self.venv.step(self._actions)
         dones = np.logical_or(terminated, truncated)
-        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        per_row = {
-            k: v for k, v in info.items() if isinstance(v, np.ndarray) and len(v) == self.num_envs
-        }
-        for key, values in per_row.items():
-            if key.startswith("_"):
-                continue
-            for i in range(self.num_envs):
-                infos[i][key] = values[i]
+        keys = [
+            k
+            for k, v in info.items()
+            if not k.startswith("_") and isinstance(v, np.ndarray) and len(v) == self.num_envs
+        ]
+        # one conversion per key (rows of 1-D arrays as Python scalars), then one dict per row
+        columns = [info[k].tolist() if info[k].ndim == 1 else list(info[k]) for k in keys]
+        infos: list[dict[str, Any]] = (
+            [dict(zip(keys, row)) for row in zip(*columns)]
+            if keys
+            else [{} for _ in range(self.num_envs)]
+        )
         final = info.get("final_obs")
         for row in np.flatnonzero(dones):
             i = int(row)

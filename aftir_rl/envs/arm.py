@@ -13,8 +13,9 @@ from numpy.typing import NDArray
 
 from aftir_rl.collision import CollisionScene, panel_violation
 from aftir_rl.envs.ftl_batch import bay_region, clearance_grid, draw_targets
+from aftir_rl.envs.ftl_kernel import fk_points
 from aftir_rl.errors import InvalidActionError, TargetError
-from aftir_rl.robot import Posture, body_points
+from aftir_rl.robot import Posture
 from aftir_rl.tank import Tank, load_tank
 
 __all__ = ["ArmEnv"]
@@ -141,7 +142,11 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return Posture.from_vector(s)
 
     def _points(self, state: NDArray[np.float64], k: int) -> NDArray[np.float64]:
-        return body_points(state[0], state[1 : self.n + 1], state[self.n + 1 :], self.l, k)
+        """Backbone samples of a state, ``k`` per section (compiled :func:`body_points`)."""
+        out = np.empty((1, self.n * k + 1, 3))
+        s = np.ascontiguousarray(state, dtype=np.float64)
+        fk_points(s[:1], s[None, 1 : self.n + 1], s[None, self.n + 1 :], self.l, k, out)
+        return out[0]
 
     def _collides(self, state: NDArray[np.float64], pts: NDArray[np.float64]) -> tuple[bool, float]:
         """Collision by python-fcl, skipped when sampled points are clearly far from the tank.

@@ -80,7 +80,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
-from aftir_rl.envs.ftl_goal import _check_options, _distance, _GoalReward, _Setup
+from aftir_rl.envs.ftl_goal import _check_options, _GoalReward, _Setup
 from aftir_rl.envs.ftl_model import FTLBatch, ftl_kappa_batch, raster_detour_table
 from aftir_rl.errors import ConfigError, TargetError
 from aftir_rl.robot import Posture, body_points
@@ -275,21 +275,26 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         """Steer and push; see the class docstring for rewards and termination."""
         a = self._check_action(action, self.action_space.shape)
         b = self.batch
-        prev = self._goal_clip(b.step(a[None]))[0]
+        prev = self._goal_clip(b.step(a[None]))
         self._tips.append(self.tip)
-        obs = {k: v[0] for k, v in self._obs_dict(slice(None)).items()}
-        contact = bool(b.contact[0])
-        info: dict[str, Any] = {"prev_achieved_goal": prev, "contact": contact}
-        reward = self.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)
-        distance = _distance(obs["achieved_goal"], obs["desired_goal"])
-        success = bool(distance < b.success_tolerance) and not contact
-        info.update(
-            is_success=success,
-            collision=contact,
-            distance_cm=float(distance),
-            min_clearance_cm=float(b.body_clearance[0]),
+        rows = self._obs_dict(slice(None))
+        contact = b.contact
+        # compute_reward's formula on the same float32 goals
+        reward, distance = self._step_reward(
+            rows["achieved_goal"], rows["desired_goal"], prev, contact
         )
-        return obs, float(reward), bool(success or contact), False, info
+        hit = bool(contact[0])
+        success = bool(distance[0] < b.success_tolerance) and not hit
+        info: dict[str, Any] = {
+            "prev_achieved_goal": prev[0],
+            "contact": hit,
+            "is_success": success,
+            "collision": hit,
+            "distance_cm": float(distance[0]),
+            "min_clearance_cm": float(b.body_clearance[0]),
+        }
+        obs = {k: v[0] for k, v in rows.items()}
+        return obs, float(reward[0]), success or hit, False, info
 
     def render(self) -> NDArray[np.uint8] | None:
         """The tank, the arm, its tip path and the target (``rgb_array``)."""
@@ -444,10 +449,10 @@ class ArmFTLVectorEnv(
         prev = self._goal_clip(prev_tip)
         contact = b.contact.copy()
         info: dict[str, Any] = {"prev_achieved_goal": prev, "contact": contact}
-        reward = np.asarray(
-            self.compute_reward(obs["achieved_goal"], obs["desired_goal"], info), dtype=np.float64
+        # compute_reward's formula on the same float32 goals
+        reward, distance = self._step_reward(
+            obs["achieved_goal"], obs["desired_goal"], prev, contact
         )
-        distance = _distance(obs["achieved_goal"], obs["desired_goal"])
         success = (distance < b.success_tolerance) & ~contact
         terminated = success | contact
         self.steps += 1

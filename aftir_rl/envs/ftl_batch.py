@@ -28,6 +28,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from aftir_rl.envs import ftl_kernel as kernel
+from aftir_rl.envs.ftl_kernel import KernelTank, kernel_tank
 from aftir_rl.errors import ConfigError, TargetError
 from aftir_rl.tank import Tank
 
@@ -36,6 +38,7 @@ __all__ = [
     "FieldGuide",
     "bay_region",
     "clearance_grid",
+    "kernel_grid",
     "field_guide",
     "draw_targets",
     "raster_distance_table",
@@ -160,6 +163,20 @@ def clearance_grid(tank: Tank) -> ClearanceGrid:
         column = (c - [half, half, depth], c + [half, half, 0.0])
         grid = _GRIDS[tank] = ClearanceGrid(tank.distance, [(lo, hi), column])
     return grid
+
+
+_KERNEL_TANKS: weakref.WeakKeyDictionary[Tank, KernelTank] = weakref.WeakKeyDictionary()
+
+
+def kernel_grid(tank: Tank) -> KernelTank:
+    """The tank's signed distance and :func:`clearance_grid` as the compiled kernels read them.
+
+    Built once per tank (:func:`aftir_rl.envs.ftl_kernel.kernel_tank`).
+    """
+    packed = _KERNEL_TANKS.get(tank)
+    if packed is None:
+        packed = _KERNEL_TANKS[tank] = kernel_tank(tank, clearance_grid(tank))
+    return packed
 
 
 def bay_region(tank: Tank, bay: int | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -310,7 +327,8 @@ class FieldGuide:
         self.size, self.origin = probe.size, probe.origin
         self.shape = np.asarray(probe.shape, dtype=np.int64)
         self.edges, self.neighbours = probe.edges, np.asarray(_NEIGHBOURS, dtype=np.int64)
-        self._edges_flat = self.edges.reshape(len(self.neighbours), -1)
+        self._edges_flat = np.ascontiguousarray(self.edges.reshape(len(self.neighbours), -1))
+        self._origin = np.asarray(self.origin, dtype=np.float64)
         self.clearance_cost = float(clearance_cost)
         self._tank = tank
         self._field_cls = GuideField
@@ -318,9 +336,15 @@ class FieldGuide:
         self.capacity = max(1, MAX_GUIDE_VALUES // n)
         #: Incremented whenever the cache starts again: ids from an older generation are void.
         self.generation = 0
-        self._rows: dict[int, int] = {}
+        #: The table row of each target cell's field (flat cell index; -1: not built).
+        self._row_of = np.full(n, -1, dtype=np.int64)
+        self._count = 0
         self._table = np.empty((min(64, self.capacity), n), dtype=np.float32)
         self._next = np.empty((min(64, self.capacity), n), dtype=np.int32)
+
+    def __len__(self) -> int:
+        """The number of fields kept."""
+        return self._count
 
     def _flat(self, cell: NDArray[np.int64]) -> NDArray[np.int64]:
         return (cell[..., 0] * self.shape[1] + cell[..., 1]) * self.shape[2] + cell[..., 2]
@@ -331,16 +355,19 @@ class FieldGuide:
 
     def field_ids(self, targets: NDArray[np.float64]) -> NDArray[np.int64]:
         """Rows of the field table for targets ``(B, 3)``, building the missing fields."""
-        keys = self._flat(self._cell(targets))
-        out = np.empty(len(keys), dtype=np.int64)
+        keys = self._flat(self._cell(np.asarray(targets, dtype=np.float64)))
+        out = self._row_of[keys]
+        if (out >= 0).all():  # every field built already: one gather
+            return out
         for i, key in enumerate(keys.tolist()):
-            row = self._rows.get(key)
-            if row is None:
-                if len(self._rows) >= self.capacity:
+            row = int(self._row_of[key])
+            if row < 0:
+                if self._count >= self.capacity:
                     # full: start again; ids given out before are void (see generation)
-                    self._rows.clear()
+                    self._row_of[:] = -1
+                    self._count = 0
                     self.generation += 1
-                row = len(self._rows)
+                row = self._count
                 if row >= len(self._table):
                     size = min(2 * len(self._table), self.capacity)
                     grown = np.empty((size,) + self._table.shape[1:], np.float32)
@@ -360,7 +387,8 @@ class FieldGuide:
                 field = self._field_cls(self._tank, centre, None, self.clearance_cost)
                 self._table[row] = field.dist.reshape(-1)
                 self._next[row] = self._descent(field.dist, field.weights)
-                self._rows[key] = row
+                self._row_of[key] = row
+                self._count += 1
             out[i] = row
         return out
 
@@ -399,17 +427,18 @@ class FieldGuide:
         cm from the tip's grid point). A way that reaches the target's grid point ends at the
         target ``g`` itself.
         """
-        cell = self._flat(self._cell(p))
-        home = self._flat(self._cell(g))
         out = np.empty((len(p), len(hops), 3))
-        done = 0
-        for j, h in enumerate(hops):
-            for _ in range(h - done):
-                cell = self._next[ids, cell].astype(np.int64)
-            done = h
-            c = np.stack(np.unravel_index(cell, tuple(self.shape)), -1)
-            centre = self.origin + (c + 0.5) * self.size
-            out[:, j] = np.where((cell == home)[:, None], g, centre)
+        kernel.lookahead(
+            np.ascontiguousarray(p, dtype=np.float64),
+            np.ascontiguousarray(g, dtype=np.float64),
+            np.asarray(ids, dtype=np.int64),
+            self._next,
+            np.asarray(hops, dtype=np.int64),
+            self._origin,
+            float(self.size),
+            self.shape,
+            out,
+        )
         return out
 
     def __call__(
@@ -419,27 +448,21 @@ class FieldGuide:
 
         Returns ``P`` ``(B,)`` [cm] and the unit way ``(B, 3)``.
         """
-        cell = self._cell(p)
-        own = self._table[ids, self._flat(cell)].astype(np.float64)
-        value = own + np.linalg.norm(p - (self.origin + (cell + 0.5) * self.size), axis=-1)
-        # every joined neighbour at once, (B, 26): its distance plus the straight line to it
-        c = cell[:, None, :] + self.neighbours[None]
-        ok = np.all((c >= 0) & (c < self.shape), axis=-1)
-        c = np.where(ok[..., None], c, 0)
-        ok &= self._edges_flat[:, self._flat(cell)].T
-        step = self.origin + (c + 0.5) * self.size - p[:, None, :]
-        v = self._table[ids[:, None], self._flat(c)] + np.sqrt(np.einsum("bni,bni->bn", step, step))
-        v = np.where(ok, v, np.inf)
-        pick = np.argmin(v, axis=1)  # the first of equals, as a scan in neighbour order
-        rows = np.arange(len(p))
-        best, way = v[rows, pick], step[rows, pick]
-        value = np.minimum(value, best)
-        home = np.all(cell == self._cell(g), axis=-1) | ~np.isfinite(best)
-        straight = g - p
-        value = np.where(home, np.linalg.norm(straight, axis=-1), value)
-        way = np.where(home[:, None], straight, way)
-        norm = np.linalg.norm(way, axis=-1, keepdims=True)
-        return value, np.where(norm > 1e-9, way / np.maximum(norm, 1e-12), 0.0)
+        to_go, way = np.empty(len(p)), np.empty((len(p), 3))
+        kernel.guide_query(
+            np.ascontiguousarray(p, dtype=np.float64),
+            np.ascontiguousarray(g, dtype=np.float64),
+            np.asarray(ids, dtype=np.int64),
+            self._table,
+            self._edges_flat,
+            self.neighbours,
+            self._origin,
+            float(self.size),
+            self.shape,
+            to_go,
+            way,
+        )
+        return to_go, way
 
 
 _GUIDES: weakref.WeakKeyDictionary[Tank, FieldGuide] = weakref.WeakKeyDictionary()

@@ -12,22 +12,34 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.collision import point_clearance
+from aftir_rl.envs import ftl_kernel as kernel
 from aftir_rl.envs.ftl_batch import bay_region, draw_targets
+from aftir_rl.envs.ftl_kernel import PROGRESS_PER_CM
 from aftir_rl.envs.ftl_model import FTLBatch, raster_detour_table
 from aftir_rl.errors import AftirError, ConfigError, InvalidActionError, TargetError
 from aftir_rl.tank import Tank, load_tank
-
-#: Reward of a success and penalty of a contact.
-SUCCESS_REWARD = 10.0
-CONTACT_PENALTY = 10.0
-#: Progress reward per cm of distance-to-go.
-PROGRESS_PER_CM = 0.1
 
 
 def _distance(a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
     """Euclidean distance over the last axis, in float64 (goals are stored as float32)."""
     diff = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
     return np.sqrt(np.einsum("...i,...i->...", diff, diff))
+
+
+def _goal_rows(
+    achieved_goal: ArrayLike, desired_goal: ArrayLike
+) -> tuple[tuple[int, ...], NDArray[np.float64], NDArray[np.float64]]:
+    """The goals' common leading shape and both as ``(rows, 3)`` float64 arrays."""
+    a = np.asarray(achieved_goal, dtype=np.float64)
+    g = np.asarray(desired_goal, dtype=np.float64)
+    if a.shape == g.shape:
+        return a.shape[:-1], a.reshape(-1, 3), g.reshape(-1, 3)
+    shape = np.broadcast_shapes(a.shape, g.shape)[:-1]
+    return (
+        shape,
+        np.broadcast_to(a, shape + (3,)).reshape(-1, 3),
+        np.broadcast_to(g, shape + (3,)).reshape(-1, 3),
+    )
 
 
 def _info_arrays(info: Any, size: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
@@ -45,8 +57,8 @@ def _info_arrays(info: Any, size: int) -> tuple[NDArray[np.float64], NDArray[np.
             f"compute_reward needs the step's info (missing {exc}); with SB3's HerReplayBuffer "
             "pass replay_buffer_kwargs={'copy_info_dict': True}"
         ) from None
-    prev = np.broadcast_to(prev, (size, 3)) if len(prev) == 1 else prev
-    contact = np.broadcast_to(contact, (size,)) if len(contact) == 1 else contact
+    prev = np.broadcast_to(prev, (size, 3)) if len(prev) == 1 < size else prev
+    contact = np.broadcast_to(contact, (size,)) if len(contact) == 1 < size else contact
     return prev, contact
 
 
@@ -65,25 +77,39 @@ class _GoalReward:
         Vectorised over leading axes. ``info`` is the step's info dict (``prev_achieved_goal``,
         ``contact``), or a sequence / object array of them, one per row (HER's relabelling).
         """
-        a = np.asarray(achieved_goal, dtype=np.float64)
-        g = np.asarray(desired_goal, dtype=np.float64)
-        shape = np.broadcast_shapes(a.shape, g.shape)[:-1]
-        a2 = np.broadcast_to(a, shape + (3,)).reshape(-1, 3)
-        g2 = np.broadcast_to(g, shape + (3,)).reshape(-1, 3)
+        shape, a2, g2 = _goal_rows(achieved_goal, desired_goal)
         prev, contact = _info_arrays(info, len(a2))
-        d = _distance(a2, g2)
-        d_prev = _distance(prev, g2)
-        reward = PROGRESS_PER_CM * (d_prev - d)
+        out = self._step_reward(a2, g2, prev, contact)[0].reshape(shape)
+        return float(out) if out.ndim == 0 else out
+
+    def _step_reward(
+        self, a: ArrayLike, g: ArrayLike, prev: ArrayLike, contact: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Rewards and tip-to-target distances [cm] of rows of tips, targets, previous tips.
+
+        Each ``(R, 3)`` (any float dtype, taken as float64) with contact flags ``(R,)``: the one
+        reward formula, which :meth:`compute_reward` and the envs' steps both call.
+        """
+        a2 = np.asarray(a, dtype=np.float64)
+        g2 = np.asarray(g, dtype=np.float64)
+        prev = np.asarray(prev, dtype=np.float64)
+        reward, d = np.empty(len(a2)), np.empty(len(a2))
+        kernel.goal_reward(
+            a2,
+            g2,
+            prev,
+            np.asarray(contact, dtype=np.bool_),
+            self.batch.success_tolerance,
+            self.step_cost,
+            reward,
+            d,
+        )
         if self.batch.shaping:
             detour = self._cells if self.batch.shaping == "raster" else self._field_detour
             # both ends in one call: one field lookup per goal, not two
             both = detour(np.concatenate([prev, a2]), np.concatenate([g2, g2]))
-            before, after = np.split(both, 2)
-            reward += PROGRESS_PER_CM * (before - after)
-        success = (d < self.batch.success_tolerance) & ~contact
-        reward = reward + SUCCESS_REWARD * success - CONTACT_PENALTY * contact - self.step_cost
-        out = reward.reshape(shape)
-        return float(out) if out.ndim == 0 else out
+            reward += PROGRESS_PER_CM * (both[: len(a2)] - both[len(a2) :])
+        return reward, d
 
     def _cells(self, p: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
         """``cell · e(p, g)`` [cm]: the raster detour from ``p``'s cell to ``g``'s."""
@@ -107,27 +133,26 @@ class _GoalReward:
         self, achieved_goal: ArrayLike, desired_goal: ArrayLike, info: Any
     ) -> NDArray[np.bool_] | bool:
         """Success (tip within tolerance, no contact) or contact, vectorised like the reward."""
-        a = np.asarray(achieved_goal, dtype=np.float64)
-        g = np.asarray(desired_goal, dtype=np.float64)
-        shape = np.broadcast_shapes(a.shape, g.shape)[:-1]
-        d = _distance(
-            np.broadcast_to(a, shape + (3,)).reshape(-1, 3),
-            np.broadcast_to(g, shape + (3,)).reshape(-1, 3),
-        )
+        shape, a2, g2 = _goal_rows(achieved_goal, desired_goal)
+        d = _distance(a2, g2)
         _, contact = _info_arrays(info, len(d))
         out = ((d < self.batch.success_tolerance) | contact).reshape(shape)
         return bool(out) if out.ndim == 0 else out
 
+    def _goal_bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The goal space's corners [cm]: the tank's box grown by 1 m."""
+        return np.array(self.tank.box_min) - 100.0, np.array(self.tank.box_max) + 100.0
+
     def _goal_space(self) -> spaces.Box:
-        lo = np.array(self.tank.box_min) - 100.0
-        hi = np.array(self.tank.box_max) + 100.0
+        lo, hi = self._goal_bounds()
         return spaces.Box(lo.astype(np.float32), hi.astype(np.float32), (3,), np.float32)
 
     def _goal_clip(self, points: NDArray[np.float64]) -> NDArray[np.float32]:
         """Points as the goal space holds them: clipped to its bounds, float32."""
-        lo = np.array(self.tank.box_min) - 100.0
-        hi = np.array(self.tank.box_max) + 100.0
-        return np.clip(points, lo, hi).astype(np.float32)
+        bounds = self.__dict__.get("_bounds")
+        if bounds is None:
+            bounds = self.__dict__["_bounds"] = self._goal_bounds()
+        return np.minimum(np.maximum(points, bounds[0]), bounds[1]).astype(np.float32)
 
 
 #: The largest ``step_cost``: 300 steps of it stay below the contact penalty, so ending an
@@ -283,7 +308,7 @@ class _Setup:
     def _obs_dict(self, rows: slice | NDArray[np.int64]) -> dict[str, NDArray[np.float32]]:
         b = self.batch
         return {
-            "observation": np.clip(b.observation()[rows], -10.0, 10.0),
+            "observation": b.observation()[rows],
             "achieved_goal": self._goal_clip(b.tip[rows]),  # type: ignore[attr-defined]
             "desired_goal": b.target[rows].astype(np.float32),
         }
@@ -293,8 +318,8 @@ class _Setup:
             a = np.asarray(action, dtype=np.float64)
         except (TypeError, ValueError):
             a = np.zeros(0)
-        if a.shape != shape or not np.all(np.isfinite(a)):
+        if a.shape != shape or not np.isfinite(a).all():
             raise InvalidActionError(
                 f"invalid action of shape {a.shape}: expected {shape} finite values in [-1, 1]"
             )
-        return np.clip(a, -1.0, 1.0)
+        return np.minimum(np.maximum(a, -1.0), 1.0)

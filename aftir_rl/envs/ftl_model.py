@@ -15,15 +15,15 @@ import weakref
 import numpy as np
 from numpy.typing import NDArray
 
+from aftir_rl.envs import ftl_kernel as kernel
 from aftir_rl.envs.ftl_batch import (
     LOOKAHEAD_HOPS,
     clearance_grid,
     field_guide,
+    kernel_grid,
     raster_distance_table,
 )
 from aftir_rl.errors import ConfigError
-from aftir_rl.motion.ftl import kappa_to_angles
-from aftir_rl.robot import body_points, section_transforms
 from aftir_rl.tank import Tank
 
 __all__ = ["FTLBatch", "ftl_kappa_batch", "raster_detour_table", "RAY_DISTANCES"]
@@ -34,6 +34,7 @@ _RAY_AXES = np.array(
 )
 #: Distances [cm] of the samples along each ray.
 RAY_DISTANCES = (10.0, 25.0, 50.0)
+_RAY_STEPS = np.array(RAY_DISTANCES)
 #: Clearances [cm] in the observation are divided by this and clipped to [-1, 1].
 _CLEAR_SCALE = 50.0
 
@@ -138,6 +139,7 @@ class FTLBatch:
         self.steer = str(steer)
         self.detour = raster_detour_table(tank) if shaping == "raster" else None
         self.grid = clearance_grid(tank)
+        self._kernel_tank = kernel_grid(tank)
         self._deep = tank.box_min[2] - tank.panel.radius - 1.0
         self.kappa = np.zeros((self.b, self.n, 2))
         self.k = np.zeros(self.b, dtype=np.int64)
@@ -160,62 +162,86 @@ class FTLBatch:
     # -- geometry
     def postures(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """``dis (B,)``, ``θ (B, N)``, ``φ (B, N)`` of the current states."""
-        theta, phi = kappa_to_angles(ftl_kappa_batch(self.kappa, self.k, self.s, self.l))
-        return self.s - self.n * self.l, theta, phi
+        return self.s - self.n * self.l, self.theta, self.phi
 
     def refresh(self) -> None:
-        """Recompute postures, body samples, tip and clearances of every env."""
-        dis, theta, phi = self.postures()
-        pts = body_points(dis, theta, phi, self.l, self.k_samples)  # (B, N·K + 1, 3)
-        tip = pts[:, -1]
-        heading = tip - pts[:, -2]
-        heading /= np.maximum(np.linalg.norm(heading, axis=-1, keepdims=True), 1e-12)
-        axes = np.concatenate(
-            [heading[:, None, :], np.broadcast_to(_RAY_AXES, (self.b,) + _RAY_AXES.shape)], 1
+        """Recompute postures, body samples, tip and clearances of every env.
+
+        One compiled pass (:func:`aftir_rl.envs.ftl_kernel.refresh`): the FTL postures
+        (:func:`ftl_kappa_batch`), the backbone samples (:func:`~aftir_rl.robot.body_points`),
+        the exact body clearance (:meth:`ClearanceGrid.row_min
+        <aftir_rl.envs.ftl_batch.ClearanceGrid.row_min>`) and the rays' clearances
+        (:meth:`~aftir_rl.envs.ftl_batch.ClearanceGrid.approx`). Below the floor the body is
+        straight on the guide's axis (the route starts at the floor), where the distance does
+        not change with depth: the base stands for every sample deeper than the opening's rim
+        can reach. Every array is new (holders of the previous ones keep them).
+        """
+        b, n = self.b, self.n
+        self.theta, self.phi = np.empty((b, n)), np.empty((b, n))
+        self.points = np.empty((b, n * self.k_samples + 1, 3))
+        self.heading = np.empty((b, 3))
+        self.body_clearance = np.empty(b)  # surface [cm]
+        self.ray_clearance = np.empty((b, (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)))
+        kernel.refresh(
+            self.kappa,
+            self.k,
+            self.s,
+            self.l,
+            self.k_samples,
+            float(self.arm.radius),
+            self._deep,
+            _RAY_AXES,
+            _RAY_STEPS,
+            self._kernel_tank,
+            self.theta,
+            self.phi,
+            self.points,
+            self.heading,
+            self.body_clearance,
+            self.ray_clearance,
         )
-        rays = tip[:, None, None, :] + axes[:, :, None, :] * np.asarray(RAY_DISTANCES)[:, None]
-        self.theta, self.phi, self.dis = theta, phi, dis
-        self.points, self.tip, self.heading = pts, tip, heading
-        # Below the floor the body is straight on the guide's axis (the route starts at the
-        # floor), where the distance does not change with depth: the base stands for every
-        # sample deeper than the opening's rim can reach.
-        use = pts[..., 2] > self._deep
-        use[:, 0] = True
-        self.body_clearance = self.grid.row_min(pts, use) - self.arm.radius  # surface [cm]
-        self.ray_clearance = self.grid.approx(rays.reshape(self.b, -1, 3))
+        self.dis = self.s - n * self.l
+        self.tip = self.points[:, -1]
         self.contact = self.body_clearance < self.margin
 
     def observation(self) -> NDArray[np.float32]:
-        """The goal-free observation vector of every env, ``(B, obs_size)``."""
-        lead = self.kappa[np.arange(self.b), self.k] / self.arm.theta_max
-        parts = [
-            (self.dis / self.s_max)[:, None],
-            (self.k / self.n)[:, None],
-            lead,
-            self.theta / self.arm.theta_max,
-            np.sin(self.phi),
-            np.cos(self.phi),
-            self.tip / 100.0,
+        """The goal-free observation vector of every env, ``(B, obs_size)``.
+
+        With the guide, its columns follow: the way, the target and the lookahead in the frame
+        the steered ``κ`` bends in, where steering towards them is simplest.
+        """
+        out = np.empty((self.b, self.obs_size), dtype=np.float32)
+        kernel.observation(
+            self.kappa,
+            self.k,
+            self.s,
+            self.theta,
+            self.phi,
+            self.points,
             self.heading,
-            np.clip(self.body_clearance / 10.0, -1.0, 1.0)[:, None],
-            np.clip(self.ray_clearance / _CLEAR_SCALE, -1.0, 1.0),
-            self.points[:, self.k_samples :: self.k_samples, 2][:, -3:] / 100.0,
-        ]
+            self.body_clearance,
+            self.ray_clearance,
+            self.l,
+            self.k_samples,
+            float(self.arm.theta_max),
+            _CLEAR_SCALE,
+            out,
+        )
         if self.guide is not None:
             to_go, direction = self.guide(self.tip, self.target, self.target_fields())
-            to_go = np.minimum(to_go, 1000.0)
-            # in the frame the steered κ bends in, where steering towards them is simplest
-            frame = self.steering_frames()
-            ahead = self.guide.lookahead(self.tip, self.target, self.guide_ids) - self.tip[:, None]
-            ahead /= np.maximum(np.linalg.norm(ahead, axis=-1, keepdims=True), 1e-9)
-            parts += [
-                (to_go / 100.0)[:, None],
-                np.einsum("bji,bj->bi", frame, direction),
-                np.einsum("bji,bj->bi", frame, self.target - self.tip) / 100.0,
-                np.einsum("bji,bj->bi", frame, self.heading),
-                np.einsum("bji,bhj->bhi", frame, ahead).reshape(self.b, -1),
-            ]
-        return np.concatenate(parts, axis=1).astype(np.float32)
+            ahead = self.guide.lookahead(self.tip, self.target, self.guide_ids)
+            kernel.guide_columns(
+                self.steering_frames(),
+                to_go,
+                direction,
+                self.target,
+                self.tip,
+                self.heading,
+                ahead,
+                out,
+                self.obs_size - 10 - 3 * len(LOOKAHEAD_HOPS),
+            )
+        return out
 
     def target_fields(self) -> NDArray[np.int64]:
         """The guide's field ids of the targets, ``(B,)`` (asked again after a restart)."""
@@ -229,15 +255,11 @@ class FTLBatch:
         """Rotations ``(B, 3, 3)`` of the frames the steered sections bend in.
 
         The route's frame at ``k·l``: the product of the rotations of its frozen sections
-        ``0..k−1``.
+        ``0..k−1`` (:func:`aftir_rl.envs.ftl_kernel.steering_frames`).
         """
-        theta, phi = kappa_to_angles(self.kappa)
-        ends = section_transforms(theta, phi, self.l)[..., :3, :3]
-        frame = np.broadcast_to(np.eye(3), (self.b, 3, 3)).copy()
-        for j in range(int(self.k.max(initial=0))):
-            frozen = (j < self.k)[:, None, None]
-            frame = np.where(frozen, frame @ ends[:, j], frame)
-        return frame
+        out = np.empty((self.b, 3, 3))
+        kernel.steering_frames(self.kappa, self.k, out)
+        return out
 
     # -- dynamics
     def reset_rows(
@@ -264,23 +286,16 @@ class FTLBatch:
     def step(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
         """Apply actions ``(B, 3)`` in ``[-1, 1]``; return the previous tips ``(B, 3)``."""
         prev = self.tip.copy()
-        rows = np.arange(self.b)
-        lead = self.kappa[rows, self.k]
-        limit = self.arm.theta_max
-        if self.steer == "target":
-            want = action[:, :2] * limit
-            norm = np.hypot(want[:, 0], want[:, 1])
-            want *= np.where(norm > limit, limit / np.maximum(norm, 1e-12), 1.0)[:, None]
-            steered = lead + np.clip(want - lead, -self.kappa_step, self.kappa_step)
-        else:
-            steered = lead + action[:, :2] * self.kappa_step
-            norm = np.hypot(steered[:, 0], steered[:, 1])
-            steered *= np.where(norm > limit, limit / np.maximum(norm, 1e-12), 1.0)[:, None]
-        self.kappa[rows, self.k] = steered
-        self.s = np.clip(self.s + action[:, 2] * self.push_step, 0.0, self.s_max)
-        new_k = np.minimum(np.floor(self.s / self.l).astype(np.int64), self.n - 1)
-        grow = new_k > self.k  # push_step <= l: at most one new section
-        self.kappa[rows[grow], new_k[grow]] = self.kappa[rows[grow], self.k[grow]]
-        self.k = new_k
+        kernel.advance(
+            np.ascontiguousarray(action, dtype=np.float64),
+            self.kappa,
+            self.k,
+            self.s,
+            self.steer == "target",
+            self.kappa_step,
+            self.push_step,
+            float(self.arm.theta_max),
+            self.l,
+        )
         self.refresh()
         return prev
