@@ -123,7 +123,7 @@ def test_guide_leads_through_the_hatch():
     guide = field_guide(tank)
     rng = np.random.default_rng(0)
     env = ArmFTLEnv(bay=2)
-    targets = draw_targets([rng], env.batch.grid, env.region, 10.0, env.start_tip)
+    targets = draw_targets([rng], env.tank, env.region, 10.0, env.start_tip)
     targets = np.concatenate([targets, [[200.0, 120.0, 50.0]]])
     starts = np.array([[100.0, 20.0, 20.0], [0.0, 0.0, 10.0]])
     for target in targets:
@@ -226,12 +226,12 @@ def dijkstra(field):
 def test_draw_targets_are_free_and_reproducible():
     env = ArmFTLEnv(bay=2)
     rngs = [np.random.default_rng(i) for i in range(50)]
-    t = draw_targets(rngs, env.batch.grid, env.region, 10.0, env.start_tip)
+    t = draw_targets(rngs, env.tank, env.region, 10.0, env.start_tip)
     assert (point_clearance(env.tank, t) >= 10.0).all()
     assert (t[:, env.tank.baffle.index] > env.tank.baffle.position).all()
     again = draw_targets(
         [np.random.default_rng(i) for i in range(50)],
-        env.batch.grid,
+        env.tank,
         env.region,
         10.0,
         env.start_tip,

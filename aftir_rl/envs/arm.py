@@ -12,7 +12,7 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from aftir_rl.collision import CollisionScene, panel_violation
-from aftir_rl.envs.ftl_batch import bay_region, clearance_grid, draw_targets
+from aftir_rl.envs.ftl_batch import bay_region, draw_targets
 from aftir_rl.envs.ftl_kernel import fk_points
 from aftir_rl.errors import InvalidActionError, TargetError
 from aftir_rl.robot import Posture
@@ -107,7 +107,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             else (np.array(target_region[0], float), np.array(target_region[1], float))
         )
         self.free_targets = bool(free_targets)
-        self._grid = clearance_grid(self.tank) if free_targets else None
+        self._free_targets = bool(free_targets)
         self.action_space = spaces.Box(-1.0, 1.0, (1 + 2 * self.n,), np.float32)
         self.observation_space = spaces.Box(-20.0, 20.0, (6 * self.n + 15,), np.float32)
         # Fast pre-check (see _collides): backbone samples farther than radius + margin from
@@ -168,9 +168,9 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         return report.collides, max(report.clearance_cm, 0.0)
 
     def _draw_target(self) -> NDArray[np.float64]:
-        if self._grid is not None:
+        if self._free_targets:
             start = np.array([0.0, 0.0, self.start_height])
-            return draw_targets([self.np_random], self._grid, self.target_region, 10.0, start)[0]
+            return draw_targets([self.np_random], self.tank, self.target_region, 10.0, start)[0]
         lo, hi = self.target_region
         for _ in range(10_000):
             state = self._random_state()

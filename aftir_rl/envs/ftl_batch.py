@@ -199,7 +199,7 @@ def bay_region(tank: Tank, bay: int | None) -> tuple[NDArray[np.float64], NDArra
 
 def draw_targets(
     rngs: Sequence[np.random.Generator],
-    grid: ClearanceGrid,
+    tank: Tank,
     region: tuple[NDArray[np.float64], NDArray[np.float64]],
     clearance: float,
     start: NDArray[np.float64],
@@ -210,8 +210,9 @@ def draw_targets(
 
     Each generator draws batches of 64 uniform candidates until one is at least ``clearance``
     from every surface and 20 cm from ``start``; its first such candidate is its target (the
-    grid's bounds settle most candidates, the rest are computed exactly, so the verdicts are the
-    exact ones). Shape ``(len(rngs), 3)``.
+    tank's :func:`clearance_grid` settles most candidates, the rest are computed exactly, so the
+    verdicts are the exact ones: :func:`aftir_rl.envs.ftl_kernel.clear_of`). Shape
+    ``(len(rngs), 3)``.
 
     With ``biased > 0`` each generator first draws whether its target is biased (probability
     ``biased``); a biased one keeps each free candidate with probability ``weight(candidate)``
@@ -219,6 +220,7 @@ def draw_targets(
     ``weight``. ``biased = 0`` draws nothing more: the targets are the same as without it.
     """
     lo, hi = region
+    packed = kernel_grid(tank)
     out = np.empty((len(rngs), 3))
     todo = np.arange(len(rngs))
     if biased > 0 and weight is None:
@@ -228,12 +230,8 @@ def draw_targets(
         if not len(todo):
             return out
         cand = np.stack([rngs[int(i)].uniform(lo, hi, (64, 3)) for i in todo])
-        v = grid.bound(cand)
-        ok = v - grid.slack >= clearance
-        unsure = np.isnan(v) | (~ok & (v + grid.slack >= clearance))
-        if unsure.any():
-            ok[unsure] = grid.distance(cand[unsure]) >= clearance
-        ok &= np.linalg.norm(cand - start, axis=-1) >= 20.0
+        ok = kernel.clear_of(cand, float(clearance), packed)
+        ok &= np.einsum("rci,rci->rc", cand - start, cand - start) >= 400.0  # 20 cm
         if want[todo].any():
             assert weight is not None
             rows = np.flatnonzero(want[todo])

@@ -263,7 +263,7 @@ class _Setup:
         """One target per generator (:func:`~aftir_rl.envs.ftl_batch.draw_targets`)."""
         return draw_targets(
             rngs,
-            self.batch.grid,
+            self.tank,
             self.region,
             self.target_clearance,
             self.start_tip,

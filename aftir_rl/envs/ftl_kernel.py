@@ -49,6 +49,7 @@ __all__ = [
     "advance",
     "goal_reward",
     "fk_points",
+    "clear_of",
 ]
 
 #: Reward of a success and penalty of a contact.
@@ -228,13 +229,17 @@ def _fk_row(
     rot[0, 0], rot[1, 1], rot[2, 2] = 1.0, 1.0, 1.0
     for i in range(theta.shape[0]):
         th, cp, sp = theta[i], math.cos(phi[i]), math.sin(phi[i])
+        # sample j bends by h_j = j·h₁ (half its angle): sin, cos by the addition formulas
+        h1 = 0.5 * th / samples
+        s1, c1 = math.sin(h1), math.cos(h1)
+        sj, cj = 0.0, 1.0
         for j in range(1, samples + 1):
-            frac = j / samples
-            h = 0.5 * (th * frac)
-            sinc_h = 1.0 - h * h / 6.0 if abs(h) < 0.5 * _SMALL else math.sin(h) / h
-            arc = l * frac
+            sj, cj = sj * c1 + cj * s1, cj * c1 - sj * s1
+            h = h1 * j
+            sinc_h = 1.0 - h * h / 6.0 if abs(h) < 0.5 * _SMALL else sj / h
+            arc = l * (j / samples)
             radial = arc * (h * sinc_h * sinc_h)
-            lx, ly, lz = radial * cp, radial * sp, arc * (sinc_h * math.cos(h))
+            lx, ly, lz = radial * cp, radial * sp, arc * (sinc_h * cj)
             row = 1 + i * samples + j - 1
             points[row, 0] = rot[0, 0] * lx + rot[0, 1] * ly + rot[0, 2] * lz + ox
             points[row, 1] = rot[1, 0] * lx + rot[1, 1] * ly + rot[1, 2] * lz + oy
@@ -264,6 +269,7 @@ def fk_points(
 
 @njit(cache=True)
 def refresh(
+    rows: NDArray[np.int64],
     kappa: NDArray[np.float64],
     k: NDArray[np.int64],
     s: NDArray[np.float64],
@@ -281,7 +287,7 @@ def refresh(
     body_clearance: NDArray[np.float64],
     ray_clearance: NDArray[np.float64],
 ) -> None:
-    """Postures, backbone samples, headings and clearances of every arm, in place.
+    """Postures, backbone samples, headings and clearances of the arms ``rows``, in place.
 
     Per row ``b``: ``θ, φ (N,)`` of the FTL posture of route ``kappa[b, :k[b] + 1]`` with the
     tip at arc length ``s[b]``; ``points (N·K + 1, 3)`` from the base at ``(0, 0, s − N·l)``;
@@ -289,7 +295,7 @@ def refresh(
     over the samples above ``deep`` (and the base), exact (grid-pruned); the clearances at
     ``ray_distances`` along the heading and ``ray_axes`` (grid values, exact outside).
     """
-    nb, n = kappa.shape[0], kappa.shape[1]
+    n = kappa.shape[1]
     boxes, cylinders, spheres, walls = tank.boxes, tank.cylinders, tank.spheres, tank.walls
     lo, spacing, shape = tank.grid_lo, tank.grid_spacing, tank.grid_shape
     offset, values, slack = tank.grid_offset, tank.grid_values, tank.slack
@@ -297,7 +303,7 @@ def refresh(
     n_points = n * samples + 1
     bound = np.empty(n_points)
     rot = np.empty((3, 3))
-    for b in range(nb):
+    for b in rows:
         # shift-and-copy: the route's κ interpolated at the sections' arc lengths
         m = k[b] + 1
         u = min(max(s[b] / l, 0.0), float(m))
@@ -651,3 +657,22 @@ def goal_reward(
             value += SUCCESS_REWARD
         reward[r] = value - step_cost
         distance[r] = d
+
+
+@njit(cache=True)
+def clear_of(points: NDArray[np.float64], clearance: float, tank: KernelTank) -> NDArray[np.bool_]:
+    """Whether each point ``(..., 3)`` lies at least ``clearance`` [cm] from the tank's surfaces.
+
+    The exact verdict: the grid's value settles a point when it is more than ``slack`` from
+    ``clearance``, the exact signed distance the others.
+    """
+    flat = points.reshape(-1, 3)
+    out = np.empty(flat.shape[0], dtype=np.bool_)
+    for i in range(flat.shape[0]):
+        x, y, z = flat[i, 0], flat[i, 1], flat[i, 2]
+        v = _grid_value(x, y, z, tank.grid_lo, tank.grid_spacing, tank.grid_shape,
+                        tank.grid_offset, tank.grid_values)  # fmt: skip
+        if math.isnan(v) or abs(v - clearance) <= tank.slack:
+            v = sdf(x, y, z, tank.boxes, tank.cylinders, tank.spheres, tank.walls)
+        out[i] = v >= clearance
+    return out.reshape(points.shape[:-1])

@@ -164,8 +164,8 @@ class FTLBatch:
         """``dis (B,)``, ``θ (B, N)``, ``φ (B, N)`` of the current states."""
         return self.s - self.n * self.l, self.theta, self.phi
 
-    def refresh(self) -> None:
-        """Recompute postures, body samples, tip and clearances of every env.
+    def refresh(self, rows: NDArray[np.int64] | None = None) -> None:
+        """Recompute postures, body samples, tip and clearances of every env (or of ``rows``).
 
         One compiled pass (:func:`aftir_rl.envs.ftl_kernel.refresh`): the FTL postures
         (:func:`ftl_kappa_batch`), the backbone samples (:func:`~aftir_rl.robot.body_points`),
@@ -174,15 +174,19 @@ class FTLBatch:
         (:meth:`~aftir_rl.envs.ftl_batch.ClearanceGrid.approx`). Below the floor the body is
         straight on the guide's axis (the route starts at the floor), where the distance does
         not change with depth: the base stands for every sample deeper than the opening's rim
-        can reach. Every array is new (holders of the previous ones keep them).
+        can reach. For every env, every array is new (holders of the previous ones keep them);
+        ``rows`` are updated in place.
         """
         b, n = self.b, self.n
-        self.theta, self.phi = np.empty((b, n)), np.empty((b, n))
-        self.points = np.empty((b, n * self.k_samples + 1, 3))
-        self.heading = np.empty((b, 3))
-        self.body_clearance = np.empty(b)  # surface [cm]
-        self.ray_clearance = np.empty((b, (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)))
+        if rows is None:
+            rows = np.arange(b)
+            self.theta, self.phi = np.empty((b, n)), np.empty((b, n))
+            self.points = np.empty((b, n * self.k_samples + 1, 3))
+            self.heading = np.empty((b, 3))
+            self.body_clearance = np.empty(b)  # surface [cm]
+            self.ray_clearance = np.empty((b, (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)))
         kernel.refresh(
+            np.asarray(rows, dtype=np.int64),
             self.kappa,
             self.k,
             self.s,
@@ -281,7 +285,7 @@ class FTLBatch:
                 self.guide_ids = self.fields.field_ids(self.target)
                 self._guide_generation = self.fields.generation
         if refresh:
-            self.refresh()
+            self.refresh(None if len(rows) == self.b else rows)
 
     def step(self, action: NDArray[np.float64]) -> NDArray[np.float64]:
         """Apply actions ``(B, 3)`` in ``[-1, 1]``; return the previous tips ``(B, 3)``."""
