@@ -18,9 +18,9 @@ import time
 
 import gymnasium as gym
 import numpy as np
-import yaml
 
 import aftir_rl  # noqa: F401
+from aftir_rl.agents.sb3_config import SB3Config, build_model, load_sb3_config
 
 ENV_ID = "AFTIR-ArmFTL-v0"
 
@@ -74,15 +74,11 @@ def warm_fields(steps: int, **kwargs) -> int:
     return len(fields) - before
 
 
-def ppo_env_share(config: dict, steps: int) -> tuple[float, float]:
+def ppo_env_share(config: SB3Config, steps: int) -> tuple[float, float]:
     """PPO (SB3) on the batched env as a config trains it: steps/s and the env's share."""
-    from stable_baselines3 import PPO
-
     from aftir_rl.agents.vec_adapter import make_batched_vec_env
 
-    venv = make_batched_vec_env(
-        f"aftir_rl:{ENV_ID}", config["n_envs"], 0, dict(config["env_kwargs"])
-    )
+    venv = make_batched_vec_env(f"aftir_rl:{ENV_ID}", config.n_envs, 0, dict(config.env_kwargs))
     inner = venv.venv  # VecMonitor -> SB3VectorEnv
     spent = [0.0]
     step_wait = inner.step_wait
@@ -94,7 +90,7 @@ def ppo_env_share(config: dict, steps: int) -> tuple[float, float]:
         return out
 
     inner.step_wait = timed
-    model = PPO(config["policy"], venv, seed=0, **config["hyperparameters"])
+    model = build_model("ppo", config, venv, seed=0)
     start = time.perf_counter()
     model.learn(steps)
     total = time.perf_counter() - start
@@ -110,9 +106,8 @@ def main() -> None:
         help="training config of the PPO row and of the 'as trained' env rows",
     )
     args = parser.parse_args()
-    with open(args.config, encoding="utf-8") as fh:
-        config = yaml.safe_load(fh)
-    trained = dict(config["env_kwargs"])
+    config = load_sb3_config(args.config, "ppo")
+    trained = dict(config.env_kwargs)
     all_cores = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
     if all_cores:  # the env rows on one core, as the goals are stated
         os.sched_setaffinity(0, {min(all_cores)})
@@ -160,9 +155,9 @@ def main() -> None:
     print("|---|---:|---:|")
     for name, rate in rows:
         print(f"| {name} | {rate:,.0f} | {rate / single:.1f}x |")
-    hyper = config["hyperparameters"]
+    hyper = config.hyperparameters
     print(
-        f"\nPPO (SB3, {args.config}: {config['n_envs']} rows, n_steps {hyper['n_steps']}, "
+        f"\nPPO (SB3, {args.config}: {config.n_envs} rows, n_steps {hyper['n_steps']}, "
         f"batch {hyper['batch_size']}, {hyper['n_epochs']} epochs, all cores) for "
         f"{10 * args.steps:,} steps: {ppo_rate:,.0f} steps/s; the env's share of the time: "
         f"{100 * share:.1f}%"
