@@ -267,7 +267,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         self.batch.reset_rows(np.array([0]), target[None])
         self._tips = [self.tip]
         info = {"distance_cm": float(np.linalg.norm(self.tip - target)), "target": target.copy()}
-        return {k: v[0] for k, v in self._obs_dict(slice(None)).items()}, info
+        return {k: v[0] for k, v in self._obs_dict().items()}, info
 
     def step(
         self, action: NDArray[np.float32]
@@ -277,7 +277,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         b = self.batch
         prev = self._goal_clip(b.step(a[None]))
         self._tips.append(self.tip)
-        rows = self._obs_dict(slice(None))
+        rows = self._obs_dict()
         contact = b.contact
         # compute_reward's formula on the same float32 goals
         reward, distance = self._step_reward(
@@ -425,7 +425,7 @@ class ArmFTLVectorEnv(
         self.batch.reset_rows(every, self._new_targets(every))
         self.steps[:] = 0
         self.prev_done[:] = False
-        return self._obs_dict(slice(None)), {"target": self.batch.target.copy()}
+        return self._obs_dict(), {"target": self.batch.target.copy()}
 
     def step(
         self, actions: NDArray[np.float32]
@@ -445,7 +445,7 @@ class ArmFTLVectorEnv(
             b.reset_rows(done_rows, self._new_targets(done_rows), refresh=False)
         prev_tip = b.step(a)
         prev_tip[done_rows] = b.tip[done_rows]
-        obs = self._obs_dict(slice(None))
+        obs = self._obs_dict()
         prev = self._goal_clip(prev_tip)
         contact = b.contact.copy()
         info: dict[str, Any] = {"prev_achieved_goal": prev, "contact": contact}
@@ -472,8 +472,10 @@ class ArmFTLVectorEnv(
             self.prev_done = done
         elif done.any():  # SAME_STEP: the last observations go to info, the rows start again
             rows = np.flatnonzero(done)
-            info.update(final_obs={k: v.copy() for k, v in obs.items()}, _final_obs=done)
+            info.update(final_obs=obs, _final_obs=done)
             b.reset_rows(rows, self._new_targets(rows))
             self.steps[rows] = 0
-            obs = self._obs_dict(slice(None))
+            obs = {k: v.copy() for k, v in obs.items()}
+            for key, value in self._obs_dict(rows).items():  # only the rows that started again
+                obs[key][rows] = value
         return obs, reward, terminated, truncated, info

@@ -305,12 +305,14 @@ class _Setup:
         )
         return action, obs
 
-    def _obs_dict(self, rows: slice | NDArray[np.int64]) -> dict[str, NDArray[np.float32]]:
+    def _obs_dict(self, rows: NDArray[np.int64] | None = None) -> dict[str, NDArray[np.float32]]:
+        """The observations of every env (or of ``rows``) as the observation space holds them."""
         b = self.batch
+        tip, target = (b.tip, b.target) if rows is None else (b.tip[rows], b.target[rows])
         return {
-            "observation": b.observation()[rows],
-            "achieved_goal": self._goal_clip(b.tip[rows]),  # type: ignore[attr-defined]
-            "desired_goal": b.target[rows].astype(np.float32),
+            "observation": b.observation(rows),
+            "achieved_goal": self._goal_clip(tip),  # type: ignore[attr-defined]
+            "desired_goal": target.astype(np.float32),
         }
 
     def _check_action(self, action: Any, shape: tuple[int, ...] | None) -> NDArray[np.float64]:

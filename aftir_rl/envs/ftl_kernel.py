@@ -491,6 +491,7 @@ def steering_frames(
 
 @njit(cache=True)
 def observation(
+    rows: NDArray[np.int64],
     kappa: NDArray[np.float64],
     k: NDArray[np.int64],
     s: NDArray[np.float64],
@@ -506,15 +507,17 @@ def observation(
     clear_scale: float,
     out: NDArray[np.float32],
 ) -> None:
-    """The goal-free part of the observation vector (:meth:`FTLBatch.observation`), in place.
+    """The goal-free part of the observation vectors of ``rows`` into ``out``'s rows, in place.
 
-    Columns ``0 .. 35 + 3N``; the guide's columns after them are filled by the caller.
+    Columns ``0 .. 35 + 3N`` (:meth:`FTLBatch.observation`); the guide's columns after them
+    are filled by the caller.
     """
     n = theta.shape[1]
     s_max = n * section_length
     tip = points.shape[1] - 1
-    for b in range(theta.shape[0]):
-        o = out[b]
+    for r in range(rows.shape[0]):
+        b = rows[r]
+        o = out[r]
         o[0] = (s[b] - s_max) / s_max
         o[1] = k[b] / n
         o[2] = kappa[b, k[b], 0] / theta_max

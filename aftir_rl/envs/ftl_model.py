@@ -208,14 +208,17 @@ class FTLBatch:
         self.tip = self.points[:, -1]
         self.contact = self.body_clearance < self.margin
 
-    def observation(self) -> NDArray[np.float32]:
-        """The goal-free observation vector of every env, ``(B, obs_size)``.
+    def observation(self, rows: NDArray[np.int64] | None = None) -> NDArray[np.float32]:
+        """The observation vectors of every env ``(B, obs_size)``, or of ``rows``.
 
         With the guide, its columns follow: the way, the target and the lookahead in the frame
         the steered ``κ`` bends in, where steering towards them is simplest.
         """
-        out = np.empty((self.b, self.obs_size), dtype=np.float32)
+        every = rows is None
+        rows = np.arange(self.b) if rows is None else np.asarray(rows, dtype=np.int64)
+        out = np.empty((len(rows), self.obs_size), dtype=np.float32)
         kernel.observation(
+            rows,
             self.kappa,
             self.k,
             self.s,
@@ -232,16 +235,18 @@ class FTLBatch:
             out,
         )
         if self.guide is not None:
-            to_go, direction = self.guide(self.tip, self.target, self.target_fields())
-            ahead = self.guide.lookahead(self.tip, self.target, self.guide_ids)
+            tip = self.tip if every else self.tip[rows]
+            target = self.target if every else self.target[rows]
+            ids = self.target_fields() if every else self.target_fields()[rows]
+            to_go, direction = self.guide(tip, target, ids)
             kernel.guide_columns(
-                self.steering_frames(),
+                self.steering_frames(None if every else rows),
                 to_go,
                 direction,
-                self.target,
-                self.tip,
-                self.heading,
-                ahead,
+                target,
+                tip,
+                self.heading if every else self.heading[rows],
+                self.guide.lookahead(tip, target, ids),
                 out,
                 self.obs_size - 10 - 3 * len(LOOKAHEAD_HOPS),
             )
@@ -255,14 +260,15 @@ class FTLBatch:
             self._guide_generation = self.fields.generation
         return self.guide_ids
 
-    def steering_frames(self) -> NDArray[np.float64]:
-        """Rotations ``(B, 3, 3)`` of the frames the steered sections bend in.
+    def steering_frames(self, rows: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
+        """Rotations ``(B, 3, 3)`` of the frames the steered sections bend in (or of ``rows``).
 
         The route's frame at ``k·l``: the product of the rotations of its frozen sections
         ``0..k−1`` (:func:`aftir_rl.envs.ftl_kernel.steering_frames`).
         """
-        out = np.empty((self.b, 3, 3))
-        kernel.steering_frames(self.kappa, self.k, out)
+        kappa, k = (self.kappa, self.k) if rows is None else (self.kappa[rows], self.k[rows])
+        out = np.empty((len(k), 3, 3))
+        kernel.steering_frames(kappa, k, out)
         return out
 
     # -- dynamics
