@@ -83,7 +83,7 @@ def test_sdf_is_the_tanks_signed_distance(name):
     tank = tank_named(name)
     rng = np.random.default_rng(0)
     lo, hi = np.array(tank.box_min) - 30, np.array(tank.box_max) + 30
-    pts = rng.uniform(lo, hi, (20000, 3))
+    pts = rng.uniform(lo, hi, (8000, 3))
     pts[:2000, 2] = rng.uniform(-400, 5, 2000)  # in and around the guide tube
     pts[:1000, :2] = np.array(tank.panel.center)[:2] + rng.normal(0, tank.panel.radius, (1000, 2))
     packed = kernel_grid(tank)
@@ -97,7 +97,7 @@ def test_sdf_is_the_tanks_signed_distance(name):
 def test_refresh_is_the_numpy_pipeline(name):
     tank = tank_named(name)
     rng = np.random.default_rng(1)
-    batch = random_batch(tank, rng, 3000)
+    batch = random_batch(tank, rng, 1500)
     batch.refresh()
     theta, phi, pts, heading, body, ray, use = numpy_refresh(batch)
     np.testing.assert_allclose(batch.theta, theta, atol=1e-12)
