@@ -348,13 +348,18 @@ def test_tank_distance_is_point_clearance(tank):
     np.testing.assert_allclose(TankDistance(tank)(p), point_clearance(tank, p), atol=1e-9)
 
 
-def test_vector_env_matches_single_envs():
+@pytest.mark.parametrize("shaping", [False, "field"])
+def test_vector_env_matches_single_envs(shaping):
     b, steps = 4, 120
     rng = np.random.default_rng(5)
     actions = rng.uniform(-1, 1, (steps, b, 3)).astype(np.float32)
     actions[..., 2] = np.abs(actions[..., 2])
     venv = gym.make_vec(
-        ENV_ID, num_envs=b, vectorization_mode="vector_entry_point", max_episode_steps=40
+        ENV_ID,
+        num_envs=b,
+        vectorization_mode="vector_entry_point",
+        max_episode_steps=40,
+        shaping=shaping,
     )
     obs, _ = venv.reset(seed=10)
     v_rows = []
@@ -363,7 +368,7 @@ def test_vector_env_matches_single_envs():
         v_rows.append((obs, r, term, trunc, nxt))
         obs = nxt
     for i in range(b):
-        env = gym.make(ENV_ID, max_episode_steps=40)
+        env = gym.make(ENV_ID, max_episode_steps=40, shaping=shaping)
         o, _ = env.reset(seed=10 + i)
         done = False
         for t in range(steps):

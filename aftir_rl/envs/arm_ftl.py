@@ -220,6 +220,8 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
         self.action_space, self.observation_space = self._spaces()  # type: ignore[assignment]
         self._tips: list[NDArray[np.float64]] = []
+        #: The shaping's potential at the tip (NaN: not known; see ``_step_reward``).
+        self._potential: NDArray[np.float64] | None = np.full(1, np.nan)
 
     @property
     def target(self) -> NDArray[np.float64]:
@@ -265,6 +267,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         else:
             target = self._draw_targets([self.np_random])[0]
         self.batch.reset_rows(np.array([0]), target[None])
+        self._potential = np.full(1, np.nan)
         self._tips = [self.tip]
         info = {"distance_cm": float(np.linalg.norm(self.tip - target)), "target": target.copy()}
         return {k: v[0] for k, v in self._obs_dict().items()}, info
@@ -280,8 +283,8 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         rows = self._obs_dict()
         contact = b.contact
         # compute_reward's formula on the same float32 goals
-        reward, distance = self._step_reward(
-            rows["achieved_goal"], rows["desired_goal"], prev, contact
+        reward, distance, self._potential = self._step_reward(
+            rows["achieved_goal"], rows["desired_goal"], prev, contact, self._potential
         )
         hit = bool(contact[0])
         success = bool(distance[0] < b.success_tolerance) and not hit
@@ -392,6 +395,8 @@ class ArmFTLVectorEnv(
         self._rngs = [seeding.np_random()[0] for _ in range(self.num_envs)]
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self.prev_done = np.zeros(self.num_envs, dtype=bool)
+        #: The shaping's potential at each row's tip (NaN: not known; see ``_step_reward``).
+        self._potential = np.full(self.num_envs, np.nan)
         self._targets_option: NDArray[np.float64] | None = None
 
     def _new_targets(self, rows: NDArray[np.int64]) -> NDArray[np.float64]:
@@ -423,6 +428,7 @@ class ArmFTLVectorEnv(
             self._targets_option = np.broadcast_to(checked, (self.num_envs, 3)).copy()
         every = np.arange(self.num_envs)
         self.batch.reset_rows(every, self._new_targets(every))
+        self._potential = np.full(self.num_envs, np.nan)
         self.steps[:] = 0
         self.prev_done[:] = False
         return self._obs_dict(), {"target": self.batch.target.copy()}
@@ -443,6 +449,7 @@ class ArmFTLVectorEnv(
         if len(done_rows):
             a[done_rows] = 0.0
             b.reset_rows(done_rows, self._new_targets(done_rows), refresh=False)
+            # (their rewards are 0 this step; their potentials at the new start follow from it)
         prev_tip = b.step(a)
         prev_tip[done_rows] = b.tip[done_rows]
         obs = self._obs_dict()
@@ -450,9 +457,11 @@ class ArmFTLVectorEnv(
         contact = b.contact.copy()
         info: dict[str, Any] = {"prev_achieved_goal": prev, "contact": contact}
         # compute_reward's formula on the same float32 goals
-        reward, distance = self._step_reward(
-            obs["achieved_goal"], obs["desired_goal"], prev, contact
+        reward, distance, potential = self._step_reward(
+            obs["achieved_goal"], obs["desired_goal"], prev, contact, self._potential
         )
+        if potential is not None:  # the next step's potentials at its previous tips
+            self._potential = potential
         success = (distance < b.success_tolerance) & ~contact
         terminated = success | contact
         self.steps += 1
@@ -474,6 +483,7 @@ class ArmFTLVectorEnv(
             rows = np.flatnonzero(done)
             info.update(final_obs=obs, _final_obs=done)
             b.reset_rows(rows, self._new_targets(rows))
+            self._potential[rows] = np.nan
             self.steps[rows] = 0
             obs = {k: v.copy() for k, v in obs.items()}
             for key, value in self._obs_dict(rows).items():  # only the rows that started again

@@ -83,12 +83,21 @@ class _GoalReward:
         return float(out) if out.ndim == 0 else out
 
     def _step_reward(
-        self, a: ArrayLike, g: ArrayLike, prev: ArrayLike, contact: ArrayLike
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        self,
+        a: ArrayLike,
+        g: ArrayLike,
+        prev: ArrayLike,
+        contact: ArrayLike,
+        prev_potential: NDArray[np.float64] | None = None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]:
         """Rewards and tip-to-target distances [cm] of rows of tips, targets, previous tips.
 
         Each ``(R, 3)`` (any float dtype, taken as float64) with contact flags ``(R,)``: the one
-        reward formula, which :meth:`compute_reward` and the envs' steps both call.
+        reward formula, which :meth:`compute_reward` and the envs' steps both call. Also returns
+        the shaping's potential at ``a`` (``None`` without shaping). An env passes the potentials
+        its previous step returned as ``prev_potential`` (NaN for rows whose tip or target has
+        changed since), so each step asks the guide about the new tips only: the value at the
+        same point and target is the same, so the reward is too.
         """
         a2 = np.asarray(a, dtype=np.float64)
         g2 = np.asarray(g, dtype=np.float64)
@@ -104,12 +113,21 @@ class _GoalReward:
             reward,
             d,
         )
-        if self.batch.shaping:
-            detour = self._cells if self.batch.shaping == "raster" else self._field_detour
-            # both ends in one call: one field lookup per goal, not two
-            both = detour(np.concatenate([prev, a2]), np.concatenate([g2, g2]))
-            reward += PROGRESS_PER_CM * (both[: len(a2)] - both[len(a2) :])
-        return reward, d
+        if not self.batch.shaping:
+            return reward, d, None
+        detour = self._cells if self.batch.shaping == "raster" else self._field_detour
+        if prev_potential is None:
+            stale = np.arange(len(a2))
+            before = np.empty(len(a2))
+        else:
+            stale = np.flatnonzero(np.isnan(prev_potential))
+            before = np.array(prev_potential, dtype=np.float64)
+        # both ends in one call: one field lookup per goal, not two
+        both = detour(np.concatenate([prev[stale], a2]), np.concatenate([g2[stale], g2]))
+        before[stale] = both[: len(stale)]
+        potential = both[len(stale) :]
+        reward += PROGRESS_PER_CM * (before - potential)
+        return reward, d, potential
 
     def _cells(self, p: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
         """``cell · e(p, g)`` [cm]: the raster detour from ``p``'s cell to ``g``'s."""
