@@ -78,7 +78,10 @@ def ppo_env_share(config: SB3Config, steps: int) -> tuple[float, float]:
     """PPO (SB3) on the batched env as a config trains it: steps/s and the env's share."""
     from aftir_rl.agents.vec_adapter import make_batched_vec_env
 
-    venv = make_batched_vec_env(f"aftir_rl:{ENV_ID}", config.n_envs, 0, dict(config.env_kwargs))
+    # as aftir_rl.train builds it: only HER reads the infos of rows that did not finish
+    venv = make_batched_vec_env(
+        f"aftir_rl:{ENV_ID}", config.n_envs, 0, dict(config.env_kwargs), None if config.her else ()
+    )
     inner = venv.venv  # VecMonitor -> SB3VectorEnv
     spent = [0.0]
     step_wait = inner.step_wait

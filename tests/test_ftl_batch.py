@@ -271,14 +271,21 @@ def test_guide_observation():
     check_env(env.unwrapped, skip_render_check=True)
 
 
-def test_same_step_autoreset_keeps_the_transitions():
-    """SameStep rows see the transitions of NextStep rows, minus the extra reset step."""
+@pytest.mark.parametrize("shaping", [False, "field"])
+def test_same_step_autoreset_keeps_the_transitions(shaping):
+    """SameStep rows see the transitions of NextStep rows, minus the extra reset step.
+
+    With shaping, the rows reuse their previous step's potential; the single envs' rewards are
+    checked against ``compute_reward`` in ``test_arm_ftl.py``.
+    """
     b, steps = 3, 90
     rng = np.random.default_rng(2)
     actions = rng.uniform(-1, 1, (steps, b, 3)).astype(np.float32)
     actions[..., 2] = np.abs(actions[..., 2])
-    same = ArmFTLVectorEnv(num_envs=b, max_episode_steps=25, autoreset_mode="SameStep")
-    single = [ArmFTLEnv() for _ in range(b)]
+    same = ArmFTLVectorEnv(
+        num_envs=b, max_episode_steps=25, autoreset_mode="SameStep", shaping=shaping
+    )
+    single = [ArmFTLEnv(shaping=shaping) for _ in range(b)]
     obs, _ = same.reset(seed=4)
     for i, env in enumerate(single):
         env.reset(seed=4 + i)
@@ -329,6 +336,46 @@ def test_sb3_adapter_trains_ppo_and_sac_her():
     )
     sac.learn(160)
     assert sac.num_timesteps == 160
+
+
+@pytest.mark.parametrize("keys", [(), ("contact",)])
+def test_sb3_adapter_running_info_keys(keys):
+    """Rows that did not finish get only the keys asked for; everything else is the same."""
+    from aftir_rl.agents.vec_adapter import make_batched_vec_env
+
+    rng = np.random.default_rng(8)
+    actions = rng.uniform(-1, 1, (60, 4, 3)).astype(np.float32)
+    actions[..., 2] = np.abs(actions[..., 2])
+    kwargs = {"max_episode_steps": 15, "shaping": "field"}
+    full = make_batched_vec_env(f"aftir_rl:{ENV_ID}", 4, 3, kwargs)
+    lean = make_batched_vec_env(f"aftir_rl:{ENV_ID}", 4, 3, kwargs, keys)
+    first = lean.reset()
+    for key, value in full.reset().items():
+        np.testing.assert_array_equal(first[key], value)
+    finished = 0
+    for a in actions:
+        o1, r1, d1, i1 = full.step(a)
+        o2, r2, d2, i2 = lean.step(a)
+        np.testing.assert_array_equal(r1, r2)
+        np.testing.assert_array_equal(d1, d2)
+        for key in o1:
+            np.testing.assert_array_equal(o1[key], o2[key])
+        for row, (f, l) in enumerate(zip(i1, i2)):
+            if d1[row]:
+                finished += 1
+                assert f.keys() == l.keys() and "episode" in l and "is_success" in l
+                assert (l["episode"]["r"], l["episode"]["l"]) == (
+                    f["episode"]["r"],
+                    f["episode"]["l"],
+                )
+                for key in f.keys() - {"episode", "terminal_observation"}:
+                    np.testing.assert_array_equal(np.asarray(l[key]), np.asarray(f[key]))
+                for key, value in f["terminal_observation"].items():
+                    np.testing.assert_array_equal(l["terminal_observation"][key], value)
+            else:
+                assert set(l) == set(keys) and all(l[k] == f[k] for k in keys)
+                assert len(f) > 1
+    assert finished >= 4
 
 
 def test_train_cli_ppo_on_the_batched_env(tmp_path):

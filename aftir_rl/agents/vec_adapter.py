@@ -34,13 +34,22 @@ class SB3VectorEnv(VecEnv):
 
     Args:
         venv: the vector env; its ``metadata["autoreset_mode"]`` must be ``SameStep``.
+        running_info_keys: the info keys rows that did not finish get; ``None`` (default):
+            every key, as every row of a ``VecEnv`` has. Finished rows always get every key.
+            SB3 reads the infos of finished rows only (``Monitor``'s episode, ``is_success``,
+            ``terminal_observation``) except in ``HerReplayBuffer``, which keeps every row's: so
+            PPO, and SAC or TD3 without HER, train the same with ``()``, and their steps skip
+            building one dict per row.
 
     """
 
-    def __init__(self, venv: gym.vector.VectorEnv) -> None:
+    def __init__(
+        self, venv: gym.vector.VectorEnv, running_info_keys: Sequence[str] | None = None
+    ) -> None:
         if venv.metadata.get("autoreset_mode") is not AutoresetMode.SAME_STEP:
             raise ConfigError("SB3VectorEnv needs a vector env with autoreset_mode='SameStep'")
         self.venv = venv
+        self.running_info_keys = None if running_info_keys is None else tuple(running_info_keys)
         super().__init__(venv.num_envs, venv.single_observation_space, venv.single_action_space)
         self._actions: np.ndarray | None = None
 
@@ -67,16 +76,27 @@ class SB3VectorEnv(VecEnv):
             for k, v in info.items()
             if not k.startswith("_") and isinstance(v, np.ndarray) and len(v) == self.num_envs
         ]
-        # one conversion per key (rows of 1-D arrays as Python scalars), then one dict per row
-        columns = [info[k].tolist() if info[k].ndim == 1 else list(info[k]) for k in keys]
-        infos: list[dict[str, Any]] = (
-            [dict(zip(keys, row)) for row in zip(*columns)]
-            if keys
-            else [{} for _ in range(self.num_envs)]
-        )
+        infos: list[dict[str, Any]]
+        if self.running_info_keys is None:
+            # one conversion per key (rows of 1-D arrays as Python scalars), then one dict per row
+            columns = [info[k].tolist() if info[k].ndim == 1 else list(info[k]) for k in keys]
+            infos = (
+                [dict(zip(keys, row)) for row in zip(*columns)]
+                if keys
+                else [{} for _ in range(self.num_envs)]
+            )
+        else:
+            running = [k for k in keys if k in self.running_info_keys]
+            infos = (
+                [{k: _item(info[k], i) for k in running} for i in range(self.num_envs)]
+                if running
+                else [{} for _ in range(self.num_envs)]
+            )
         final = info.get("final_obs")
         for row in np.flatnonzero(dones):
             i = int(row)
+            if self.running_info_keys is not None:
+                infos[i].update({k: _item(info[k], i) for k in keys})
             infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
             if final is not None:
                 infos[i]["terminal_observation"] = (
@@ -120,13 +140,23 @@ class SB3VectorEnv(VecEnv):
         return list(indices)
 
 
+def _item(column: np.ndarray, row: int) -> Any:
+    """Row ``row`` of an info column as the full-info path gives it (a scalar or an array)."""
+    value = column[row]
+    return value.item() if column.ndim == 1 else value
+
+
 def make_batched_vec_env(
-    env_id: str, n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | None = None
+    env_id: str,
+    n_envs: int,
+    seed: int | None,
+    env_kwargs: dict[str, Any] | None = None,
+    running_info_keys: Sequence[str] | None = None,
 ) -> VecEnv | None:
     """SB3 ``VecEnv`` of ``n_envs`` rows of a batched env (with ``VecMonitor``), or None.
 
     None when ``env_id`` has no ``vector_entry_point`` (or ``n_envs`` is 1): the caller makes
-    per-env copies as usual.
+    per-env copies as usual. ``running_info_keys``: see :class:`SB3VectorEnv`.
     """
     from stable_baselines3.common.vec_env import VecMonitor
 
@@ -143,6 +173,6 @@ def make_batched_vec_env(
         autoreset_mode=AutoresetMode.SAME_STEP,
         **kwargs,
     )
-    out = VecMonitor(SB3VectorEnv(venv))
+    out = VecMonitor(SB3VectorEnv(venv, running_info_keys))
     out.seed(seed)
     return out

@@ -77,7 +77,10 @@ def train_sb3(
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
     try:
         # a batched env (one numpy pass for all rows) when the env has one, else copies
-        venv = make_batched_vec_env(env_id, config.n_envs, seed, config.env_kwargs)
+        # only HER's replay buffer reads the infos of rows that did not finish
+        venv = make_batched_vec_env(
+            env_id, config.n_envs, seed, config.env_kwargs, None if config.her else ()
+        )
         if venv is None:
             venv = make_vec_env(
                 env_id,
