@@ -83,7 +83,9 @@ def test_smoke_training_writes_tensorboard(tmp_path, algo, steps, capsys):
     hyper = (
         "  n_steps: 128\n  batch_size: 64\n"
         if algo == "ppo"
-        else "  learning_starts: 50\n  batch_size: 32\n  buffer_size: 1000\n"
+        # 50 small gradient steps: the loop and its TensorBoard files, not learning
+        else "  learning_starts: 150\n  batch_size: 32\n  buffer_size: 1000\n"
+        "  policy_kwargs:\n    net_arch: [32, 32]\n"
     )
     config.write_text(
         "env_id: AFTIR-ArmReach-v0\neval_freq: 100000\neval_targets: 2\ncheckpoint_freq: 100\n"

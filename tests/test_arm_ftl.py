@@ -315,6 +315,44 @@ def test_detour_bias_draws_more_targets_behind_obstacles():
     np.testing.assert_allclose(obs["desired_goal"], np.array(singles, dtype=np.float32))
 
 
+def test_corner_bias_draws_targets_in_the_regions_corners():
+    """corner_bias draws that fraction in the eight corner cubes; 0 leaves the draws unchanged."""
+    from aftir_rl.agents.sb3_eval import evaluation_targets
+    from aftir_rl.envs.ftl_batch import CORNER_DEPTH, bay_region
+
+    def targets(n=200, **kwargs):
+        env = ArmFTLEnv(bay=2, **kwargs)
+        return np.array([env.reset(seed=i)[1]["target"] for i in range(n)]), env
+
+    def in_corner(t, lo, hi, clearance):
+        depth = np.minimum(t - lo, hi - t)  # per axis, from the nearer face
+        return ((depth >= clearance - 1e-9) & (depth <= clearance + CORNER_DEPTH)).all(-1)
+
+    plain, env = targets()
+    np.testing.assert_array_equal(plain, targets(corner_bias=0.0)[0])
+    lo, hi = bay_region(env.tank, 2)
+    every, _ = targets(corner_bias=1.0)
+    np.testing.assert_array_equal(every, targets(corner_bias=1.0)[0])  # seeded
+    assert in_corner(every, lo, hi, 10.0).all()
+    assert (point_clearance(env.tank, every) >= 10.0).all()
+    # each of the eight corners comes up (the side of every axis is drawn)
+    sides = {tuple(row) for row in (every > (lo + hi) / 2).astype(int)}
+    assert len(sides) == 8
+    near, _ = targets(corner_bias=1.0, target_clearance=6.0)
+    assert in_corner(near, lo, hi, 6.0).all() and (point_clearance(env.tank, near) >= 6.0).all()
+    half, _ = targets(400, corner_bias=0.5)
+    share = in_corner(half, lo, hi, 10.0).mean()
+    assert 0.4 < share < 0.6  # uniform draws land in the corner cubes about 1% of the time
+    assert in_corner(plain, lo, hi, 10.0).mean() < 0.05
+    # evaluations draw uniformly whatever the training bias
+    np.testing.assert_array_equal(
+        evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2, "corner_bias": 1.0}),
+        evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2}),
+    )
+    with pytest.raises(ConfigError):
+        ArmFTLEnv(bay=2, corner_bias=0.5, detour_bias=0.5)
+
+
 @pytest.mark.parametrize(
     "kwargs, error",
     [
@@ -323,6 +361,8 @@ def test_detour_bias_draws_more_targets_behind_obstacles():
         ({"n_sections": 0}, ConfigError),
         ({"detour_bias": 1.5}, ConfigError),
         ({"detour_bias": -0.1}, ConfigError),
+        ({"corner_bias": 1.5}, ConfigError),
+        ({"corner_bias": True}, ConfigError),
         ({"target": (0, 60, 50)}, TargetError),
         ({"target": (500, 0, 10)}, TargetError),
     ],

@@ -157,6 +157,10 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
       (Manhattan) one, in cells: targets behind obstacles (in bay 2, far from the hatch) come up
       more often; the other targets are uniform as before. A curriculum knob for training; the
       evaluations of ``train`` and ``evaluate`` draw their targets uniformly.
+    - ``corner_bias`` (0): the fraction of drawn targets drawn in the corners of the target
+      region instead (``target_clearance`` to ``target_clearance`` + 15 cm inward from one of
+      its eight corners, free as the others): where the arm bends most with walls on three
+      sides. A curriculum knob for training, like ``detour_bias`` (not both at once).
     - ``steer`` (``"increment"``): what the two steering actions command, a change of ``κ``
       or ``"target"``, the bend itself (Action Space).
     - ``step_cost`` (0): a cost paid on every step (at most 0.03, so that ending an episode
@@ -192,6 +196,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         detour_bias: float = 0.0,
         steer: str = "increment",
         step_cost: float = 0.0,
+        corner_bias: float = 0.0,
         render_mode: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -215,6 +220,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
             detour_bias,
             steer,
             step_cost,
+            corner_bias,
         )
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
@@ -351,6 +357,7 @@ class ArmFTLVectorEnv(
         detour_bias: float = 0.0,
         steer: str = "increment",
         step_cost: float = 0.0,
+        corner_bias: float = 0.0,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
     ) -> None:
@@ -379,6 +386,7 @@ class ArmFTLVectorEnv(
             detour_bias,
             steer,
             step_cost,
+            corner_bias,
         )
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)

@@ -205,6 +205,7 @@ def draw_targets(
     start: NDArray[np.float64],
     biased: float = 0.0,
     weight: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
+    corners: float = 0.0,
 ) -> NDArray[np.float64]:
     """One target per generator: uniform in ``region``, ``clearance`` [cm] from every surface.
 
@@ -218,6 +219,12 @@ def draw_targets(
     ``biased``); a biased one keeps each free candidate with probability ``weight(candidate)``
     (points ``(..., 3)`` → values in ``[0, 1]``), so targets are drawn with density proportional to
     ``weight``. ``biased = 0`` draws nothing more: the targets are the same as without it.
+
+    With ``corners > 0`` (and ``biased = 0``) each generator first draws whether its target lies
+    in a corner of ``region`` (probability ``corners``): then its candidates are uniform in the
+    cubes of side :data:`CORNER_DEPTH` that start ``clearance`` inward from the region's eight
+    corners (a corner drawn per candidate), where an arm must bend most with walls on three
+    sides. The same checks apply.
     """
     lo, hi = region
     packed = kernel_grid(tank)
@@ -225,11 +232,21 @@ def draw_targets(
     todo = np.arange(len(rngs))
     if biased > 0 and weight is None:
         raise ConfigError("draw_targets: biased > 0 needs a weight function")
+    if biased > 0 and corners > 0:
+        raise ConfigError("draw_targets: draw biased or corner targets, not both")
     want = np.array([biased > 0 and rng.random() < biased for rng in rngs], dtype=bool)
+    corner = np.array([corners > 0 and rng.random() < corners for rng in rngs], dtype=bool)
     for _ in range(200):
         if not len(todo):
             return out
-        cand = np.stack([rngs[int(i)].uniform(lo, hi, (64, 3)) for i in todo])
+        cand = np.stack(
+            [
+                _corner_candidates(rngs[int(i)], lo, hi, clearance)
+                if corner[i]
+                else rngs[int(i)].uniform(lo, hi, (64, 3))
+                for i in todo
+            ]
+        )
         ok = kernel.clear_of(cand, float(clearance), packed)
         ok &= np.einsum("rci,rci->rc", cand - start, cand - start) >= 400.0  # 20 cm
         if want[todo].any():
@@ -244,6 +261,20 @@ def draw_targets(
     if len(todo):
         raise TargetError(f"no free point {clearance:g} cm from every surface in the target region")
     return out
+
+
+#: Side [cm] of the cubes in the corners of a target region that ``corners`` draws from
+#: (:func:`draw_targets`).
+CORNER_DEPTH = 15.0
+
+
+def _corner_candidates(
+    rng: np.random.Generator, lo: NDArray[np.float64], hi: NDArray[np.float64], clearance: float
+) -> NDArray[np.float64]:
+    """64 points ``(64, 3)``, each in the cube ``clearance`` inward from a random corner."""
+    high = rng.integers(0, 2, (64, 3)).astype(bool)
+    depth = clearance + rng.uniform(0.0, CORNER_DEPTH, (64, 3))
+    return np.where(high, hi - depth, lo + depth)
 
 
 def raster_distance_table(tank: Tank) -> NDArray[np.int32]:

@@ -221,6 +221,7 @@ class _Setup:
         detour_bias: float = 0.0,
         steer: str = "increment",
         step_cost: float = 0.0,
+        corner_bias: float = 0.0,
     ) -> None:
         self.tank = load_tank(tank)
         if steer not in STEER_MODES:
@@ -248,6 +249,15 @@ class _Setup:
         if (detour_bias > 0 or shaping) and self.tank.cell_size is None:
             raise ConfigError("detour_bias and shaping need a tank with a raster (cell_size)")
         self.detour_bias = float(detour_bias)
+        if not (
+            isinstance(corner_bias, int | float)
+            and not isinstance(corner_bias, bool)
+            and 0 <= corner_bias <= 1
+        ):
+            raise ConfigError(f"corner_bias must be in [0, 1], got {corner_bias!r}")
+        if corner_bias > 0 and detour_bias > 0:
+            raise ConfigError("give detour_bias or corner_bias, not both")
+        self.corner_bias = float(corner_bias)
         if not (
             isinstance(step_cost, int | float)
             and not isinstance(step_cost, bool)
@@ -287,6 +297,7 @@ class _Setup:
             self.start_tip,
             self.detour_bias,
             self._detour_weight if self.detour_bias > 0 else None,
+            self.corner_bias,
         )
 
     def _detour_weight(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
