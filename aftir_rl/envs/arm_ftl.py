@@ -228,6 +228,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         self._tips: list[NDArray[np.float64]] = []
         #: The shaping's potential at the tip (NaN: not known; see ``_step_reward``).
         self._potential: NDArray[np.float64] | None = np.full(1, np.nan)
+        self._achieved = np.zeros((1, 3), dtype=np.float32)
 
     @property
     def target(self) -> NDArray[np.float64]:
@@ -276,7 +277,9 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         self._potential = np.full(1, np.nan)
         self._tips = [self.tip]
         info = {"distance_cm": float(np.linalg.norm(self.tip - target)), "target": target.copy()}
-        return {k: v[0] for k, v in self._obs_dict().items()}, info
+        rows = self._obs_dict()
+        self._achieved = rows["achieved_goal"].copy()  # the next step's previous tip, clipped
+        return {k: v[0] for k, v in rows.items()}, info
 
     def step(
         self, action: NDArray[np.float32]
@@ -284,9 +287,11 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         """Steer and push; see the class docstring for rewards and termination."""
         a = self._check_action(action, self.action_space.shape)
         b = self.batch
-        prev = self._goal_clip(b.step(a[None]))
+        b.step(a[None])
+        prev = self._achieved  # the previous tip, as the last observation held it
         self._tips.append(self.tip)
         rows = self._obs_dict()
+        self._achieved = rows["achieved_goal"].copy()
         contact = b.contact
         # compute_reward's formula on the same float32 goals
         reward, distance, self._potential = self._step_reward(
