@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import fcl
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.robot import ArmSpec, Posture, body_points
@@ -195,9 +196,7 @@ class CollisionScene:
         Conservative and cheap: the solids are taken as their bounding boxes, and the floor as a
         plane with the panel's round opening. False only means "maybe closer".
         """
-        grown_lo, grown_hi = self._solid_lo - clear, self._solid_hi + clear
-        near = (points[:, None, :] > grown_lo) & (points[:, None, :] < grown_hi)
-        if near.all(axis=-1).any():
+        if not _outside_boxes(np.ascontiguousarray(points), self._solid_lo, self._solid_hi, clear):
             return False
         if not self.walls:
             return True
@@ -241,6 +240,23 @@ class CollisionScene:
         return np.array(
             [self.collides(Posture(d, t, p)) for d, t, p in zip(dis, theta, phi)], dtype=bool
         )
+
+
+@njit(cache=True)
+def _outside_boxes(
+    points: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64], clear: float
+) -> bool:
+    """Whether no point ``(P, 3)`` lies inside a box ``lo[j]..hi[j]`` grown by ``clear``."""
+    for i in range(points.shape[0]):
+        for j in range(lo.shape[0]):
+            inside = True
+            for a in range(3):
+                if not lo[j, a] - clear < points[i, a] < hi[j, a] + clear:
+                    inside = False
+                    break
+            if inside:
+                return False
+    return True
 
 
 def _finite_or_inf(distance: float) -> float:

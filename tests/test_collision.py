@@ -149,3 +149,33 @@ def test_point_clearance_is_the_fcl_distance_to_the_scene(tank, scene):
         point_clearance(tank, pts, pipe),
         np.minimum(pipe[0].signed_distance(pts), tank.enclosure.signed_distance_xyz(*pts.T)),
     )
+
+
+@pytest.mark.parametrize("name", ["b737_center", "open_space_obstacles1"])
+def test_far_from_everything_is_its_conservative_rule(name):
+    """The compiled pre-check against its rule in numpy: solids' bounds grown, walls, floor."""
+    from aftir_rl.tank import load_tank
+
+    tank = load_tank(name)
+    scene = CollisionScene(tank)
+    rng = np.random.default_rng(4)
+    lo, hi = np.array(tank.box_min, float), np.array(tank.box_max, float)
+    seen = set()
+    for _ in range(3000):
+        centre = rng.uniform(lo - 20, hi + 20)
+        pts = centre + rng.normal(0, rng.uniform(1, 40), (rng.integers(1, 40), 3))
+        clear = float(rng.uniform(0, 8))
+        near = (pts[:, None] > scene._solid_lo - clear) & (pts[:, None] < scene._solid_hi + clear)
+        expected = not near.all(-1).any()
+        if expected and scene.walls:
+            expected = not (pts[:, :2] <= lo[:2] + clear).any() and not (pts >= hi - clear).any()
+        if expected and scene.walls:
+            floor = tank.enclosure.floor_distance_xyz(pts[:, 0], pts[:, 1], pts[:, 2])
+            expected = bool(np.all(floor > clear))
+        got = scene.far_from_everything(pts, clear)
+        assert got == expected
+        seen.add(got)
+        # far means far: every point is farther than clear from every surface
+        if got:
+            assert (point_clearance(tank, pts) > clear - 1e-9).all()
+    assert seen == {True, False}
