@@ -1,0 +1,121 @@
+"""Rank the checkpoints of an `AFTIR-ArmFTL-v0` run on validation targets, in one batched pass each.
+
+Run: ``python benchmarks/rank_checkpoints.py RUN_DIR [--fresh N] [--corners N] [--seed S]``.
+``RUN_DIR`` is a (finished or interrupted) SB3 run: its ``config.json`` and
+``checkpoints/model_*.zip``, loaded without unpickling (:func:`aftir_rl.agents.sb3.load_model`).
+
+Two validation sets, both drawn by the run's env as it is evaluated (10 cm from every surface,
+the training-only kwargs left out), with seeds no evaluation uses by default (``evaluate`` draws
+from 1,000,000, the docs' test sets from 777,000 and 2,000,000, training's fixed set from 12,345):
+
+- *fresh*: ``--fresh`` targets drawn uniformly, seeds ``S .. S + N - 1``;
+- *corners*: ``--corners`` targets drawn in the corners of the target region as
+  ``corner_bias=1`` draws them (10-25 cm inward from one of its eight corners), seeds
+  ``S + 500,000 ..``.
+
+Each checkpoint's deterministic policy runs every target once, all targets as rows of the batched
+env (the same transitions as the single env: ``tests/test_arm_ftl.py``). Prints a markdown table
+with the success and contact rates per set, and the checkpoint with the best mean success marked.
+Choose a checkpoint here, then measure it on test targets with ``python -m aftir_rl.evaluate``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch
+from tqdm import tqdm
+
+import aftir_rl  # noqa: F401
+from aftir_rl.agents.sb3 import load_model
+from aftir_rl.agents.sb3_config import TRAINING_ONLY_KWARGS
+from aftir_rl.errors import AftirError
+from aftir_rl.run import load_sb3_run
+
+ENV_ID = "AFTIR-ArmFTL-v0"
+CORNER_SEED_OFFSET = 500_000
+
+
+def validation_targets(kwargs: dict, count: int, seed: int, corners: bool) -> np.ndarray:
+    """``count`` targets of ``ArmFTLEnv(**kwargs)``, reset ``i`` seeded ``seed + i``."""
+    if corners:
+        kwargs = {**kwargs, "corner_bias": 1.0}
+    env = gym.make(ENV_ID, **kwargs)
+    return np.array([env.reset(seed=seed + i)[1]["target"] for i in range(count)])
+
+
+def rollout(model, kwargs: dict, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Success and contact of the deterministic policy's first episode on every target."""
+    venv = gym.make_vec(
+        ENV_ID, num_envs=len(targets), vectorization_mode="vector_entry_point", **kwargs
+    )
+    obs, _ = venv.reset(seed=0, options={"target": targets})
+    done = np.zeros(len(targets), dtype=bool)
+    success, contact = np.zeros_like(done), np.zeros_like(done)
+    while not done.all():
+        action, _ = model.predict(obs, deterministic=True)
+        obs, _, terminated, truncated, info = venv.step(action)
+        new = (terminated | truncated) & ~done
+        success[new], contact[new] = info["is_success"][new], info["collision"][new]
+        done |= new
+    venv.close()
+    return success, contact
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run", metavar="RUN_DIR", help="an SB3 run of AFTIR-ArmFTL-v0")
+    parser.add_argument("--fresh", type=int, default=200, help="uniform targets (200)")
+    parser.add_argument("--corners", type=int, default=96, help="corner targets (96)")
+    parser.add_argument("--seed", type=int, default=3_000_000, help="first seed (3,000,000)")
+    args = parser.parse_args(argv)
+    if not (1 <= args.fresh <= 4096 and 1 <= args.corners <= 4096):
+        print("error: --fresh and --corners must be in 1..4096", file=sys.stderr)
+        return 2
+    if not 0 <= args.seed <= 2**31:
+        print("error: --seed must be in 0..2**31", file=sys.stderr)
+        return 2
+    torch.set_num_threads(1)
+    try:
+        run = load_sb3_run(args.run)
+        if run.config.env_id != ENV_ID:
+            raise AftirError(f"{args.run} is a run of {run.config.env_id}, not {ENV_ID}")
+        paths = sorted(
+            Path(args.run, "checkpoints").glob("model_*.zip"),
+            key=lambda p: int(p.stem.split("_")[-1]),
+        )
+        if not paths:
+            raise AftirError(f"{args.run} has no checkpoints/model_*.zip")
+        kwargs = {k: v for k, v in run.config.env_kwargs.items() if k not in TRAINING_ONLY_KWARGS}
+        fresh = validation_targets(kwargs, args.fresh, args.seed, corners=False)
+        corner = validation_targets(
+            kwargs, args.corners, args.seed + CORNER_SEED_OFFSET, corners=True
+        )
+        rows = []
+        for path in tqdm(paths, desc="checkpoints", file=sys.stderr):
+            model = load_model(run.algo, path, config=run.config)
+            f_ok, f_hit = rollout(model, kwargs, fresh)
+            c_ok, c_hit = rollout(model, kwargs, corner)
+            rows.append((path.name, f_ok.mean(), f_hit.mean(), c_ok.mean(), c_hit.mean()))
+    except AftirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    best = max(range(len(rows)), key=lambda i: rows[i][1] + rows[i][3])
+    print(
+        f"{args.run}: {len(fresh)} fresh targets (seeds {args.seed}+), {len(corner)} corner "
+        f"targets (seeds {args.seed + CORNER_SEED_OFFSET}+), deterministic\n"
+    )
+    print("| checkpoint | fresh success | fresh contact | corner success | corner contact |")
+    print("|---|---:|---:|---:|---:|")
+    for i, (name, fs, fc, cs, cc) in enumerate(rows):
+        mark = " **best**" if i == best else ""
+        print(f"| {name}{mark} | {fs:.1%} | {fc:.1%} | {cs:.1%} | {cc:.1%} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
