@@ -16,10 +16,10 @@ from aftir_rl.envs.ftl_batch import (
     field_guide,
     raster_distance_table,
 )
-from aftir_rl.envs.ftl_model import FTLBatch
 from aftir_rl.motion.ftl import kappa_to_angles
 from aftir_rl.robot import Posture, body_points, forward_kinematics
 from aftir_rl.tank import load_tank
+from tests.helpers import random_ftl_batch
 
 ENV_ID = "AFTIR-ArmFTL-v0"
 
@@ -78,14 +78,7 @@ def test_contact_verdicts_against_python_fcl(name, count):
     tank = load_tank(name)
     rng = np.random.default_rng(7)
     margin = 1.0
-    batch = FTLBatch(tank, tank.arm.max_sections, count, 10, 0.1, 5.0, 10.0, margin, 2.0, False)
-    n = batch.n
-    # routes from straight to sharply bent, any deployment
-    r = rng.uniform(0, 1, (count, n)) ** 2 * tank.arm.theta_max * rng.uniform(0, 1, (count, 1))
-    a = rng.uniform(-np.pi, np.pi, (count, n))
-    batch.kappa = np.stack([r * np.cos(a), r * np.sin(a)], -1)
-    batch.s = rng.uniform(0, batch.s_max, count)
-    batch.k = np.minimum(np.floor(batch.s / batch.l).astype(np.int64), n - 1)
+    batch = random_ftl_batch(tank, rng, count, margin)
     batch.refresh()
     scene = CollisionScene(tank, links_per_section=10)
     fcl_clear = np.array(

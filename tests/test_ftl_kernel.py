@@ -16,11 +16,12 @@ import pytest
 from aftir_rl.envs import ftl_kernel as kernel
 from aftir_rl.envs.arm_ftl import ArmFTLVectorEnv
 from aftir_rl.envs.ftl_batch import kernel_grid
-from aftir_rl.envs.ftl_model import _RAY_AXES, RAY_DISTANCES, FTLBatch, ftl_kappa_batch
+from aftir_rl.envs.ftl_model import _RAY_AXES, RAY_DISTANCES, ftl_kappa_batch
 from aftir_rl.motion.ftl import kappa_to_angles
 from aftir_rl.robot import _bend_rotations, body_points
 from aftir_rl.tank import load_tank
 from aftir_rl.tank.solids import Box, Cylinder, Sphere
+from tests.helpers import random_ftl_batch
 
 
 def random_tank(seed):
@@ -47,18 +48,6 @@ TANKS = ["b737_center", "single_cabin", "open_space_obstacles1", "random"]
 
 def tank_named(name):
     return random_tank(11) if name == "random" else load_tank(name)
-
-
-def random_batch(tank, rng, b, **kwargs):
-    """A batch in random states: routes bent up to θ_max, tips anywhere along them."""
-    batch = FTLBatch(tank, tank.arm.max_sections, b, 10, 0.1, 5.0, 10.0, 1.0, 2.0, "", **kwargs)
-    n = batch.n
-    r = rng.uniform(0, 1, (b, n)) ** 2 * tank.arm.theta_max * rng.uniform(0, 1, (b, 1))
-    a = rng.uniform(-np.pi, np.pi, (b, n))
-    batch.kappa = np.stack([r * np.cos(a), r * np.sin(a)], -1)
-    batch.s = rng.uniform(0, batch.s_max, b)
-    batch.k = np.minimum(np.floor(batch.s / batch.l).astype(np.int64), n - 1)
-    return batch
 
 
 def numpy_refresh(batch):
@@ -97,7 +86,7 @@ def test_sdf_is_the_tanks_signed_distance(name):
 def test_refresh_is_the_numpy_pipeline(name):
     tank = tank_named(name)
     rng = np.random.default_rng(1)
-    batch = random_batch(tank, rng, 1500)
+    batch = random_ftl_batch(tank, rng, 1500)
     batch.refresh()
     theta, phi, pts, heading, body, ray, use = numpy_refresh(batch)
     np.testing.assert_allclose(batch.theta, theta, atol=1e-12)
@@ -140,7 +129,7 @@ def numpy_advance(kappa, k, s, action, target_mode, ks, push, limit, l):
 def test_advance_is_the_numpy_step(target_mode):
     tank = load_tank("b737_center")
     rng = np.random.default_rng(2)
-    batch = random_batch(tank, rng, 2000)
+    batch = random_ftl_batch(tank, rng, 2000)
     action = rng.uniform(-1, 1, (2000, 3))
     action[:50] = np.sign(action[:50])  # the bounds
     args = (target_mode, 0.1, 5.0, tank.arm.theta_max, batch.l)
