@@ -40,6 +40,10 @@ def single_rate(env_id: str, steps: int, **kwargs) -> float:
         acts = [env.action_space.sample() for _ in range(steps)]
     else:
         acts = list(actions(env.action_space.shape, steps))
+    for a in acts[:200]:  # warm: compiled kernels loaded, caches filled
+        _, _, term, trunc, _ = env.step(a)
+        if term or trunc:
+            env.reset()
     start = time.perf_counter()
     for a in acts:
         _, _, term, trunc, _ = env.step(a)

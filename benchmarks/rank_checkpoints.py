@@ -14,9 +14,12 @@ from 1,000,000, the docs' test sets from 777,000 and 2,000,000, training's fixed
   ``S + 500,000 ..``.
 
 Each checkpoint's deterministic policy runs every target once, all targets as rows of the batched
-env (the same transitions as the single env: ``tests/test_arm_ftl.py``). Prints a markdown table
-with the success and contact rates per set, and the checkpoint with the best mean success marked.
-Choose a checkpoint here, then measure it on test targets with ``python -m aftir_rl.evaluate``.
+env (the same transitions as the single env for the same actions: ``tests/test_arm_ftl.py``; the
+policy's actions for a batch differ from one-by-one predictions by about 1e-6, float32
+rounding, which can turn an episode that grazes a wall or the tolerance either way). Prints a
+markdown table with the success and contact rates per set, and the checkpoint with the best
+mean success marked. Choose a checkpoint here, then measure it on test targets with
+``python -m aftir_rl.evaluate``.
 """
 
 from __future__ import annotations
