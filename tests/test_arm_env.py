@@ -77,7 +77,15 @@ def test_render():
     assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.std() > 10
 
 
-@pytest.mark.parametrize("algo, steps", [("ppo", 256), ("sac", 200), ("td3", 200)])
+@pytest.mark.parametrize(
+    "algo, steps",
+    [
+        ("ppo", 256),
+        # off-policy loops: the fast tier has SAC+HER on AFTIR-ArmFTL-v0 (test_arm_ftl.py)
+        pytest.param("sac", 200, marks=pytest.mark.slow),
+        pytest.param("td3", 200, marks=pytest.mark.slow),
+    ],
+)
 def test_smoke_training_writes_tensorboard(tmp_path, algo, steps, capsys):
     config = tmp_path / f"{algo}.yaml"
     hyper = (
