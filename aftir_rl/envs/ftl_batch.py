@@ -271,10 +271,14 @@ CORNER_DEPTH = 15.0
 def _corner_candidates(
     rng: np.random.Generator, lo: NDArray[np.float64], hi: NDArray[np.float64], clearance: float
 ) -> NDArray[np.float64]:
-    """64 points ``(64, 3)``, each in the cube ``clearance`` inward from a random corner."""
+    """64 points ``(64, 3)``, each in the cube ``clearance`` inward from a random corner.
+
+    Kept inside the region (a region narrower than the cubes gets points on its faces, which the
+    clearance check rejects).
+    """
     high = rng.integers(0, 2, (64, 3)).astype(bool)
     depth = clearance + rng.uniform(0.0, CORNER_DEPTH, (64, 3))
-    return np.where(high, hi - depth, lo + depth)
+    return np.minimum(np.maximum(np.where(high, hi - depth, lo + depth), lo), hi)
 
 
 def raster_distance_table(tank: Tank) -> NDArray[np.int32]:
