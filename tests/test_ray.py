@@ -187,6 +187,7 @@ def test_search_space_is_checked(tmp_path, text, message):
         load_search_space(path, "ppo", base)
 
 
+@pytest.mark.slow  # a CLI subprocess; load_search_space's errors are checked in-process above
 def test_bad_space_file_is_one_line(tmp_path):
     pytest.importorskip("ray")
     space = tmp_path / "space.yaml"
