@@ -36,8 +36,9 @@ from tqdm import tqdm
 import aftir_rl  # noqa: F401
 from aftir_rl.agents.sb3 import load_model
 from aftir_rl.agents.sb3_config import TRAINING_ONLY_KWARGS
+from aftir_rl.agents.sb3_load import sb3_config_from_run
 from aftir_rl.errors import AftirError
-from aftir_rl.run import load_sb3_run
+from aftir_rl.safety import read_json
 
 ENV_ID = "AFTIR-ArmFTL-v0"
 CORNER_SEED_OFFSET = 500_000
@@ -84,23 +85,24 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     torch.set_num_threads(1)
     try:
-        run = load_sb3_run(args.run)
-        if run.config.env_id != ENV_ID:
-            raise AftirError(f"{args.run} is a run of {run.config.env_id}, not {ENV_ID}")
+        source = str(Path(args.run, "config.json"))  # checked key by key; no model loaded
+        algo, config = sb3_config_from_run(read_json(source, "config.json"), source)
+        if config.env_id != ENV_ID:
+            raise AftirError(f"{args.run} is a run of {config.env_id}, not {ENV_ID}")
         paths = sorted(
             Path(args.run, "checkpoints").glob("model_*.zip"),
             key=lambda p: int(p.stem.split("_")[-1]),
         )
         if not paths:
             raise AftirError(f"{args.run} has no checkpoints/model_*.zip")
-        kwargs = {k: v for k, v in run.config.env_kwargs.items() if k not in TRAINING_ONLY_KWARGS}
+        kwargs = {k: v for k, v in config.env_kwargs.items() if k not in TRAINING_ONLY_KWARGS}
         fresh = validation_targets(kwargs, args.fresh, args.seed, corners=False)
         corner = validation_targets(
             kwargs, args.corners, args.seed + CORNER_SEED_OFFSET, corners=True
         )
         rows = []
         for path in tqdm(paths, desc="checkpoints", file=sys.stderr):
-            model = load_model(run.algo, path, config=run.config)
+            model = load_model(algo, path, config=config)
             f_ok, f_hit = rollout(model, kwargs, fresh)
             c_ok, c_hit = rollout(model, kwargs, corner)
             rows.append((path.name, f_ok.mean(), f_hit.mean(), c_ok.mean(), c_hit.mean()))

@@ -235,7 +235,9 @@ def draw_targets(
     if biased > 0 and corners > 0:
         raise ConfigError("draw_targets: draw biased or corner targets, not both")
     want = np.array([biased > 0 and rng.random() < biased for rng in rngs], dtype=bool)
-    corner = np.array([corners > 0 and rng.random() < corners for rng in rngs], dtype=bool)
+    corner = np.zeros(len(rngs), dtype=bool)
+    if corners > 0:
+        corner[:] = [rng.random() < corners for rng in rngs]
     for _ in range(200):
         if not len(todo):
             return out
