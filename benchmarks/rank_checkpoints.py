@@ -34,8 +34,7 @@ import torch
 from tqdm import tqdm
 
 import aftir_rl  # noqa: F401
-from aftir_rl.agents.sb3 import load_model
-from aftir_rl.agents.sb3_config import TRAINING_ONLY_KWARGS
+from aftir_rl.agents.sb3 import evaluation_env_kwargs, load_model
 from aftir_rl.agents.sb3_load import sb3_config_from_run
 from aftir_rl.errors import AftirError
 from aftir_rl.safety import read_json
@@ -95,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         if not paths:
             raise AftirError(f"{args.run} has no checkpoints/model_*.zip")
-        kwargs = {k: v for k, v in config.env_kwargs.items() if k not in TRAINING_ONLY_KWARGS}
+        kwargs = evaluation_env_kwargs(config.env_kwargs)
         fresh = validation_targets(kwargs, args.fresh, args.seed, corners=False)
         corner = validation_targets(
             kwargs, args.corners, args.seed + CORNER_SEED_OFFSET, corners=True

@@ -353,6 +353,44 @@ def test_corner_bias_draws_targets_in_the_regions_corners():
         ArmFTLEnv(bay=2, corner_bias=0.5, detour_bias=0.5)
 
 
+def test_slack_tightens_training_and_evaluations_drop_it():
+    """slack: success within tolerance − slack, contact below margin + slack; training-only."""
+    from aftir_rl.agents.sb3_eval import evaluation_env_kwargs, evaluation_targets
+
+    plain, strict = ArmFTLEnv(bay=2), ArmFTLEnv(bay=2, slack=0.5)
+    assert (strict.batch.success_tolerance, strict.batch.margin) == (1.5, 1.5)
+    assert (plain.batch.success_tolerance, plain.batch.margin) == (2.0, 1.0)
+    target = np.array([[300.0, 100.0, 60.0]])
+    info = {"prev_achieved_goal": target + [[0.0, 0.0, 3.0]], "contact": False}
+    for d, both in ((1.8, False), (1.2, True)):
+        tip = target + [[0.0, 0.0, d]]
+        # the success bonus is paid on the plain rule at 1.8 cm, on the strict one only at 1.2
+        assert plain.compute_reward(tip, target, info)[0] > 5
+        assert (strict.compute_reward(tip, target, info)[0] > 5) == both
+    # pushed straight up in 0.5 cm steps, the same arm ends on contact at 1.5 cm with slack
+    ends = []
+    for env in (plain, strict):
+        env.reset(seed=4)
+        for _ in range(2000):
+            _, _, terminated, _, info = env.step(np.array([0.0, 0.0, 0.1], dtype=np.float32))
+            if terminated:
+                break
+        assert info["contact"] and not info["is_success"]
+        ends.append((info["min_clearance_cm"], env.batch.dis[0]))
+    (clear_plain, dis_plain), (clear_strict, dis_strict) = ends
+    assert 0.5 <= clear_plain < 1.0 <= clear_strict < 1.5 and dis_strict < dis_plain
+    np.testing.assert_array_equal(
+        plain.reset(seed=9)[1]["target"], strict.reset(seed=9)[1]["target"]
+    )
+    # evaluations build the env without it (and without the other training-only kwargs)
+    kwargs = {"bay": 2, "guide": True, "slack": 0.5, "corner_bias": 0.25, "target_clearance": 6}
+    assert evaluation_env_kwargs(kwargs) == {"bay": 2, "guide": True}
+    np.testing.assert_array_equal(
+        evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2, "slack": 0.5}),
+        evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2}),
+    )
+
+
 @pytest.mark.parametrize(
     "kwargs, error",
     [
@@ -363,6 +401,9 @@ def test_corner_bias_draws_targets_in_the_regions_corners():
         ({"detour_bias": -0.1}, ConfigError),
         ({"corner_bias": 1.5}, ConfigError),
         ({"corner_bias": True}, ConfigError),
+        ({"slack": -0.1}, ConfigError),
+        ({"slack": 2.0}, ConfigError),
+        ({"slack": True}, ConfigError),
         ({"target": (0, 60, 50)}, TargetError),
         ({"target": (500, 0, 10)}, TargetError),
     ],

@@ -38,6 +38,7 @@ from aftir_rl.agents.sb3_eval import (
     AtomicCheckpoint,
     Period,
     evaluate_policy_on_targets,
+    evaluation_env_kwargs,
     evaluation_targets,
     save_model,
 )
@@ -60,6 +61,7 @@ __all__ = [
     "check_sb3_config",
     "constructor_keys",
     "evaluate_policy_on_targets",
+    "evaluation_env_kwargs",
     "evaluation_targets",
     "load_model",
     "load_run",

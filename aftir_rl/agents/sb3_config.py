@@ -329,6 +329,7 @@ ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
         "start_height": (int, float),
         "detour_bias": (int, float),
         "corner_bias": (int, float),
+        "slack": (int, float),
         "steer": (str,),
         "step_cost": (int, float),
     },
@@ -340,9 +341,10 @@ ENV_KWARG_CHOICES: dict[str, tuple[object, ...]] = {
 }
 #: Env keyword arguments that only change how training draws its targets (``target_clearance``:
 #: how near the surfaces they may lie; ``detour_bias``: how often behind obstacles;
-#: ``corner_bias``: how often in the corners): evaluation targets are drawn without them, so
-#: every run of an env is measured on the same targets.
-TRAINING_ONLY_KWARGS = ("detour_bias", "target_clearance", "corner_bias")
+#: ``corner_bias``: how often in the corners) or how strictly it judges them (``slack``: a
+#: tighter tolerance and a wider margin): evaluations go without them, so every run of an env
+#: is measured on the same targets by the same rule.
+TRAINING_ONLY_KWARGS = ("detour_bias", "target_clearance", "corner_bias", "slack")
 #: Envs with a batched implementation: ``n_envs`` are rows of one process (at most
 #: :data:`MAX_BATCHED_ENVS`), not subprocesses (at most 64).
 BATCHED_ENV_IDS = ("AFTIR-ArmFTL-v0",)

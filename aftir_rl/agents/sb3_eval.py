@@ -29,6 +29,7 @@ from aftir_rl.config import EVAL_SEED
 
 __all__ = [
     "EVAL_SEED",
+    "evaluation_env_kwargs",
     "evaluation_targets",
     "evaluate_policy_on_targets",
     "Period",
@@ -38,16 +39,24 @@ __all__ = [
 ]
 
 
+def evaluation_env_kwargs(env_kwargs: dict[str, Any] | None) -> dict[str, Any]:
+    """A run's env kwargs as evaluations use them: without the training-only ones.
+
+    The keys of :data:`~aftir_rl.agents.sb3_config.TRAINING_ONLY_KWARGS` change how training
+    draws or judges its targets, not the env's spaces: every run of an env is evaluated on the
+    same targets by the same rule.
+    """
+    return {k: v for k, v in (env_kwargs or {}).items() if k not in TRAINING_ONLY_KWARGS}
+
+
 def evaluation_targets(
     env_id: str, count: int, seed: int = EVAL_SEED, env_kwargs: dict[str, Any] | None = None
 ) -> list[np.ndarray]:
     """A fixed set of targets drawn by the env's own sampler, reset ``i`` seeded ``seed + i``.
 
-    The keys of :data:`~aftir_rl.agents.sb3_config.TRAINING_ONLY_KWARGS` are left out: the
-    targets are those of the env as evaluated, not as its training drew them.
+    Drawn by the env as evaluated (:func:`evaluation_env_kwargs`), not as its training drew them.
     """
-    kwargs = {k: v for k, v in (env_kwargs or {}).items() if k not in TRAINING_ONLY_KWARGS}
-    env = gym.make(env_id, **kwargs)
+    env = gym.make(env_id, **evaluation_env_kwargs(env_kwargs))
     targets = []
     for i in range(count):
         _, info = env.reset(seed=seed + i)
@@ -84,7 +93,8 @@ def evaluate_policy_on_targets(
         targets: evaluation targets [cm].
         clearance: also measure the smallest clearance along each motion (python-fcl distance
             at every step; slower).
-        env_kwargs: keyword arguments of the env (the run's ``SB3Config.env_kwargs``).
+        env_kwargs: keyword arguments of the env (the run's ``SB3Config.env_kwargs``; the
+            training-only ones are left out, :func:`evaluation_env_kwargs`).
 
     Returns:
         Means over targets (``success_rate``, ``tip_error_cm``, ``path_length_cm``,
@@ -93,7 +103,7 @@ def evaluate_policy_on_targets(
         ``tank`` for a picture.
 
     """
-    env = gym.make(env_id, **(env_kwargs or {}))
+    env = gym.make(env_id, **evaluation_env_kwargs(env_kwargs))
     arm: Any = env.unwrapped  # an arm env: tip, posture, scene, body(), tank
     rows, smallest, first = [], np.inf, {}
     for i, target in enumerate(targets):

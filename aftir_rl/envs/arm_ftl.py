@@ -161,6 +161,11 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
       region instead (``target_clearance`` to ``target_clearance`` + 15 cm inward from one of
       its eight corners, free as the others): where the arm bends most with walls on three
       sides. A curriculum knob for training, like ``detour_bias`` (not both at once).
+    - ``slack`` (0 cm): training demands this much more than the success rule: the tip within
+      ``success_tolerance − slack``, the surface clearance at least ``margin + slack``. A policy
+      trained so keeps that much in hand when it is measured by the rule itself, instead of
+      ending its episodes exactly at the 2 cm tolerance or the 1 cm margin, where float
+      rounding decides. Training-only, like ``detour_bias``: evaluations drop it.
     - ``steer`` (``"increment"``): what the two steering actions command, a change of ``κ``
       or ``"target"``, the bend itself (Action Space).
     - ``step_cost`` (0): a cost paid on every step (at most 0.03, so that ending an episode
@@ -197,6 +202,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         steer: str = "increment",
         step_cost: float = 0.0,
         corner_bias: float = 0.0,
+        slack: float = 0.0,
         render_mode: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -221,6 +227,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
             steer,
             step_cost,
             corner_bias,
+            slack,
         )
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
@@ -363,6 +370,7 @@ class ArmFTLVectorEnv(
         steer: str = "increment",
         step_cost: float = 0.0,
         corner_bias: float = 0.0,
+        slack: float = 0.0,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
     ) -> None:
@@ -392,6 +400,7 @@ class ArmFTLVectorEnv(
             steer,
             step_cost,
             corner_bias,
+            slack,
         )
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)

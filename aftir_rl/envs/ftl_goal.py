@@ -176,6 +176,8 @@ class _GoalReward:
 #: The largest ``step_cost``: 300 steps of it stay below the contact penalty, so ending an
 #: episode on contact never pays better than waiting.
 MAX_STEP_COST = 0.03
+#: ``slack`` stays below this [cm] (and below ``success_tolerance``).
+MAX_SLACK = 5.0
 
 #: What the two steering actions may command: a change of the steered ``κ``, or ``κ`` itself.
 STEER_MODES = ("increment", "target")
@@ -222,6 +224,7 @@ class _Setup:
         steer: str = "increment",
         step_cost: float = 0.0,
         corner_bias: float = 0.0,
+        slack: float = 0.0,
     ) -> None:
         self.tank = load_tank(tank)
         if steer not in STEER_MODES:
@@ -240,6 +243,15 @@ class _Setup:
                 raise ConfigError(f"{name} must be positive and finite, got {value}")
         if push_step > arm.section_length:
             raise ConfigError(f"push_step must be at most the section length, got {push_step}")
+        if not (
+            isinstance(slack, int | float)
+            and not isinstance(slack, bool)
+            and 0 <= slack < min(success_tolerance, MAX_SLACK)
+        ):
+            raise ConfigError(
+                f"slack must be in [0, {MAX_SLACK:g}) cm and below success_tolerance, got {slack!r}"
+            )
+        self.slack = float(slack)
         if not 0 <= margin < 20 or not 0 <= target_clearance < 100:
             raise ConfigError("margin must be in [0, 20) cm and target_clearance in [0, 100) cm")
         if samples_per_section < 2:
@@ -278,8 +290,8 @@ class _Setup:
             kappa_step,
             push_step,
             start_height,
-            margin,
-            success_tolerance,
+            margin + self.slack,
+            success_tolerance - self.slack,
             shaping,
             guide,
             steer,
