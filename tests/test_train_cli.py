@@ -215,3 +215,18 @@ def test_all_targets_run(tmp_path, capsys):
     acc = _events(run_dir)
     assert "eval/success_rate" in acc.Tags()["scalars"]
     assert train.main(["q_table", "--all-targets", "--target", "1", "2", "3"]) == 2
+
+
+def test_linear_learning_rate_falls_to_zero_over_a_learn_call():
+    """``learning_rate: lin_X`` (RL Zoo's form): X at the start of ``learn``, 0 at its end."""
+    from aftir_rl.agents.sb3_config import SB3Config, build_model, check_sb3_config
+
+    hyper = {"learning_rate": "lin_1e-3", "n_steps": 64, "batch_size": 64, "n_epochs": 1}
+    config = SB3Config(env_id="AFTIR-ArmReach-v0", n_envs=1, hyperparameters=hyper)
+    check_sb3_config(config, "ppo", "test")
+    model = build_model("ppo", config, gym.make("AFTIR-ArmReach-v0"))
+    assert model.lr_schedule(1.0) == pytest.approx(1e-3)
+    assert model.lr_schedule(0.25) == pytest.approx(2.5e-4)
+    model.learn(128)  # two rollouts: the updates run at progress 0.5, then 0
+    assert model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(0.0)
+    assert config.hyperparameters["learning_rate"] == "lin_1e-3"  # config.json keeps the text

@@ -445,6 +445,8 @@ def test_tank_cli_one_line_and_closed_stdout(tmp_path):
     [
         ("hyperparameters:\n  n_steps: -5\n", "n_steps"),
         ("hyperparameters:\n  learning_rate: fast\n", "learning_rate"),
+        ("hyperparameters:\n  learning_rate: lin_fast\n", "learning_rate"),
+        ("hyperparameters:\n  learning_rate: lin_50\n", "learning_rate"),
         ("hyperparameters:\n  gamma: 7\n", "gamma"),
         ("hyperparameters:\n  policy_kwargs: {net_arch: [100000000]}\n", "net_arch"),
         ("hyperparameters:\n  rollout_buffer_class: os.system\n", "Python object"),

@@ -162,6 +162,21 @@ _CONFIG_RANGES = {
 }
 
 
+#: Prefix of a learning rate that falls linearly to 0 over a ``learn`` call (RL Zoo's
+#: ``lin_3e-4``): with ``--resume``, over the steps of the resumed stage.
+LINEAR_PREFIX = "lin_"
+
+
+def linear_start(value: Any) -> float | None:
+    """The starting value of a ``lin_<number>`` schedule, or None for anything else."""
+    if not (isinstance(value, str) and value.startswith(LINEAR_PREFIX)):
+        return None
+    try:
+        return float(value[len(LINEAR_PREFIX) :])
+    except ValueError:
+        return math.nan
+
+
 def _check_range(value: Any, lo: float, hi: float, where: str, integer: bool) -> None:
     kind = "an integer" if integer else "a number"
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -216,6 +231,14 @@ def check_sb3_config(config: SB3Config, algo: str, source: str) -> None:
         where = f"{source}: hyperparameters.{key}"
         if key in _INT_RANGES:
             _check_range(value, *_INT_RANGES[key], where, integer=True)
+        elif key == "learning_rate" and isinstance(value, str):
+            start = linear_start(value)
+            if start is None or math.isnan(start):
+                raise ConfigError(
+                    f"{where}: expected a number or {LINEAR_PREFIX}<number> (falling linearly to "
+                    f"0), got {brief(value)}"
+                )
+            _check_range(start, *_FLOAT_RANGES[key], where, integer=False)
         elif key in _FLOAT_RANGES:
             _check_range(value, *_FLOAT_RANGES[key], where, integer=False)
         elif key in _OPTIONAL_FLOATS:
@@ -447,6 +470,11 @@ def build_model(
 
     """
     hyper = dict(config.hyperparameters)
+    start = linear_start(hyper.get("learning_rate"))
+    if start is not None:
+        from stable_baselines3.common.utils import get_linear_fn
+
+        hyper["learning_rate"] = get_linear_fn(start, 0.0, 1.0)
     if config.her and not evaluation:
         from stable_baselines3 import HerReplayBuffer
 
