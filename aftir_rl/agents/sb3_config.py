@@ -472,9 +472,9 @@ def build_model(
     hyper = dict(config.hyperparameters)
     start = linear_start(hyper.get("learning_rate"))
     if start is not None:
-        from stable_baselines3.common.utils import get_linear_fn
+        from stable_baselines3.common.utils import LinearSchedule
 
-        hyper["learning_rate"] = get_linear_fn(start, 0.0, 1.0)
+        hyper["learning_rate"] = LinearSchedule(start, 0.0, 1.0)
     if config.her and not evaluation:
         from stable_baselines3 import HerReplayBuffer
 
