@@ -217,8 +217,9 @@ def test_all_targets_run(tmp_path, capsys):
     assert train.main(["q_table", "--all-targets", "--target", "1", "2", "3"]) == 2
 
 
-def test_linear_learning_rate_falls_to_zero_over_a_learn_call():
+def test_linear_learning_rate_falls_to_zero_over_a_learn_call(tmp_path):
     """``learning_rate: lin_X`` (RL Zoo's form): X at the start of ``learn``, 0 at its end."""
+    from aftir_rl.agents.sb3 import load_model
     from aftir_rl.agents.sb3_config import SB3Config, build_model, check_sb3_config
 
     hyper = {"learning_rate": "lin_1e-3", "n_steps": 64, "batch_size": 64, "n_epochs": 1}
@@ -230,3 +231,7 @@ def test_linear_learning_rate_falls_to_zero_over_a_learn_call():
     model.learn(128)  # two rollouts: the updates run at progress 0.5, then 0
     assert model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(0.0)
     assert config.hyperparameters["learning_rate"] == "lin_1e-3"  # config.json keeps the text
+    # what SB3 saves of the schedule is a class the safe loader knows, not a pickled function
+    model.save(tmp_path / "model.zip")
+    loaded = load_model("ppo", tmp_path / "model.zip", config=config)
+    assert loaded.lr_schedule(0.5) == pytest.approx(5e-4)
