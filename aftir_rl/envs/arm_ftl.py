@@ -162,10 +162,10 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
       its eight corners, free as the others): where the arm bends most with walls on three
       sides. A curriculum knob for training, like ``detour_bias`` (not both at once).
     - ``slack`` (0 cm): training demands this much more than the success rule: the tip within
-      ``success_tolerance − slack``, the surface clearance at least ``margin + slack``. A policy
-      trained so keeps that much in hand when it is measured by the rule itself, instead of
-      ending its episodes exactly at the 2 cm tolerance or the 1 cm margin, where float
-      rounding decides. Training-only, like ``detour_bias``: evaluations drop it.
+      ``success_tolerance − slack``, the surface clearance at least ``margin + slack``, so that
+      a policy measured by the rule itself has that much in hand rather than ending its
+      episodes exactly at the 2 cm tolerance or the 1 cm margin (docs/benchmarks.md measures
+      it). Training-only, like ``detour_bias``: evaluations drop it.
     - ``steer`` (``"increment"``): what the two steering actions command, a change of ``κ``
       or ``"target"``, the bend itself (Action Space).
     - ``step_cost`` (0): a cost paid on every step (at most 0.03, so that ending an episode
