@@ -168,7 +168,7 @@ LINEAR_PREFIX = "lin_"
 
 
 def linear_start(value: Any) -> float | None:
-    """The starting value of a ``lin_<number>`` schedule, or None for anything else."""
+    """The starting value of a ``lin_<number>`` schedule (NaN if not a number), else None."""
     if not (isinstance(value, str) and value.startswith(LINEAR_PREFIX)):
         return None
     try:
@@ -232,13 +232,12 @@ def check_sb3_config(config: SB3Config, algo: str, source: str) -> None:
         if key in _INT_RANGES:
             _check_range(value, *_INT_RANGES[key], where, integer=True)
         elif key == "learning_rate" and isinstance(value, str):
-            start = linear_start(value)
-            if start is None or math.isnan(start):
+            start, (low, high) = linear_start(value), _FLOAT_RANGES[key]
+            if start is None or not (math.isfinite(start) and low <= start <= high):
                 raise ConfigError(
-                    f"{where}: expected a number or {LINEAR_PREFIX}<number> (falling linearly to "
-                    f"0), got {brief(value)}"
+                    f"{where}: expected a number or {LINEAR_PREFIX}<number> from {low:g} to "
+                    f"{high:g} (falling linearly to 0), got {brief(value)}"
                 )
-            _check_range(start, *_FLOAT_RANGES[key], where, integer=False)
         elif key in _FLOAT_RANGES:
             _check_range(value, *_FLOAT_RANGES[key], where, integer=False)
         elif key in _OPTIONAL_FLOATS:
