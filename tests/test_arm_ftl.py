@@ -63,9 +63,11 @@ def test_spaces_and_registration():
     assert env.unwrapped.batch.n == 12
 
 
-@pytest.mark.parametrize("shaping", [False, True, "field"])
-def test_compute_reward_matches_step_rewards_in_batches(shaping):
-    env = gym.make(ENV_ID, shaping=shaping, max_episode_steps=60)
+@pytest.mark.parametrize(
+    "shaping, guide", [(False, False), (True, False), ("field", False), ("field", True)]
+)
+def test_compute_reward_matches_step_rewards_in_batches(shaping, guide):
+    env = gym.make(ENV_ID, shaping=shaping, guide=guide, max_episode_steps=60)
     rng = np.random.default_rng(1)
     # Push in mostly, so that the rollouts bend, touch and sometimes succeed.
     actions = rng.uniform(-1, 1, (400, 3)).astype(np.float32)
@@ -429,8 +431,8 @@ def test_tank_distance_is_point_clearance(tank):
     np.testing.assert_allclose(TankDistance(tank)(p), point_clearance(tank, p), atol=1e-9)
 
 
-@pytest.mark.parametrize("shaping", [False, "field"])
-def test_vector_env_matches_single_envs(shaping):
+@pytest.mark.parametrize("shaping, guide", [(False, False), ("field", False), ("field", True)])
+def test_vector_env_matches_single_envs(shaping, guide):
     b, steps = 4, 120
     rng = np.random.default_rng(5)
     actions = rng.uniform(-1, 1, (steps, b, 3)).astype(np.float32)
@@ -441,6 +443,7 @@ def test_vector_env_matches_single_envs(shaping):
         vectorization_mode="vector_entry_point",
         max_episode_steps=40,
         shaping=shaping,
+        guide=guide,
     )
     obs, _ = venv.reset(seed=10)
     v_rows = []
@@ -449,7 +452,7 @@ def test_vector_env_matches_single_envs(shaping):
         v_rows.append((obs, r, term, trunc, nxt))
         obs = nxt
     for i in range(b):
-        env = gym.make(ENV_ID, max_episode_steps=40, shaping=shaping)
+        env = gym.make(ENV_ID, max_episode_steps=40, shaping=shaping, guide=guide)
         o, _ = env.reset(seed=10 + i)
         done = False
         for t in range(steps):
@@ -466,6 +469,30 @@ def test_vector_env_matches_single_envs(shaping):
             o, r, term, trunc, _ = env.step(actions[t, i])
             assert (r, term, trunc) == (v_r[i], v_term[i], v_trunc[i])
             done = term or trunc
+
+
+def test_reward_reuses_the_observations_guide_query(monkeypatch):
+    """With the guide observed, a step asks the guide once: the reward reuses the answer."""
+    from aftir_rl.envs.ftl_batch import FieldGuide
+
+    venv = gym.make_vec(
+        ENV_ID, num_envs=8, vectorization_mode="vector_entry_point", shaping="field", guide=True
+    )
+    venv.reset(seed=3)
+    batch = venv.unwrapped.batch
+    # targets are kept as the float32 goals the reward is given
+    np.testing.assert_array_equal(batch.target, batch.target.astype(np.float32))
+    calls = []
+    query = FieldGuide.__call__
+    monkeypatch.setattr(FieldGuide, "__call__", lambda *a: calls.append(1) or query(*a))
+    action = np.tile([0.3, -0.2, 1.0], (8, 1)).astype(np.float32)
+    venv.step(action)  # the first step asks for the potentials at the start too
+    calls.clear()
+    _, reward, term, trunc, _ = venv.step(action)
+    assert not (term | trunc).any() and len(calls) == 1
+    tips, targets, to_go = batch.guide_memo
+    fresh, _ = query(batch.fields, tips, targets, batch.fields.field_ids(targets))
+    np.testing.assert_array_equal(to_go, fresh)
 
 
 def test_vector_env_targets_option():

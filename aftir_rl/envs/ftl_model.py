@@ -150,6 +150,11 @@ class FTLBatch:
         self.fields = field_guide(tank) if guide or shaping == "field" else None
         self.guide = self.fields if guide else None
         self.guide_ids = np.zeros(self.b, dtype=np.int64)
+        #: The last full observation's guide query: tips, targets (both ``(B, 3)``) and their
+        #: distance-to-go ``(B,)`` (None before the first), for the reward to reuse.
+        self.guide_memo: (
+            tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None
+        ) = None
         self._guide_generation = self.fields.generation if self.fields is not None else 0
         if self.fields is not None and self.fields.capacity < 2 * self.b:
             raise ConfigError(
@@ -235,10 +240,14 @@ class FTLBatch:
             out,
         )
         if self.guide is not None:
-            tip = self.tip if every else self.tip[rows]
+            # the tips as the goal space holds them (float32), so that the reward's potential,
+            # asked at the observed goals, can reuse this query (:attr:`guide_memo`)
+            tip = (self.tip if every else self.tip[rows]).astype(np.float32).astype(np.float64)
             target = self.target if every else self.target[rows]
             ids = self.target_fields() if every else self.target_fields()[rows]
             to_go, direction = self.guide(tip, target, ids)
+            if every:
+                self.guide_memo = (tip, target.copy(), to_go)
             kernel.guide_columns(
                 self.steering_frames(None if every else rows),
                 to_go,
@@ -283,7 +292,9 @@ class FTLBatch:
         self.kappa[rows] = 0.0
         self.k[rows] = 0
         self.s[rows] = self.start_height
-        self.target[rows] = targets
+        # kept as float32 values, as the goal space holds them: the observation's guide and the
+        # reward ask about the same point
+        self.target[rows] = np.asarray(targets, dtype=np.float32)
         if self.fields is not None:
             generation = self.fields.generation
             self.guide_ids[rows] = self.fields.field_ids(self.target[rows])
