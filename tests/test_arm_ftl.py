@@ -386,11 +386,71 @@ def test_slack_tightens_training_and_evaluations_drop_it():
     )
     # evaluations build the env without it (and without the other training-only kwargs)
     kwargs = {"bay": 2, "guide": True, "slack": 0.5, "corner_bias": 0.25, "target_clearance": 6}
-    assert evaluation_env_kwargs(kwargs) == {"bay": 2, "guide": True}
+    assert evaluation_env_kwargs({**kwargs, "failure_bias": 0.5}) == {"bay": 2, "guide": True}
     np.testing.assert_array_equal(
         evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2, "slack": 0.5}),
         evaluation_targets(ENV_ID, 5, env_kwargs={"bay": 2}),
     )
+
+
+def test_failure_bias_draws_targets_where_episodes_fail():
+    """failure_bias: targets come up in proportion to their cell's failure rate."""
+    rows = 512
+    biased, plain = (
+        gym.make_vec(
+            ENV_ID, num_envs=rows, vectorization_mode="vector_entry_point", bay=2, **kwargs
+        ).unwrapped
+        for kwargs in ({"failure_bias": 1.0, "corner_bias": 0.25}, {"corner_bias": 0.25})
+    )
+    raster = biased.tank.raster
+    # every cell solved except the cell of a random target, failed every time
+    _, info = plain.reset(seed=50)
+    hard = raster.cell_indices(info["target"])[7]
+    cells = np.arange(raster.n_cells)
+    rates = biased.failures
+    for _ in range(400):
+        rates.record(cells, cells != hard)
+    assert rates.count == 400 * len(cells)
+    np.testing.assert_allclose(rates.weight(cells), np.where(cells == hard, 1.0, rates.floor))
+    counts = []
+    for env in (biased, plain):
+        _, info = env.reset(seed=60)
+        counts.append(int((raster.cell_indices(info["target"]) == hard).sum()))
+    # about rows/len(cells) uniformly (a few), about rows/(1 + 0.05 (cells − 1)) biased
+    assert counts[0] >= 4 * max(counts[1], 3), counts
+
+
+@pytest.mark.parametrize("vector", [False, True])
+def test_failure_bias_records_every_ended_episode(vector):
+    rng = np.random.default_rng(8)
+    actions = rng.uniform(-1, 1, (120, 4, 3)).astype(np.float32)
+    actions[..., 2] = np.abs(actions[..., 2])
+    if vector:
+        env = gym.make_vec(
+            ENV_ID,
+            num_envs=4,
+            vectorization_mode="vector_entry_point",
+            max_episode_steps=25,
+            failure_bias=0.5,
+            autoreset_mode="SameStep",
+        )
+        env.reset(seed=1)
+        ended = successes = 0
+        for a in actions:
+            _, _, term, trunc, info = env.step(a)
+            ended += int((term | trunc).sum())
+            successes += int(info["is_success"].sum())
+    else:
+        env = gym.make(ENV_ID, max_episode_steps=25, failure_bias=0.5)
+        steps = rollout(env, actions[:, 0], seed=1)
+        ended = sum(s[4] or s[5] for s in steps)
+        successes = sum(s[6]["is_success"] for s in steps)
+        env.reset()  # the episode under way when the rollout stopped ends without success
+        ended += not (steps[-1][4] or steps[-1][5])
+    rates = env.unwrapped.failures
+    assert ended > 4 and rates.count == ended and rates.seen.sum() >= 2
+    # the rates moved down from 1 only by successes
+    assert (rates.fail < 1).sum() <= successes
 
 
 @pytest.mark.parametrize(
@@ -406,6 +466,10 @@ def test_slack_tightens_training_and_evaluations_drop_it():
         ({"slack": -0.1}, ConfigError),
         ({"slack": 2.0}, ConfigError),
         ({"slack": True}, ConfigError),
+        ({"failure_bias": 1.5}, ConfigError),
+        ({"failure_bias": -0.1}, ConfigError),
+        ({"failure_bias": True}, ConfigError),
+        ({"failure_bias": 0.5, "detour_bias": 0.5}, ConfigError),
         ({"target": (0, 60, 50)}, TargetError),
         ({"target": (500, 0, 10)}, TargetError),
     ],

@@ -352,6 +352,7 @@ ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
         "detour_bias": (int, float),
         "corner_bias": (int, float),
         "slack": (int, float),
+        "failure_bias": (int, float),
         "steer": (str,),
         "step_cost": (int, float),
     },
@@ -363,10 +364,11 @@ ENV_KWARG_CHOICES: dict[str, tuple[object, ...]] = {
 }
 #: Env keyword arguments that only change how training draws its targets (``target_clearance``:
 #: how near the surfaces they may lie; ``detour_bias``: how often behind obstacles;
-#: ``corner_bias``: how often in the corners) or how strictly it judges them (``slack``: a
-#: tighter tolerance and a wider margin): evaluations go without them, so every run of an env
-#: is measured on the same targets by the same rule.
-TRAINING_ONLY_KWARGS = ("detour_bias", "target_clearance", "corner_bias", "slack")
+#: ``corner_bias``: how often in the corners; ``failure_bias``: how often where the policy
+#: fails) or how strictly it judges them (``slack``: a tighter tolerance and a wider margin):
+#: evaluations go without them, so every run of an env is measured on the same targets by the
+#: same rule.
+TRAINING_ONLY_KWARGS = ("detour_bias", "target_clearance", "corner_bias", "slack", "failure_bias")
 #: Envs with a batched implementation: ``n_envs`` are rows of one process (at most
 #: :data:`MAX_BATCHED_ENVS`), not subprocesses (at most 64).
 BATCHED_ENV_IDS = ("AFTIR-ArmFTL-v0",)

@@ -161,6 +161,14 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
       region instead (``target_clearance`` to ``target_clearance`` + 15 cm inward from one of
       its eight corners, free as the others): where the arm bends most with walls on three
       sides. A curriculum knob for training, like ``detour_bias`` (not both at once).
+    - ``failure_bias`` (0): the fraction of drawn targets whose density is weighted by the
+      running failure rate of the episodes aimed at their raster cell
+      (:class:`~aftir_rl.envs.ftl_goal.FailureRates`, kept by the env from its own episodes;
+      cells never aimed at count as hard): training comes back to where the policy still fails,
+      wherever that is. With ``corner_bias`` the corner targets are weighted too; not with
+      ``detour_bias``. Training-only, like ``detour_bias``; the rates start again with each
+      env (a resumed run learns them anew), and the vector env's targets then depend on its
+      rows' outcomes, not on the seeds alone.
     - ``slack`` (0 cm): training demands this much more than the success rule: the tip within
       ``success_tolerance − slack``, the surface clearance at least ``margin + slack``, so that
       a policy measured by the rule itself has that much in hand rather than ending its
@@ -203,6 +211,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         step_cost: float = 0.0,
         corner_bias: float = 0.0,
         slack: float = 0.0,
+        failure_bias: float = 0.0,
         render_mode: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -228,6 +237,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
             step_cost,
             corner_bias,
             slack,
+            failure_bias,
         )
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
@@ -236,6 +246,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         #: The shaping's potential at the tip (NaN: not known; see ``_step_reward``).
         self._potential: NDArray[np.float64] | None = np.full(1, np.nan)
         self._achieved = np.zeros((1, 3), dtype=np.float32)
+        self._open = False  # an episode has steps and has not ended (for failure_bias)
 
     @property
     def target(self) -> NDArray[np.float64]:
@@ -274,6 +285,9 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         """Straighten the arm just inside the panel and set a target."""
         super().reset(seed=seed)
         options = _check_options(options)
+        if self._open:  # the last episode ended without success (truncated or left)
+            self._record_outcomes(self.batch.target, [False])
+        self._open = False
         if options.get("target") is not None:
             target = self._check_target(options["target"])
         elif self.fixed_target is not None:
@@ -306,6 +320,9 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         )
         hit = bool(contact[0])
         success = bool(distance[0] < b.success_tolerance) and not hit
+        self._open = not (success or hit)
+        if not self._open:
+            self._record_outcomes(b.target, [success])
         info: dict[str, Any] = {
             "prev_achieved_goal": prev[0],
             "contact": hit,
@@ -371,6 +388,7 @@ class ArmFTLVectorEnv(
         step_cost: float = 0.0,
         corner_bias: float = 0.0,
         slack: float = 0.0,
+        failure_bias: float = 0.0,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
     ) -> None:
@@ -401,6 +419,7 @@ class ArmFTLVectorEnv(
             step_cost,
             corner_bias,
             slack,
+            failure_bias,
         )
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
@@ -499,6 +518,8 @@ class ArmFTLVectorEnv(
             min_clearance_cm=b.body_clearance.copy(),
         )
         done = terminated | truncated
+        ended = np.flatnonzero(done)
+        self._record_outcomes(b.target[ended], success[ended])
         if self.autoreset_mode is AutoresetMode.NEXT_STEP:
             self.prev_done = done
         elif done.any():  # SAME_STEP: the last observations go to info, the rows start again

@@ -220,11 +220,11 @@ def draw_targets(
     (points ``(..., 3)`` → values in ``[0, 1]``), so targets are drawn with density proportional to
     ``weight``. ``biased = 0`` draws nothing more: the targets are the same as without it.
 
-    With ``corners > 0`` (and ``biased = 0``) each generator first draws whether its target lies
-    in a corner of ``region`` (probability ``corners``): then its candidates are uniform in the
-    cubes of side :data:`CORNER_DEPTH` that start ``clearance`` inward from the region's eight
-    corners (a corner drawn per candidate), where an arm must bend most with walls on three
-    sides. The same checks apply.
+    With ``corners > 0`` each generator then draws whether its target lies in a corner of
+    ``region`` (probability ``corners``): then its candidates are uniform in the cubes of side
+    :data:`CORNER_DEPTH` that start ``clearance`` inward from the region's eight corners (a
+    corner drawn per candidate), where an arm must bend most with walls on three sides. The
+    same checks apply (and a biased generator's weighting, in a corner too).
     """
     lo, hi = region
     packed = kernel_grid(tank)
@@ -232,8 +232,6 @@ def draw_targets(
     todo = np.arange(len(rngs))
     if biased > 0 and weight is None:
         raise ConfigError("draw_targets: biased > 0 needs a weight function")
-    if biased > 0 and corners > 0:
-        raise ConfigError("draw_targets: draw biased or corner targets, not both")
     want = np.array([biased > 0 and rng.random() < biased for rng in rngs], dtype=bool)
     corner = np.zeros(len(rngs), dtype=bool)
     if corners > 0:

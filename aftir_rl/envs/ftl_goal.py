@@ -208,6 +208,38 @@ def _check_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
     return options
 
 
+class FailureRates:
+    """Per raster cell of a tank, a running failure rate of the episodes aimed at it.
+
+    Each ended episode moves its target cell's rate by ``rate`` towards 1 (not a success) or 0
+    (a success). :meth:`weight` turns the rates into the acceptance probabilities with which
+    ``failure_bias`` draws targets: cells never aimed at count as hard (weight 1), the others
+    in proportion to their rate against the hardest seen (at least ``floor`` of it), so targets
+    come up more often where the policy fails more, wherever that is.
+    """
+
+    def __init__(self, n_cells: int, rate: float = 0.02, floor: float = 0.05) -> None:
+        self.rate, self.floor = float(rate), float(floor)
+        self.fail = np.ones(n_cells)
+        self.seen = np.zeros(n_cells, dtype=bool)
+        #: Episodes recorded.
+        self.count = 0
+
+    def record(self, cells: ArrayLike, success: ArrayLike) -> None:
+        """Record ended episodes: their target cells and whether each was a success."""
+        for c, ok in zip(np.asarray(cells).tolist(), np.asarray(success).tolist()):
+            self.fail[c] += self.rate * (float(not ok) - self.fail[c])
+            self.seen[c] = True
+            self.count += 1
+
+    def weight(self, cells: ArrayLike) -> NDArray[np.float64]:
+        """Acceptance probabilities in ``[floor, 1]`` of targets in ``cells``."""
+        c = np.asarray(cells)
+        hardest = max(float(self.fail[self.seen].max()) if self.seen.any() else 1.0, 1e-9)
+        w = np.maximum(self.fail[c] / hardest, self.floor)
+        return np.where(self.seen[c], np.minimum(w, 1.0), 1.0)
+
+
 class _Setup:
     """Argument checking and derived settings shared by the single and the vector env."""
 
@@ -232,6 +264,7 @@ class _Setup:
         step_cost: float = 0.0,
         corner_bias: float = 0.0,
         slack: float = 0.0,
+        failure_bias: float = 0.0,
     ) -> None:
         self.tank = load_tank(tank)
         if steer not in STEER_MODES:
@@ -278,6 +311,19 @@ class _Setup:
             raise ConfigError("give detour_bias or corner_bias, not both")
         self.corner_bias = float(corner_bias)
         if not (
+            isinstance(failure_bias, int | float)
+            and not isinstance(failure_bias, bool)
+            and 0 <= failure_bias <= 1
+        ):
+            raise ConfigError(f"failure_bias must be in [0, 1], got {failure_bias!r}")
+        if failure_bias > 0 and detour_bias > 0:
+            raise ConfigError("give detour_bias or failure_bias, not both")
+        if failure_bias > 0 and self.tank.cell_size is None:
+            raise ConfigError("failure_bias needs a tank with a raster (cell_size)")
+        self.failure_bias = float(failure_bias)
+        #: The failure rates ``failure_bias`` draws by (None without it).
+        self.failures = FailureRates(self.tank.raster.n_cells) if failure_bias > 0 else None
+        if not (
             isinstance(step_cost, int | float)
             and not isinstance(step_cost, bool)
             and 0 <= step_cost <= MAX_STEP_COST
@@ -308,16 +354,32 @@ class _Setup:
 
     def _draw_targets(self, rngs: Sequence[np.random.Generator]) -> NDArray[np.float64]:
         """One target per generator (:func:`~aftir_rl.envs.ftl_batch.draw_targets`)."""
+        if self.failures is not None:
+            biased, weight = self.failure_bias, self._failure_weight
+        elif self.detour_bias > 0:
+            biased, weight = self.detour_bias, self._detour_weight
+        else:
+            biased, weight = 0.0, None
         return draw_targets(
             rngs,
             self.tank,
             self.region,
             self.target_clearance,
             self.start_tip,
-            self.detour_bias,
-            self._detour_weight if self.detour_bias > 0 else None,
+            biased,
+            weight,
             self.corner_bias,
         )
+
+    def _failure_weight(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`FailureRates.weight` of the points' raster cells."""
+        assert self.failures is not None
+        return self.failures.weight(self.tank.raster.cell_indices(points))
+
+    def _record_outcomes(self, targets: NDArray[np.float64], success: ArrayLike) -> None:
+        """Give ended episodes (their targets and successes) to :attr:`failures`, if kept."""
+        if self.failures is not None and len(targets):
+            self.failures.record(self.tank.raster.cell_indices(targets), success)
 
     def _detour_weight(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(1 + e) / (1 + e_max)``: ``e`` the raster detour [cells] from the start's cell."""
