@@ -301,23 +301,13 @@ class _Setup:
         if (detour_bias > 0 or shaping) and self.tank.cell_size is None:
             raise ConfigError("detour_bias and shaping need a tank with a raster (cell_size)")
         self.detour_bias = float(detour_bias)
-        if not (
-            isinstance(corner_bias, int | float)
-            and not isinstance(corner_bias, bool)
-            and 0 <= corner_bias <= 1
-        ):
-            raise ConfigError(f"corner_bias must be in [0, 1], got {corner_bias!r}")
-        if corner_bias > 0 and detour_bias > 0:
-            raise ConfigError("give detour_bias or corner_bias, not both")
+        for name, value in (("corner_bias", corner_bias), ("failure_bias", failure_bias)):
+            number = isinstance(value, int | float) and not isinstance(value, bool)
+            if not (number and 0 <= value <= 1):
+                raise ConfigError(f"{name} must be in [0, 1], got {value!r}")
+            if value > 0 and detour_bias > 0:
+                raise ConfigError(f"give detour_bias or {name}, not both")
         self.corner_bias = float(corner_bias)
-        if not (
-            isinstance(failure_bias, int | float)
-            and not isinstance(failure_bias, bool)
-            and 0 <= failure_bias <= 1
-        ):
-            raise ConfigError(f"failure_bias must be in [0, 1], got {failure_bias!r}")
-        if failure_bias > 0 and detour_bias > 0:
-            raise ConfigError("give detour_bias or failure_bias, not both")
         if failure_bias > 0 and self.tank.cell_size is None:
             raise ConfigError("failure_bias needs a tank with a raster (cell_size)")
         self.failure_bias = float(failure_bias)
