@@ -232,6 +232,41 @@ def test_draw_targets_are_free_and_reproducible():
     np.testing.assert_array_equal(t, again)
 
 
+@pytest.mark.parametrize("corners", [0.0, 0.5])
+def test_draw_targets_are_the_first_free_candidates(corners):
+    """Each target is its generator's first candidate free by the exact distance (a numpy loop)."""
+    from aftir_rl.envs.ftl_batch import _corner_candidates
+
+    env = ArmFTLEnv(bay=2)
+    lo, hi = env.region
+
+    def reference(rng, clearance):
+        corner = corners > 0 and rng.random() < corners
+        for _ in range(200):
+            cand = (
+                _corner_candidates(rng, lo, hi, clearance)
+                if corner
+                else rng.uniform(lo, hi, (64, 3))
+            )
+            ok = point_clearance(env.tank, cand) >= clearance
+            ok &= np.linalg.norm(cand - env.start_tip, axis=1) >= 20.0
+            if ok.any():
+                return cand[ok.argmax()]
+        raise AssertionError("no target")
+
+    for clearance in (6.0, 10.0):
+        drawn = draw_targets(
+            [np.random.default_rng(i) for i in range(60)],
+            env.tank,
+            env.region,
+            clearance,
+            env.start_tip,
+            corners=corners,
+        )
+        expected = [reference(np.random.default_rng(i), clearance) for i in range(60)]
+        np.testing.assert_array_equal(drawn, expected)
+
+
 def route_frame(kappa, k, l):
     """Rotation of the route's frame after its first ``k`` sections, by forward kinematics."""
     theta, phi = kappa_to_angles(kappa[:k])

@@ -212,7 +212,7 @@ def draw_targets(
     Each generator draws batches of 64 uniform candidates until one is at least ``clearance``
     from every surface and 20 cm from ``start``; its first such candidate is its target (the
     tank's :func:`clearance_grid` settles most candidates, the rest are computed exactly, so the
-    verdicts are the exact ones: :func:`aftir_rl.envs.ftl_kernel.clear_of`). Shape
+    verdicts are the exact ones: :func:`aftir_rl.envs.ftl_kernel.usable`). Shape
     ``(len(rngs), 3)``.
 
     With ``biased > 0`` each generator first draws whether its target is biased (probability
@@ -227,6 +227,7 @@ def draw_targets(
     same checks apply (and a biased generator's weighting, in a corner too).
     """
     lo, hi = region
+    start = np.ascontiguousarray(start, dtype=np.float64)
     packed = kernel_grid(tank)
     out = np.empty((len(rngs), 3))
     todo = np.arange(len(rngs))
@@ -247,16 +248,18 @@ def draw_targets(
                 for i in todo
             ]
         )
-        ok = kernel.clear_of(cand, float(clearance), packed)
-        ok &= np.einsum("rci,rci->rc", cand - start, cand - start) >= 400.0  # 20 cm
-        if want[todo].any():
+        # each row's first candidate clear of the surfaces and 20 cm from the start
+        first = kernel.first_usable(cand, float(clearance), start, 20.0, packed)
+        if want[todo].any():  # biased rows: every candidate's verdict, then the weights
             assert weight is not None
             rows = np.flatnonzero(want[todo])
+            ok = kernel.usable(cand[rows], float(clearance), start, 20.0, packed)
             keep = np.stack([rngs[int(todo[r])].random(64) for r in rows]) < weight(cand[rows])
-            ok[rows] &= keep
-        found = ok.any(1)
+            ok &= keep
+            first[rows] = np.where(ok.any(1), ok.argmax(1), -1)
+        found = first >= 0
         rows = np.flatnonzero(found)
-        out[todo[rows]] = cand[rows, ok[rows].argmax(1)]
+        out[todo[rows]] = cand[rows, first[rows]]
         todo = todo[~found]
     if len(todo):
         raise TargetError(f"no free point {clearance:g} cm from every surface in the target region")

@@ -49,7 +49,8 @@ __all__ = [
     "advance",
     "goal_reward",
     "fk_points",
-    "clear_of",
+    "first_usable",
+    "usable",
 ]
 
 #: Reward of a success and penalty of a contact.
@@ -663,19 +664,70 @@ def goal_reward(
 
 
 @njit(cache=True)
-def clear_of(points: NDArray[np.float64], clearance: float, tank: KernelTank) -> NDArray[np.bool_]:
-    """Whether each point ``(..., 3)`` lies at least ``clearance`` [cm] from the tank's surfaces.
+def _usable(
+    x: float,
+    y: float,
+    z: float,
+    clearance: float,
+    start: NDArray[np.float64],
+    far: float,
+    tank: KernelTank,
+) -> bool:
+    """Whether a point is at least ``clearance`` from the surfaces and ``√far`` from ``start``.
 
     The exact verdict: the grid's value settles a point when it is more than ``slack`` from
     ``clearance``, the exact signed distance the others.
     """
-    flat = points.reshape(-1, 3)
-    out = np.empty(flat.shape[0], dtype=np.bool_)
-    for i in range(flat.shape[0]):
-        x, y, z = flat[i, 0], flat[i, 1], flat[i, 2]
-        v = _grid_value(x, y, z, tank.grid_lo, tank.grid_spacing, tank.grid_shape,
-                        tank.grid_offset, tank.grid_values)  # fmt: skip
-        if math.isnan(v) or abs(v - clearance) <= tank.slack:
-            v = sdf(x, y, z, tank.boxes, tank.cylinders, tank.spheres, tank.walls)
-        out[i] = v >= clearance
-    return out.reshape(points.shape[:-1])
+    dx, dy, dz = x - start[0], y - start[1], z - start[2]
+    if dx * dx + dy * dy + dz * dz < far:
+        return False
+    v = _grid_value(x, y, z, tank.grid_lo, tank.grid_spacing, tank.grid_shape,
+                    tank.grid_offset, tank.grid_values)  # fmt: skip
+    if math.isnan(v) or abs(v - clearance) <= tank.slack:
+        v = sdf(x, y, z, tank.boxes, tank.cylinders, tank.spheres, tank.walls)
+    return v >= clearance
+
+
+@njit(cache=True)
+def usable(
+    points: NDArray[np.float64],
+    clearance: float,
+    start: NDArray[np.float64],
+    min_distance: float,
+    tank: KernelTank,
+) -> NDArray[np.bool_]:
+    """Whether each candidate ``(R, C, 3)`` is usable as a target (exact verdicts).
+
+    At least ``clearance`` [cm] from the tank's surfaces and ``min_distance`` [cm] from
+    ``start`` (:func:`_usable`).
+    """
+    out = np.empty(points.shape[:2], dtype=np.bool_)
+    far = min_distance * min_distance
+    for r in range(points.shape[0]):
+        for c in range(points.shape[1]):
+            p = points[r, c]
+            out[r, c] = _usable(p[0], p[1], p[2], clearance, start, far, tank)
+    return out
+
+
+@njit(cache=True)
+def first_usable(
+    points: NDArray[np.float64],
+    clearance: float,
+    start: NDArray[np.float64],
+    min_distance: float,
+    tank: KernelTank,
+) -> NDArray[np.int64]:
+    """Per row of candidates ``(R, C, 3)``, the index of its first :func:`usable` one (−1: none).
+
+    Each row stops at its first, so a row whose first candidate is usable costs one check.
+    """
+    out = np.full(points.shape[0], -1, dtype=np.int64)
+    far = min_distance * min_distance
+    for r in range(points.shape[0]):
+        for c in range(points.shape[1]):
+            p = points[r, c]
+            if _usable(p[0], p[1], p[2], clearance, start, far, tank):
+                out[r] = c
+                break
+    return out
