@@ -535,26 +535,36 @@ def test_vector_env_matches_single_envs(shaping, guide):
             done = term or trunc
 
 
-def test_reward_reuses_the_observations_guide_query(monkeypatch):
-    """With the guide observed, a step asks the guide once: the reward reuses the answer."""
+def test_reward_reuses_the_observations_guide_queries(monkeypatch):
+    """With the guide observed, the reward asks the guide nothing the observations asked."""
     from aftir_rl.envs.ftl_batch import FieldGuide
 
     venv = gym.make_vec(
-        ENV_ID, num_envs=8, vectorization_mode="vector_entry_point", shaping="field", guide=True
+        ENV_ID,
+        num_envs=8,
+        vectorization_mode="vector_entry_point",
+        shaping="field",
+        guide=True,
+        max_episode_steps=3,
+        autoreset_mode="SameStep",
     )
+    calls = []
+    query = FieldGuide.__call__
+    monkeypatch.setattr(FieldGuide, "__call__", lambda *a: calls.append(1) or query(*a))
     venv.reset(seed=3)
     batch = venv.unwrapped.batch
     # targets are kept as the float32 goals the reward is given
     np.testing.assert_array_equal(batch.target, batch.target.astype(np.float32))
-    calls = []
-    query = FieldGuide.__call__
-    monkeypatch.setattr(FieldGuide, "__call__", lambda *a: calls.append(1) or query(*a))
-    action = np.tile([0.3, -0.2, 1.0], (8, 1)).astype(np.float32)
-    venv.step(action)  # the first step asks for the potentials at the start too
-    calls.clear()
-    _, reward, term, trunc, _ = venv.step(action)
-    assert not (term | trunc).any() and len(calls) == 1
-    tips, targets, to_go = batch.guide_memo
+    action = np.tile([0.3, -0.2, 0.5], (8, 1)).astype(np.float32)
+    per_step = []
+    for _ in range(7):
+        calls.clear()
+        _, _, term, trunc, _ = venv.step(action)
+        per_step.append((len(calls), bool((term | trunc).all())))
+    # one query a step for every row's observation, one more in a step whose rows restart (their
+    # first observations); the potentials at the start (after a reset or a restart) come free
+    assert per_step == [(1, False), (1, False), (2, True)] * 2 + [(1, False)]
+    tips, targets, to_go = batch.guide_queries[-1]
     fresh, _ = query(batch.fields, tips, targets, batch.fields.field_ids(targets))
     np.testing.assert_array_equal(to_go, fresh)
 

@@ -397,6 +397,7 @@ def test_sb3_adapter_running_info_keys(keys):
                     f["episode"]["l"],
                 )
                 for key in f.keys() - {"episode", "terminal_observation"}:
+                    assert type(l[key]) is type(f[key]), key
                     np.testing.assert_array_equal(np.asarray(l[key]), np.asarray(f[key]))
                 for key, value in f["terminal_observation"].items():
                     np.testing.assert_array_equal(l["terminal_observation"][key], value)

@@ -93,10 +93,15 @@ class SB3VectorEnv(VecEnv):
                 else [{} for _ in range(self.num_envs)]
             )
         final = info.get("final_obs")
-        for row in np.flatnonzero(dones):
-            i = int(row)
-            if self.running_info_keys is not None:
-                infos[i].update({k: _item(info[k], i) for k in keys})
+        ended = np.flatnonzero(dones)
+        if self.running_info_keys is not None and len(ended):
+            # the finished rows get every key: one conversion per key, as above
+            done_columns = [
+                info[k][ended].tolist() if info[k].ndim == 1 else list(info[k][ended]) for k in keys
+            ]
+            for i, values in zip(ended.tolist(), zip(*done_columns)):
+                infos[i].update(zip(keys, values))
+        for i in ended.tolist():
             infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
             if final is not None:
                 infos[i]["terminal_observation"] = (

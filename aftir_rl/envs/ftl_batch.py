@@ -365,6 +365,7 @@ class FieldGuide:
         self.edges, self.neighbours = probe.edges, np.asarray(_NEIGHBOURS, dtype=np.int64)
         self._edges_flat = np.ascontiguousarray(self.edges.reshape(len(self.neighbours), -1))
         self._origin = np.asarray(self.origin, dtype=np.float64)
+        self._last_cell = self.shape - 1
         self.clearance_cost = float(clearance_cost)
         self._tank = tank
         self._field_cls = GuideField
@@ -386,8 +387,8 @@ class FieldGuide:
         return (cell[..., 0] * self.shape[1] + cell[..., 1]) * self.shape[2] + cell[..., 2]
 
     def _cell(self, p: NDArray[np.float64]) -> NDArray[np.int64]:
-        c = np.floor((p - self.origin) / self.size).astype(np.int64)
-        return np.clip(c, 0, self.shape - 1)
+        c = np.floor((p - self._origin) / self.size).astype(np.int64)
+        return np.minimum(np.maximum(c, 0), self._last_cell)
 
     def field_ids(self, targets: NDArray[np.float64]) -> NDArray[np.int64]:
         """Rows of the field table for targets ``(B, 3)``, building the missing fields."""

@@ -122,7 +122,8 @@ class _GoalReward:
         else:
             stale = np.flatnonzero(np.isnan(prev_potential))
             before = np.array(prev_potential, dtype=np.float64)
-        potential = detour(a2, g2)  # (an env's observation has just asked the guide this)
+        potential = detour(a2, g2)  # (an env's observation has just asked the guide this,
+        # and the stale rows' potentials at their start when they restarted)
         if len(stale):
             before[stale] = detour(prev[stale], g2[stale])
         reward += PROGRESS_PER_CM * (before - potential)
@@ -139,14 +140,10 @@ class _GoalReward:
         """``P(p, g) − |p − g|`` [cm]: the guide field's cost-to-go beyond the straight line."""
         fields = self.batch.fields
         assert fields is not None
-        memo = self.batch.guide_memo
-        if (
-            memo is not None
-            and memo[0].shape == p.shape
-            and np.array_equal(memo[0], p)
-            and np.array_equal(memo[1], g)
-        ):  # the same points and targets as the observation's query: the same answer
-            return np.minimum(memo[2], 1000.0) - _distance(p, g)
+        for tips, targets, to_go in reversed(self.batch.guide_queries):
+            if tips.shape == p.shape and np.array_equal(tips, p) and np.array_equal(targets, g):
+                # the same points and targets as an observation's query: the same answer
+                return np.minimum(to_go, 1000.0) - _distance(p, g)
         generation = fields.generation
         ids = fields.field_ids(g)
         if fields.generation != generation:  # the cache started again during the call

@@ -11,6 +11,7 @@ guide (:class:`~aftir_rl.envs.ftl_batch.FieldGuide`). No gymnasium here:
 from __future__ import annotations
 
 import weakref
+from collections import deque
 
 import numpy as np
 from numpy.typing import NDArray
@@ -150,11 +151,11 @@ class FTLBatch:
         self.fields = field_guide(tank) if guide or shaping == "field" else None
         self.guide = self.fields if guide else None
         self.guide_ids = np.zeros(self.b, dtype=np.int64)
-        #: The last full observation's guide query: tips, targets (both ``(B, 3)``) and their
-        #: distance-to-go ``(B,)`` (None before the first), for the reward to reuse.
-        self.guide_memo: (
-            tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None
-        ) = None
+        #: The observations' latest guide queries (every row's or some rows'), newest last: tips,
+        #: targets (both ``(R, 3)``) and their distance-to-go ``(R,)``, for the reward to reuse.
+        self.guide_queries: deque[
+            tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+        ] = deque(maxlen=3)
         self._guide_generation = self.fields.generation if self.fields is not None else 0
         if self.fields is not None and self.fields.capacity < 2 * self.b:
             raise ConfigError(
@@ -241,13 +242,12 @@ class FTLBatch:
         )
         if self.guide is not None:
             # the tips as the goal space holds them (float32), so that the reward's potential,
-            # asked at the observed goals, can reuse this query (:attr:`guide_memo`)
+            # asked at the observed goals, can reuse this query (:attr:`guide_queries`)
             tip = (self.tip if every else self.tip[rows]).astype(np.float32).astype(np.float64)
-            target = self.target if every else self.target[rows]
+            target = self.target.copy() if every else self.target[rows]
             ids = self.target_fields() if every else self.target_fields()[rows]
             to_go, direction = self.guide(tip, target, ids)
-            if every:
-                self.guide_memo = (tip, target.copy(), to_go)
+            self.guide_queries.append((tip, target, to_go))
             kernel.guide_columns(
                 self.steering_frames(None if every else rows),
                 to_go,
