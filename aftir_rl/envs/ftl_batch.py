@@ -248,18 +248,16 @@ def draw_targets(
                 for i in todo
             ]
         )
-        # each row's first candidate clear of the surfaces and 20 cm from the start
-        first = kernel.first_usable(cand, float(clearance), start, 20.0, packed)
+        # clear of the surfaces and 20 cm from the start: up to each row's first such candidate
+        ok = kernel.usable(cand, float(clearance), start, 20.0, packed, True)
         if want[todo].any():  # biased rows: every candidate's verdict, then the weights
             assert weight is not None
             rows = np.flatnonzero(want[todo])
-            ok = kernel.usable(cand[rows], float(clearance), start, 20.0, packed)
             keep = np.stack([rngs[int(todo[r])].random(64) for r in rows]) < weight(cand[rows])
-            ok &= keep
-            first[rows] = np.where(ok.any(1), ok.argmax(1), -1)
-        found = first >= 0
+            ok[rows] = kernel.usable(cand[rows], float(clearance), start, 20.0, packed) & keep
+        found = ok.any(1)
         rows = np.flatnonzero(found)
-        out[todo[rows]] = cand[rows, first[rows]]
+        out[todo[rows]] = cand[rows, ok[rows].argmax(1)]
         todo = todo[~found]
     if len(todo):
         raise TargetError(f"no free point {clearance:g} cm from every surface in the target region")

@@ -49,7 +49,6 @@ __all__ = [
     "advance",
     "goal_reward",
     "fk_points",
-    "first_usable",
     "usable",
 ]
 
@@ -695,39 +694,21 @@ def usable(
     start: NDArray[np.float64],
     min_distance: float,
     tank: KernelTank,
+    first_only: bool = False,
 ) -> NDArray[np.bool_]:
     """Whether each candidate ``(R, C, 3)`` is usable as a target (exact verdicts).
 
     At least ``clearance`` [cm] from the tank's surfaces and ``min_distance`` [cm] from
-    ``start`` (:func:`_usable`).
+    ``start`` (:func:`_usable`). With ``first_only`` each row stops at its first usable
+    candidate (the rest of the row reads False), so a row whose first candidate is usable
+    costs one check.
     """
-    out = np.empty(points.shape[:2], dtype=np.bool_)
+    out = np.zeros(points.shape[:2], dtype=np.bool_)
     far = min_distance * min_distance
     for r in range(points.shape[0]):
         for c in range(points.shape[1]):
             p = points[r, c]
             out[r, c] = _usable(p[0], p[1], p[2], clearance, start, far, tank)
-    return out
-
-
-@njit(cache=True)
-def first_usable(
-    points: NDArray[np.float64],
-    clearance: float,
-    start: NDArray[np.float64],
-    min_distance: float,
-    tank: KernelTank,
-) -> NDArray[np.int64]:
-    """Per row of candidates ``(R, C, 3)``, the index of its first :func:`usable` one (−1: none).
-
-    Each row stops at its first, so a row whose first candidate is usable costs one check.
-    """
-    out = np.full(points.shape[0], -1, dtype=np.int64)
-    far = min_distance * min_distance
-    for r in range(points.shape[0]):
-        for c in range(points.shape[1]):
-            p = points[r, c]
-            if _usable(p[0], p[1], p[2], clearance, start, far, tank):
-                out[r] = c
+            if first_only and out[r, c]:
                 break
     return out
