@@ -122,8 +122,9 @@ class _GoalReward:
         else:
             stale = np.flatnonzero(np.isnan(prev_potential))
             before = np.array(prev_potential, dtype=np.float64)
-        potential = detour(a2, g2)  # (an env's observation has just asked the guide this,
-        # and the stale rows' potentials at their start when they restarted)
+        # an env's observations have asked the guide both already: the new tips just now, the
+        # stale rows' starts when they restarted (_field_detour reuses those answers)
+        potential = detour(a2, g2)
         if len(stale):
             before[stale] = detour(prev[stale], g2[stale])
         reward += PROGRESS_PER_CM * (before - potential)
