@@ -44,6 +44,7 @@ def rollout(env, actions, seed):
         {"bay": 2, "shaping": True},
         {"n_sections": 7},
         {"guide": True, "shaping": "field", "steer": "target"},
+        {"guide": True, "shaping": "field", "steer": "target", "near_goal": True},
     ],
 )
 def test_env_checkers(kwargs):
@@ -495,8 +496,11 @@ def test_tank_distance_is_point_clearance(tank):
     np.testing.assert_allclose(TankDistance(tank)(p), point_clearance(tank, p), atol=1e-9)
 
 
-@pytest.mark.parametrize("shaping, guide", [(False, False), ("field", False), ("field", True)])
-def test_vector_env_matches_single_envs(shaping, guide):
+@pytest.mark.parametrize(
+    "shaping, guide, near_goal",
+    [(False, False, False), ("field", False, False), ("field", True, False), (False, True, True)],
+)
+def test_vector_env_matches_single_envs(shaping, guide, near_goal):
     b, steps = 4, 120
     rng = np.random.default_rng(5)
     actions = rng.uniform(-1, 1, (steps, b, 3)).astype(np.float32)
@@ -508,6 +512,7 @@ def test_vector_env_matches_single_envs(shaping, guide):
         max_episode_steps=40,
         shaping=shaping,
         guide=guide,
+        near_goal=near_goal,
     )
     obs, _ = venv.reset(seed=10)
     v_rows = []
@@ -516,7 +521,9 @@ def test_vector_env_matches_single_envs(shaping, guide):
         v_rows.append((obs, r, term, trunc, nxt))
         obs = nxt
     for i in range(b):
-        env = gym.make(ENV_ID, max_episode_steps=40, shaping=shaping, guide=guide)
+        env = gym.make(
+            ENV_ID, max_episode_steps=40, shaping=shaping, guide=guide, near_goal=near_goal
+        )
         o, _ = env.reset(seed=10 + i)
         done = False
         for t in range(steps):

@@ -299,6 +299,38 @@ def test_guide_observation():
     check_env(env.unwrapped, skip_render_check=True)
 
 
+def test_near_goal_observation():
+    """The near-goal columns: the target's offset over max(d, 10 cm), in the steering frame."""
+    from aftir_rl.envs.ftl_model import NEAR_GOAL_RANGE
+
+    env = gym.make(ENV_ID, guide=True, near_goal=True)
+    plain = gym.make(ENV_ID, guide=True)
+    obs, _ = env.reset(seed=0)
+    assert obs["observation"].shape[0] == plain.observation_space["observation"].shape[0] + 3
+    # the guide's columns keep their place, the near-goal ones come last
+    plain_obs, _ = plain.reset(seed=0)
+    np.testing.assert_array_equal(obs["observation"][:-3], plain_obs["observation"])
+    batch = env.unwrapped.batch
+    rng = np.random.default_rng(3)
+    for _ in range(14):  # bend and push past a section end: a frame that is not the world's
+        obs, *_ = env.step(np.array([*rng.uniform(-1, 1, 2), 1.0], dtype=np.float32))
+    assert batch.k[0] >= 1
+    frame = route_frame(batch.kappa[0], batch.k[0], batch.l)
+    tip = batch.tip[0]
+    for offset in ([3.0, -4.0, 1.0], [0.5, 0.0, 0.0], [30.0, 40.0, 0.0], [0.0, 0.0, 0.0]):
+        batch.target[0] = tip + np.array(offset)
+        d = np.linalg.norm(offset)
+        expect = frame.T @ np.array(offset) / max(d, NEAR_GOAL_RANGE)
+        np.testing.assert_allclose(batch.observation()[0, -3:], expect, atol=1e-6)
+        assert np.linalg.norm(batch.near_goal_columns()[0]) == pytest.approx(
+            min(d / NEAR_GOAL_RANGE, 1.0)
+        )
+    from aftir_rl.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="near_goal"):
+        gym.make(ENV_ID, near_goal="yes")
+
+
 @pytest.mark.parametrize("shaping", [False, "field"])
 def test_same_step_autoreset_keeps_the_transitions(shaping):
     """SameStep rows see the transitions of NextStep rows, minus the extra reset step.
@@ -481,6 +513,11 @@ def test_config_limits_for_the_batched_env():
     her = SB3Config(env_id=ENV_ID, her=True, env_kwargs={"guide": True})
     with pytest.raises(ConfigError, match="guide"):
         check_sb3_config(her, "sac", "test")
+    her = SB3Config(env_id=ENV_ID, her=True, env_kwargs={"near_goal": True})
+    with pytest.raises(ConfigError, match="env_kwargs.near_goal"):
+        check_sb3_config(her, "sac", "test")
+    with pytest.raises(ConfigError, match="env_kwargs.near_goal"):
+        check_sb3_config(SB3Config(env_id=ENV_ID, env_kwargs={"near_goal": 1}), "ppo", "test")
     # HER samples finished episodes: learning may not start before every env has one
     early = {"learning_starts": 1000}
     check_sb3_config(SB3Config(env_id=ENV_ID, her=True, hyperparameters=early), "sac", "test")

@@ -218,7 +218,7 @@ def test_all_targets_run(tmp_path, capsys):
 
 
 def test_linear_learning_rate_falls_to_zero_over_a_learn_call(tmp_path):
-    """``learning_rate: lin_X`` (RL Zoo's form): X at the start of ``learn``, 0 at its end."""
+    """``learning_rate: lin_X`` (RL Zoo's form): X at the start of a run, 0 at its end."""
     from aftir_rl.agents.sb3 import load_model
     from aftir_rl.agents.sb3_config import SB3Config, build_model, check_sb3_config
 
@@ -230,6 +230,18 @@ def test_linear_learning_rate_falls_to_zero_over_a_learn_call(tmp_path):
     assert model.lr_schedule(0.25) == pytest.approx(2.5e-4)
     model.learn(128)  # two rollouts: the updates run at progress 0.5, then 0
     assert model.policy.optimizer.param_groups[0]["lr"] == pytest.approx(0.0)
+    # resumed (--resume): SB3 counts the progress over all of the model's steps, so the resumed
+    # stage starts at 1e-3 * (1 - 192/256) after its first rollout and still ends at 0
+    rates, update = [], model.train
+
+    def recording_update() -> None:
+        update()
+        rates.append(model.policy.optimizer.param_groups[0]["lr"])
+
+    model.train = recording_update  # type: ignore[method-assign]
+    model.learn(128, reset_num_timesteps=False)
+    assert rates == pytest.approx([2.5e-4, 0.0])
+    del model.train
     assert config.hyperparameters["learning_rate"] == "lin_1e-3"  # config.json keeps the text
     # what SB3 saves of the schedule is a class the safe loader knows, not a pickled function
     model.save(tmp_path / "model.zip")

@@ -162,8 +162,9 @@ _CONFIG_RANGES = {
 }
 
 
-#: Prefix of a learning rate that falls linearly to 0 over a ``learn`` call (RL Zoo's
-#: ``lin_3e-4``): with ``--resume``, over the steps of the resumed stage.
+#: Prefix of a learning rate that falls linearly to 0 over a run (RL Zoo's ``lin_3e-4``). With
+#: ``--resume``, SB3's progress counts every step of the model: the rate starts the resumed stage
+#: at ``start · (1 − resumed / (resumed + stage))`` and reaches 0 at its end.
 LINEAR_PREFIX = "lin_"
 
 
@@ -343,6 +344,7 @@ ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
         "bay": (int, type(None)),
         "shaping": (bool, str),
         "guide": (bool,),
+        "near_goal": (bool,),
         "target_clearance": (int, float),
         "success_tolerance": (int, float),
         "margin": (int, float),
@@ -400,11 +402,12 @@ def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:
         raise ConfigError(
             f"{source}: env_kwargs: expected a mapping, got {brief(config.env_kwargs)}"
         )
-    if config.her and config.env_kwargs.get("guide") is True:
-        raise ConfigError(
-            f"{source}: env_kwargs.guide: the guide observes the goal, which HER relabels; "
-            "use guide with PPO, or her without guide"
-        )
+    for key in ("guide", "near_goal"):
+        if config.her and config.env_kwargs.get(key) is True:
+            raise ConfigError(
+                f"{source}: env_kwargs.{key}: the {key} columns observe the goal, which HER "
+                f"relabels; use {key} with PPO, or her without {key}"
+            )
     if config.her:
         _check_her_start(config, algo, bare, source)
     allowed = ENV_KWARGS.get(bare, {})

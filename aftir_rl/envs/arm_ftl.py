@@ -152,6 +152,11 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
       ahead (about 30-50 and 60-100 cm; :meth:`FieldGuide.lookahead`), so the policy sees a turn
       coming while the arm can still bend into it. These depend on the goal, so HER's relabelled
       goals would not match them: use it with PPO, not HER.
+    - ``near_goal`` (False): append to ``observation`` the target's offset from the tip at a
+      fine scale, in the steering frame: ``(target − tip)/max(d, 10 cm)``, the unit way beyond
+      10 cm and within it the offset in tenths of 10 cm, ten times the resolution of the
+      guide's ``(target − tip)/100`` (:meth:`FTLBatch.near_goal_columns`), for the last
+      centimetres. Goal-dependent like ``guide``: not with HER.
     - ``detour_bias`` (0): the fraction of drawn targets whose density is weighted by
       ``1 + e``, ``e`` the detour of the raster's shortest way from the start beyond the straight
       (Manhattan) one, in cells: targets behind obstacles (in bay 2, far from the hatch) come up
@@ -212,6 +217,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         corner_bias: float = 0.0,
         slack: float = 0.0,
         failure_bias: float = 0.0,
+        near_goal: bool = False,
         render_mode: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -238,6 +244,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
             corner_bias,
             slack,
             failure_bias,
+            near_goal,
         )
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
@@ -389,6 +396,7 @@ class ArmFTLVectorEnv(
         corner_bias: float = 0.0,
         slack: float = 0.0,
         failure_bias: float = 0.0,
+        near_goal: bool = False,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
     ) -> None:
@@ -420,6 +428,7 @@ class ArmFTLVectorEnv(
             corner_bias,
             slack,
             failure_bias,
+            near_goal,
         )
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)

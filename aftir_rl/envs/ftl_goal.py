@@ -263,8 +263,11 @@ class _Setup:
         corner_bias: float = 0.0,
         slack: float = 0.0,
         failure_bias: float = 0.0,
+        near_goal: bool = False,
     ) -> None:
         self.tank = load_tank(tank)
+        if not isinstance(near_goal, bool | np.bool_):
+            raise ConfigError(f"near_goal must be true or false, got {near_goal!r}")
         if steer not in STEER_MODES:
             raise ConfigError(f"steer must be 'increment' or 'target', got {steer!r}")
         shaping = _shaping_kind(shaping)
@@ -336,6 +339,7 @@ class _Setup:
             shaping,
             guide,
             steer,
+            near_goal,
         )
         self.start_tip = np.array([0.0, 0.0, float(start_height)])
         self.fixed_target = None if target is None else self._check_target(target)

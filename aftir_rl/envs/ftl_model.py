@@ -27,7 +27,7 @@ from aftir_rl.envs.ftl_batch import (
 from aftir_rl.errors import ConfigError
 from aftir_rl.tank import Tank
 
-__all__ = ["FTLBatch", "ftl_kappa_batch", "raster_detour_table", "RAY_DISTANCES"]
+__all__ = ["FTLBatch", "ftl_kappa_batch", "raster_detour_table", "RAY_DISTANCES", "NEAR_GOAL_RANGE"]
 
 #: Directions of the sensing rays from the tip: the tip's heading, then ±x, ±y, ±z.
 _RAY_AXES = np.array(
@@ -94,6 +94,10 @@ def raster_detour_table(tank: Tank) -> NDArray[np.int32]:
 _DETOUR_CACHE: weakref.WeakKeyDictionary[Tank, NDArray[np.int32]] = weakref.WeakKeyDictionary()
 
 
+#: The distance [cm] within which the ``near_goal`` columns give the target's offset itself.
+NEAR_GOAL_RANGE = 10.0
+
+
 class FTLBatch:
     """State and dynamics of ``B`` FTL arms in one tank, stepped in one numpy pass.
 
@@ -112,6 +116,8 @@ class FTLBatch:
         guide: whether the observation holds the goal-dependent guide (see :class:`ArmFTLEnv`).
         steer: ``"increment"`` (actions change the steered ``κ``) or ``"target"`` (they name the
             bend ``κ`` approaches at ``kappa_step`` per component and step).
+        near_goal: whether the observation ends with the target's offset at a fine scale
+            (:meth:`near_goal_columns`).
 
     """
 
@@ -129,6 +135,7 @@ class FTLBatch:
         shaping: str,
         guide: bool = False,
         steer: str = "increment",
+        near_goal: bool = False,
     ) -> None:
         self.tank, self.arm = tank, tank.arm
         self.n, self.b, self.k_samples = int(n_sections), int(batch), int(samples_per_section)
@@ -162,7 +169,10 @@ class FTLBatch:
                 f"the guide keeps {self.fields.capacity} target fields of this tank's grid, too "
                 f"few for {self.b} envs; use fewer envs or guide=False"
             )
+        self._guide_start = self.obs_size
         self.obs_size += 10 + 3 * len(LOOKAHEAD_HOPS) if guide else 0
+        self.near_goal = bool(near_goal)
+        self.obs_size += 3 if near_goal else 0
         self.refresh()
 
     # -- geometry
@@ -257,9 +267,23 @@ class FTLBatch:
                 self.heading if every else self.heading[rows],
                 self.guide.lookahead(tip, target, ids),
                 out,
-                self.obs_size - 10 - 3 * len(LOOKAHEAD_HOPS),
+                self._guide_start,
             )
+        if self.near_goal:
+            out[:, -3:] = self.near_goal_columns(None if every else rows)
         return out
+
+    def near_goal_columns(self, rows: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
+        """The target's offset from the tip at a fine scale, ``(B, 3)`` (or of ``rows``).
+
+        ``(target − tip) / max(d, NEAR_GOAL_RANGE)`` (``d`` its length) in the frame the steered
+        ``κ`` bends in: the unit way to the target beyond :data:`NEAR_GOAL_RANGE` (10 cm), and
+        within it the offset itself in tenths of that range, ten times the resolution of the
+        guide's ``(target − tip)/100``, where the last centimetres are decided.
+        """
+        offset = self.target - self.tip if rows is None else self.target[rows] - self.tip[rows]
+        offset /= np.maximum(np.linalg.norm(offset, axis=1), NEAR_GOAL_RANGE)[:, None]
+        return np.einsum("rji,rj->ri", self.steering_frames(rows), offset)
 
     def target_fields(self) -> NDArray[np.int64]:
         """The guide's field ids of the targets, ``(B,)`` (asked again after a restart)."""
