@@ -1,17 +1,24 @@
 """Rank the checkpoints of an `AFTIR-ArmFTL-v0` run on validation targets, in one batched pass each.
 
-Run: ``python benchmarks/rank_checkpoints.py RUN_DIR [--fresh N] [--corners N] [--seed S]``.
+Run: ``python benchmarks/rank_checkpoints.py RUN_DIR [--fresh N] [--corners N] [--extreme N]
+[--seed S]``.
 ``RUN_DIR`` is a (finished or interrupted) SB3 run: its ``config.json`` and
 ``checkpoints/model_*.zip``, loaded without unpickling (:func:`aftir_rl.agents.sb3.load_model`).
 
-Two validation sets, both drawn by the run's env as it is evaluated (10 cm from every surface,
+Three validation sets, drawn by the run's env as it is evaluated (10 cm from every surface,
 the training-only kwargs left out), with seeds no evaluation uses by default (``evaluate`` draws
 from 1,000,000, the docs' test sets from 777,000 and 2,000,000, training's fixed set from 12,345):
 
 - *fresh*: ``--fresh`` targets drawn uniformly, seeds ``S .. S + N - 1``;
 - *corners*: ``--corners`` targets drawn in the corners of the target region as
   ``corner_bias=1`` draws them (10-25 cm inward from one of its eight corners), seeds
-  ``S + 500,000 ..``.
+  ``S + 500,000 ..``;
+- *extreme*: ``--extreme`` targets within 2 cm of the eight points ``target_clearance`` (10 cm)
+  inward from the corners of the target region (the corners in turn, each point drawn from the
+  generator seeded ``S + 900,000``, kept if 10 cm from every surface): the innermost corners an
+  evaluation can draw, where the four reference targets of bay 2 lie (4 of its 8 points). One
+  episode per reference target says little; 12 near each of the 8 points measure that kind of
+  target. Reported only: the best checkpoint is marked on the first two sets.
 
 Each checkpoint's deterministic policy runs every target once, all targets as rows of the batched
 env (the same transitions as the single env for the same actions: ``tests/test_arm_ftl.py``; the
@@ -36,11 +43,15 @@ from tqdm import tqdm
 import aftir_rl  # noqa: F401
 from aftir_rl.agents.sb3 import evaluation_env_kwargs, load_model
 from aftir_rl.agents.sb3_load import sb3_config_from_run
+from aftir_rl.collision import point_clearance
 from aftir_rl.errors import AftirError
 from aftir_rl.safety import read_json
 
 ENV_ID = "AFTIR-ArmFTL-v0"
 CORNER_SEED_OFFSET = 500_000
+EXTREME_SEED_OFFSET = 900_000
+#: How far [cm] inward of the innermost corner points the *extreme* targets may lie, per axis.
+EXTREME_DEPTH = 2.0
 
 
 def validation_targets(kwargs: dict, count: int, seed: int, corners: bool) -> np.ndarray:
@@ -49,6 +60,31 @@ def validation_targets(kwargs: dict, count: int, seed: int, corners: bool) -> np
         kwargs = {**kwargs, "corner_bias": 1.0}
     env = gym.make(ENV_ID, **kwargs)
     return np.array([env.reset(seed=seed + i)[1]["target"] for i in range(count)])
+
+
+def extreme_targets(kwargs: dict, count: int, seed: int) -> np.ndarray:
+    """``count`` targets near the points ``target_clearance`` inward from the region's corners.
+
+    Target ``j`` lies within :data:`EXTREME_DEPTH` cm inward (per axis) of corner ``j mod 8``'s
+    point and ``target_clearance`` from every surface (drawn again until it is, at most 100
+    times). Raises :class:`AftirError` when a corner has no such point.
+    """
+    env = gym.make(ENV_ID, **kwargs).unwrapped
+    lo, hi, clearance = env.region[0], env.region[1], float(env.target_clearance)
+    high = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=bool)
+    rng = np.random.default_rng(seed)
+    out = np.empty((count, 3))
+    for j in range(count):
+        for _ in range(100):
+            depth = clearance + rng.uniform(0.0, EXTREME_DEPTH, 3)
+            point = np.where(high[j % 8], hi - depth, lo + depth)
+            if point_clearance(env.tank, point[None])[0] >= clearance:
+                out[j] = point
+                break
+        else:
+            raise AftirError(f"no free point near corner {j % 8} of the target region")
+    env.close()
+    return out
 
 
 def rollout(model, kwargs: dict, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -74,10 +110,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("run", metavar="RUN_DIR", help="an SB3 run of AFTIR-ArmFTL-v0")
     parser.add_argument("--fresh", type=int, default=200, help="uniform targets (200)")
     parser.add_argument("--corners", type=int, default=96, help="corner targets (96)")
+    parser.add_argument(
+        "--extreme", type=int, default=96, help="targets at the innermost corner points (96)"
+    )
     parser.add_argument("--seed", type=int, default=3_000_000, help="first seed (3,000,000)")
     args = parser.parse_args(argv)
-    if not (1 <= args.fresh <= 4096 and 1 <= args.corners <= 4096):
-        print("error: --fresh and --corners must be in 1..4096", file=sys.stderr)
+    if not all(1 <= n <= 4096 for n in (args.fresh, args.corners, args.extreme)):
+        print("error: --fresh, --corners and --extreme must be in 1..4096", file=sys.stderr)
         return 2
     if not 0 <= args.seed <= 2**31:
         print("error: --seed must be in 0..2**31", file=sys.stderr)
@@ -99,25 +138,34 @@ def main(argv: list[str] | None = None) -> int:
         corner = validation_targets(
             kwargs, args.corners, args.seed + CORNER_SEED_OFFSET, corners=True
         )
+        extreme = extreme_targets(kwargs, args.extreme, args.seed + EXTREME_SEED_OFFSET)
         rows = []
         for path in tqdm(paths, desc="checkpoints", file=sys.stderr):
             model = load_model(algo, path, config=config)
             f_ok, f_hit = rollout(model, kwargs, fresh)
             c_ok, c_hit = rollout(model, kwargs, corner)
-            rows.append((path.name, f_ok.mean(), f_hit.mean(), c_ok.mean(), c_hit.mean()))
+            x_ok, _ = rollout(model, kwargs, extreme)
+            rows.append(
+                (path.name, f_ok.mean(), f_hit.mean(), c_ok.mean(), c_hit.mean(), x_ok.mean())
+            )
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     best = max(range(len(rows)), key=lambda i: rows[i][1] + rows[i][3])
     print(
         f"{args.run}: {len(fresh)} fresh targets (seeds {args.seed}+), {len(corner)} corner "
-        f"targets (seeds {args.seed + CORNER_SEED_OFFSET}+), deterministic\n"
+        f"targets (seeds {args.seed + CORNER_SEED_OFFSET}+), {len(extreme)} extreme corner "
+        f"targets (seed {args.seed + EXTREME_SEED_OFFSET}), deterministic; best: the highest "
+        "fresh + corner success\n"
     )
-    print("| checkpoint | fresh success | fresh contact | corner success | corner contact |")
-    print("|---|---:|---:|---:|---:|")
-    for i, (name, fs, fc, cs, cc) in enumerate(rows):
+    print(
+        "| checkpoint | fresh success | fresh contact | corner success | corner contact "
+        "| extreme corner success |"
+    )
+    print("|---|---:|---:|---:|---:|---:|")
+    for i, (name, fs, fc, cs, cc, xs) in enumerate(rows):
         mark = " **best**" if i == best else ""
-        print(f"| {name}{mark} | {fs:.1%} | {fc:.1%} | {cs:.1%} | {cc:.1%} |")
+        print(f"| {name}{mark} | {fs:.1%} | {fc:.1%} | {cs:.1%} | {cc:.1%} | {xs:.1%} |")
     return 0
 
 
