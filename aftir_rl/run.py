@@ -306,7 +306,7 @@ def _evaluate_sb3(
     metrics, _ = evaluate_policy_on_targets(
         run.model, run.env_id, targets, clearance=True, env_kwargs=kwargs
     )
-    note = f"{metrics['collision_rate']:.0%} collided" if metrics["collision_rate"] else ""
+    note = f"{metrics['collision_rate']:.1%} collided" if metrics["collision_rate"] else ""
     agent = f"{run.algo} ({run.config.env_id})"
     return {"agent": agent, "targets": len(targets), **metrics, "note": note}
 
