@@ -1,7 +1,7 @@
 """Rank the checkpoints of an `AFTIR-ArmFTL-v0` run on validation targets, in one batched pass each.
 
 Run: ``python benchmarks/rank_checkpoints.py RUN_DIR [--fresh N] [--corners N] [--extreme N]
-[--seed S]``.
+[--seed S] [--target X Y Z ...]``.
 ``RUN_DIR`` is a (finished or interrupted) SB3 run: its ``config.json`` and
 ``checkpoints/model_*.zip``, loaded without unpickling (:func:`aftir_rl.agents.sb3.load_model`).
 
@@ -19,6 +19,11 @@ from 1,000,000, the docs' test sets from 777,000 and 2,000,000, training's fixed
   evaluation can draw, where the four reference targets of bay 2 lie (4 of its 8 points). One
   episode per reference target says little; 12 near each of the 8 points measure that kind of
   target. Reported only: the best checkpoint is marked on the first two sets.
+
+``--target X Y Z`` (repeatable; e.g. the four reference targets) adds a column: how many of those
+targets each checkpoint reaches, each rolled out alone (a one-row batched env, the single env's
+transitions and predictions, as ``python -m aftir_rl.evaluate --target`` runs them). Reported
+only, like *extreme*.
 
 Each checkpoint's deterministic policy runs every target once, all targets as rows of the batched
 env (the same transitions as the single env for the same actions: ``tests/test_arm_ftl.py``; the
@@ -114,7 +119,19 @@ def main(argv: list[str] | None = None) -> int:
         "--extreme", type=int, default=96, help="targets at the innermost corner points (96)"
     )
     parser.add_argument("--seed", type=int, default=3_000_000, help="first seed (3,000,000)")
+    parser.add_argument(
+        "--target",
+        nargs=3,
+        type=float,
+        action="append",
+        default=[],
+        metavar=("X", "Y", "Z"),
+        help="a target [cm] rolled out alone on every checkpoint, reported only (repeatable, 64)",
+    )
     args = parser.parse_args(argv)
+    if len(args.target) > 64:
+        print("error: at most 64 --target", file=sys.stderr)
+        return 2
     if not all(1 <= n <= 4096 for n in (args.fresh, args.corners, args.extreme)):
         print("error: --fresh, --corners and --extreme must be in 1..4096", file=sys.stderr)
         return 2
@@ -139,14 +156,23 @@ def main(argv: list[str] | None = None) -> int:
             kwargs, args.corners, args.seed + CORNER_SEED_OFFSET, corners=True
         )
         extreme = extreme_targets(kwargs, args.extreme, args.seed + EXTREME_SEED_OFFSET)
+        named = np.array(args.target, dtype=np.float64).reshape(-1, 3)
+        check = gym.make(ENV_ID, **kwargs)
+        for target in named:  # a TargetError (an AftirError) names a target outside or blocked
+            check.reset(options={"target": tuple(float(v) for v in target)})
+        check.close()
         rows = []
         for path in tqdm(paths, desc="checkpoints", file=sys.stderr):
             model = load_model(algo, path, config=config)
             f_ok, f_hit = rollout(model, kwargs, fresh)
             c_ok, c_hit = rollout(model, kwargs, corner)
             x_ok, _ = rollout(model, kwargs, extreme)
+            alone = [rollout(model, kwargs, target[None]) for target in named]
+            reached = sum(bool(ok[0]) for ok, _ in alone)
+            touched = sum(bool(hit[0]) for _, hit in alone)
             rows.append(
                 (path.name, f_ok.mean(), f_hit.mean(), c_ok.mean(), c_hit.mean(), x_ok.mean())
+                + (f"{reached}/{len(named)}" + (f" ({touched} contact)" if touched else ""),)
             )
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -158,14 +184,16 @@ def main(argv: list[str] | None = None) -> int:
         f"targets (seed {args.seed + EXTREME_SEED_OFFSET}), deterministic; best: the highest "
         "fresh + corner success\n"
     )
+    extra = len(named) > 0
     print(
         "| checkpoint | fresh success | fresh contact | corner success | corner contact "
-        "| extreme corner success |"
+        "| extreme corner success |" + (" --target reached |" if extra else "")
     )
-    print("|---|---:|---:|---:|---:|---:|")
-    for i, (name, fs, fc, cs, cc, xs) in enumerate(rows):
+    print("|---|---:|---:|---:|---:|---:|" + ("---:|" if extra else ""))
+    for i, (name, fs, fc, cs, cc, xs, named_cell) in enumerate(rows):
         mark = " **best**" if i == best else ""
-        print(f"| {name}{mark} | {fs:.1%} | {fc:.1%} | {cs:.1%} | {cc:.1%} | {xs:.1%} |")
+        line = f"| {name}{mark} | {fs:.1%} | {fc:.1%} | {cs:.1%} | {cc:.1%} | {xs:.1%} |"
+        print(line + (f" {named_cell} |" if extra else ""))
     return 0
 
 
