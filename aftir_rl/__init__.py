@@ -1,11 +1,12 @@
 """aftir_rl: path planning for the AFTIR continuum robot in aircraft fuel tanks.
 
-Importing the package registers its Gymnasium environments (see :data:`ENV_IDS`).
+Importing the package registers its Gymnasium environments (see :data:`ENV_IDS`) by string
+entry points: nothing heavier than Gymnasium is imported until an env is made.
 """
 
 from __future__ import annotations
 
-from aftir_rl.envs import ENV_IDS, register_envs
+from aftir_rl.envs.registration import ENV_IDS, register_envs
 
 __version__ = "0.1.0"
 __all__ = ["ENV_IDS", "register_envs", "__version__"]

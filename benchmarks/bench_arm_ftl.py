@@ -20,7 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 import aftir_rl  # noqa: F401
-from aftir_rl.agents.sb3_config import SB3Config, build_model, load_sb3_config
+from aftir_rl.rl.sb3.config import SB3Config, build_model, load_sb3_config
 
 ENV_ID = "AFTIR-ArmFTL-v0"
 
@@ -85,9 +85,9 @@ def warm_fields(max_draws: int, **kwargs) -> tuple[int, int, int]:
 
 def ppo_env_share(config: SB3Config, steps: int) -> tuple[float, float]:
     """PPO (SB3) on the batched env as a config trains it: steps/s and the env's share."""
-    from aftir_rl.agents.vec_adapter import make_batched_vec_env
+    from aftir_rl.rl.sb3.vec_adapter import make_batched_vec_env
 
-    # as aftir_rl.train builds it: only HER reads the infos of rows that did not finish
+    # as aftir_rl.cli.train builds it: only HER reads the infos of rows that did not finish
     venv = make_batched_vec_env(
         f"aftir_rl:{ENV_ID}", config.n_envs, 0, dict(config.env_kwargs), None if config.her else ()
     )

@@ -3,7 +3,8 @@
 Run: ``python benchmarks/bench_goal.py``. Prints a markdown table measured in this one run on this
 machine: wall time, goals, transitions and how many greedy paths are BFS-optimal, for
 ``train_all_targets`` (one ``(cell, goal, action)`` table, every goal's episodes stepped in
-parallel) and for one :class:`~aftir_rl.agents.QLearning` trained per reachable cell, both with the
+parallel) and for one :class:`~aftir_rl.rl.tabular.QLearning` trained per reachable cell, both with
+the
 hyperparameters of ``configs/q_table.yaml`` and the same number of episodes per target.
 """
 
@@ -18,8 +19,8 @@ import gymnasium as gym
 import numpy as np
 
 import aftir_rl  # noqa: F401
-from aftir_rl.agents import QLearning, QLearningConfig, greedy_rollout, train_all_targets
-from aftir_rl.tank import load_tank
+from aftir_rl.core.tank import load_tank
+from aftir_rl.rl.tabular import QLearning, QLearningConfig, greedy_rollout, train_all_targets
 
 
 def separate_tables(cfg: QLearningConfig, seed: int, limit: int | None) -> dict:

@@ -17,10 +17,10 @@ import platform
 import numpy as np
 from bench_posture import fmt_theta as fmt
 
-from aftir_rl.papers import ICRA2014_TABLE2, ICRA2014_TANKS, ICRA2014_TARGET
-from aftir_rl.posture import Planner
-from aftir_rl.posture.obstacle_clipping import obstacle_clipping
-from aftir_rl.robot import Posture
+from aftir_rl.core.papers import ICRA2014_TABLE2, ICRA2014_TANKS, ICRA2014_TARGET
+from aftir_rl.core.robot import Posture
+from aftir_rl.planning.posture import Planner
+from aftir_rl.planning.posture.obstacle_clipping import obstacle_clipping
 
 
 def zone_distance(posture: Posture, centres: list[tuple[float, float, float]], l: float) -> float:

@@ -5,7 +5,7 @@
 Targets: the four reference targets and N random free targets per bay at least 10 cm from every
 surface (targets in obstructed raster cells are skipped: the grid world cannot learn them). The
 learned paths come from one goal-conditioned Q-learning run (every greedy path BFS-optimal).
-Each motion is planned by :func:`aftir_rl.motion.plan.plan_motion` and re-checked here with
+Each motion is planned by :func:`aftir_rl.planning.ftl.plan.plan_motion` and re-checked here with
 python-fcl capsules on every 4th entry and every stage.
 """
 
@@ -18,11 +18,11 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from aftir_rl.agents.q_table_goal import train_all_targets
-from aftir_rl.collision import CollisionScene
-from aftir_rl.motion.plan import plan_motion
-from aftir_rl.posture.planner import Planner, random_free_targets
-from aftir_rl.tank import load_tank
+from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.tank import load_tank
+from aftir_rl.planning.ftl.plan import plan_motion
+from aftir_rl.planning.posture.planner import Planner, random_free_targets
+from aftir_rl.rl.tabular.q_table_goal import train_all_targets
 
 
 def main() -> None:

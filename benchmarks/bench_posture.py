@@ -21,9 +21,9 @@ import time
 
 import numpy as np
 
-from aftir_rl.errors import PlanningError
-from aftir_rl.papers import FILOMAT2018_TABLE2, JACE_TABLE2
-from aftir_rl.posture import (
+from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.papers import FILOMAT2018_TABLE2, JACE_TABLE2
+from aftir_rl.planning.posture import (
     PlanarProblem,
     Planner,
     blind_search,

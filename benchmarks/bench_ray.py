@@ -24,7 +24,10 @@ TIMED = ("rrt_connect", "q_table+postures")
 def run(args: list[str]) -> tuple[float, str]:
     start = time.perf_counter()
     out = subprocess.run(
-        [sys.executable, "-m", "aftir_rl.bench", *args], capture_output=True, text=True, check=False
+        [sys.executable, "-m", "aftir_rl.experiments.bench", *args],
+        capture_output=True,
+        text=True,
+        check=False,
     )
     seconds = time.perf_counter() - start
     if out.returncode != 0:

@@ -1,8 +1,8 @@
 """Milliseconds per ``rgb_array`` frame: a whole matplotlib figure per frame against blitting.
 
 Run: ``python benchmarks/bench_render.py [--frames N]``. Prints one markdown table measured in this
-one run on this machine. "old" is :func:`aftir_rl.plotting.render_path` (a new figure per frame,
-what the envs did before); "new" is :class:`aftir_rl.plotting.PathRenderer` (background drawn
+one run on this machine. "old" is :func:`aftir_rl.viz.plotting.render_path` (a new figure per frame,
+what the envs did before); "new" is :class:`aftir_rl.viz.plotting.PathRenderer` (background drawn
 once, then only the moving artists), called the way each env's ``render()`` calls it, on a path
 that grows frame by frame. "env" is ``env.render()`` after ``env.step`` (the step excluded). The
 last column is the largest difference of any pixel channel between the old and the new picture of
@@ -20,9 +20,9 @@ import gymnasium as gym
 import numpy as np
 
 import aftir_rl  # noqa: F401
-from aftir_rl.plotting import PathRenderer, render_path
-from aftir_rl.robot import body_points
-from aftir_rl.tank import load_tank
+from aftir_rl.core.robot import body_points
+from aftir_rl.core.tank import load_tank
+from aftir_rl.viz.plotting import PathRenderer, render_path
 
 
 def frames(kind: str, n: int):

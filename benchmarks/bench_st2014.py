@@ -22,11 +22,11 @@ import platform
 import numpy as np
 from bench_posture import best_time  # benchmarks/ is the script's own folder
 
-from aftir_rl.errors import PlanningError
-from aftir_rl.papers import ST2014_TABLE1, ST2014_TABLE2
-from aftir_rl.posture import Planner
-from aftir_rl.posture.context import fmt_point
-from aftir_rl.posture.region_division import bearing, geometric_solution, region_division
+from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.papers import ST2014_TABLE1, ST2014_TABLE2
+from aftir_rl.planning.posture import Planner
+from aftir_rl.planning.posture.context import fmt_point
+from aftir_rl.planning.posture.region_division import bearing, geometric_solution, region_division
 
 
 def table1(planner: Planner, repeats: int) -> None:

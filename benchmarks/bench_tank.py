@@ -16,8 +16,8 @@ import gymnasium as gym
 import numpy as np
 
 import aftir_rl  # noqa: F401
-from aftir_rl.agents import QLearning, QLearningConfig, greedy_rollout
-from aftir_rl.tank import load_tank
+from aftir_rl.core.tank import load_tank
+from aftir_rl.rl.tabular import QLearning, QLearningConfig, greedy_rollout
 
 
 def steps_per_second(env_id: str, n_steps: int, repeats: int, **kwargs) -> float:

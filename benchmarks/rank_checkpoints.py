@@ -3,7 +3,7 @@
 Run: ``python benchmarks/rank_checkpoints.py RUN_DIR [--fresh N] [--corners N] [--extreme N]
 [--seed S] [--target X Y Z ...]``.
 ``RUN_DIR`` is a (finished or interrupted) SB3 run: its ``config.json`` and
-``checkpoints/model_*.zip``, loaded without unpickling (:func:`aftir_rl.agents.sb3.load_model`).
+``checkpoints/model_*.zip``, loaded without unpickling (:func:`aftir_rl.rl.sb3.load_model`).
 
 Three validation sets, drawn by the run's env as it is evaluated (10 cm from every surface,
 the training-only kwargs left out), with seeds no evaluation uses by default (``evaluate`` draws
@@ -46,11 +46,11 @@ import torch
 from tqdm import tqdm
 
 import aftir_rl  # noqa: F401
-from aftir_rl.agents.sb3 import evaluation_env_kwargs, load_model
-from aftir_rl.agents.sb3_load import sb3_config_from_run
-from aftir_rl.collision import point_clearance
-from aftir_rl.errors import AftirError
-from aftir_rl.safety import read_json
+from aftir_rl.core.collision import point_clearance
+from aftir_rl.core.errors import AftirError
+from aftir_rl.core.files import read_json
+from aftir_rl.rl.sb3 import evaluation_env_kwargs, load_model
+from aftir_rl.rl.sb3.loading import sb3_config_from_run
 
 ENV_ID = "AFTIR-ArmFTL-v0"
 CORNER_SEED_OFFSET = 500_000

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import aftir_rl  # noqa: F401  (registers the envs)
-from aftir_rl.tank import load_tank
+from aftir_rl.core.tank import load_tank
 
 
 @pytest.fixture(scope="session")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aftir_rl.envs.ftl_model import FTLBatch
+from aftir_rl.envs.ftl.state import FTLBatch
 
 
 def random_ftl_batch(tank, rng, b, margin=1.0, **kwargs):

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from aftir_rl import train
-from aftir_rl.collision import CollisionScene
-from aftir_rl.errors import InvalidActionError, TargetError
+from aftir_rl.cli import train
+from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.errors import InvalidActionError, TargetError
 
 ARM_IDS = ["AFTIR-ArmReach-v0", "AFTIR-Arm-v0"]
 
@@ -166,7 +166,7 @@ def test_full_arm_raw_joint_env_poses_the_ftl_task():
     from gymnasium.utils.env_checker import check_env as gym_check_env
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-    from aftir_rl.collision import point_clearance
+    from aftir_rl.core.collision import point_clearance
 
     env = gym.make("AFTIR-ArmFull-v0", bay=2)
     gym_check_env(env.unwrapped, skip_render_check=True)

@@ -8,18 +8,18 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-from aftir_rl.collision import point_clearance
-from aftir_rl.envs.arm_ftl import (
+from aftir_rl.core.collision import point_clearance
+from aftir_rl.core.errors import AftirError, ConfigError, InvalidActionError, TargetError
+from aftir_rl.core.robot import body_points
+from aftir_rl.envs.ftl.env import (
     ArmFTLEnv,
     TankDistance,
     ftl_kappa_batch,
     raster_detour_table,
 )
-from aftir_rl.envs.ftl_goal import MAX_STEP_COST
-from aftir_rl.envs.ftl_kernel import CONTACT_PENALTY
-from aftir_rl.errors import AftirError, ConfigError, InvalidActionError, TargetError
-from aftir_rl.motion.ftl import Route, ftl_postures, kappa_to_angles, route_points
-from aftir_rl.robot import body_points
+from aftir_rl.envs.ftl.kernel import CONTACT_PENALTY
+from aftir_rl.envs.ftl.setup import MAX_STEP_COST
+from aftir_rl.planning.ftl.model import Route, ftl_postures, kappa_to_angles, route_points
 
 ENV_ID = "AFTIR-ArmFTL-v0"
 
@@ -282,7 +282,7 @@ def test_targets_per_bay_and_by_option():
 
 def test_detour_bias_draws_more_targets_behind_obstacles():
     """detour_bias weights targets by 1 + their raster detour; 0 leaves the draws unchanged."""
-    from aftir_rl.agents.sb3_eval import evaluation_targets
+    from aftir_rl.rl.sb3.evaluation import evaluation_targets
 
     def targets(**kwargs):
         env = ArmFTLEnv(bay=2, **kwargs)
@@ -320,8 +320,8 @@ def test_detour_bias_draws_more_targets_behind_obstacles():
 
 def test_corner_bias_draws_targets_in_the_regions_corners():
     """corner_bias draws that fraction in the eight corner cubes; 0 leaves the draws unchanged."""
-    from aftir_rl.agents.sb3_eval import evaluation_targets
-    from aftir_rl.envs.ftl_batch import CORNER_DEPTH, bay_region
+    from aftir_rl.envs.ftl.fields import CORNER_DEPTH, bay_region
+    from aftir_rl.rl.sb3.evaluation import evaluation_targets
 
     def targets(n=200, **kwargs):
         env = ArmFTLEnv(bay=2, **kwargs)
@@ -358,7 +358,7 @@ def test_corner_bias_draws_targets_in_the_regions_corners():
 
 def test_slack_tightens_training_and_evaluations_drop_it():
     """slack: success within tolerance − slack, contact below margin + slack; training-only."""
-    from aftir_rl.agents.sb3_eval import evaluation_env_kwargs, evaluation_targets
+    from aftir_rl.rl.sb3.evaluation import evaluation_env_kwargs, evaluation_targets
 
     plain, strict = ArmFTLEnv(bay=2), ArmFTLEnv(bay=2, slack=0.5)
     assert (strict.batch.success_tolerance, strict.batch.margin) == (1.5, 1.5)
@@ -544,7 +544,7 @@ def test_vector_env_matches_single_envs(shaping, guide, near_goal):
 
 def test_reward_reuses_the_observations_guide_queries(monkeypatch):
     """With the guide observed, the reward asks the guide nothing the observations asked."""
-    from aftir_rl.envs.ftl_batch import FieldGuide
+    from aftir_rl.envs.ftl.fields import FieldGuide
 
     venv = gym.make_vec(
         ENV_ID,
@@ -643,7 +643,7 @@ def test_arm_env_api_used_by_the_evaluator():
 def test_train_cli_sac_her(tmp_path):
     import yaml
 
-    from aftir_rl.train import main
+    from aftir_rl.cli.train import main
 
     config = yaml.safe_load(open("configs/sac_ftl.yaml"))
     config.update(total_timesteps=400, eval_freq=400, eval_targets=2, checkpoint_freq=400)

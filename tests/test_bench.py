@@ -8,11 +8,11 @@ import sys
 import numpy as np
 import pytest
 
-from aftir_rl.bench import Outcome, Row, format_table, run_benchmark, target_sets
-from aftir_rl.collision import CollisionScene
-from aftir_rl.posture import Planner
-from aftir_rl.robot import Posture, tip_position
-from aftir_rl.tank import load_tank
+from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.robot import Posture, tip_position
+from aftir_rl.core.tank import load_tank
+from aftir_rl.experiments.bench import Outcome, Row, format_table, run_benchmark, target_sets
+from aftir_rl.planning.posture import Planner
 
 
 def test_summary_counts_only_what_ran():

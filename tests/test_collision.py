@@ -6,8 +6,8 @@ import fcl
 import numpy as np
 import pytest
 
-from aftir_rl.collision import CollisionScene, panel_violation, point_clearance, points_clear
-from aftir_rl.robot import Posture
+from aftir_rl.core.collision import CollisionScene, panel_violation, point_clearance, points_clear
+from aftir_rl.core.robot import Posture
 
 
 @pytest.fixture(scope="module")
@@ -154,7 +154,7 @@ def test_point_clearance_is_the_fcl_distance_to_the_scene(tank, scene):
 @pytest.mark.parametrize("name", ["b737_center", "open_space_obstacles1"])
 def test_far_from_everything_is_its_conservative_rule(name):
     """The compiled pre-check against its rule in numpy: solids' bounds grown, walls, floor."""
-    from aftir_rl.tank import load_tank
+    from aftir_rl.core.tank import load_tank
 
     tank = load_tank(name)
     scene = CollisionScene(tank)

@@ -12,8 +12,8 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from aftir_rl import ENV_IDS
+from aftir_rl.core.errors import InvalidActionError, TargetError
 from aftir_rl.envs import Action, TankGridEnv
-from aftir_rl.errors import InvalidActionError, TargetError
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from aftir_rl import evaluate, train
+from aftir_rl.cli import evaluate, train
 
 
 @pytest.mark.slow

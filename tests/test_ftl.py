@@ -12,13 +12,13 @@ import json
 import numpy as np
 import pytest
 
-from aftir_rl import plan as plan_cli
-from aftir_rl.collision import CollisionScene
-from aftir_rl.motion.ftl import Route, ftl_deviation, ftl_motion, ftl_postures, route_points
-from aftir_rl.motion.plan import plan_motion
-from aftir_rl.posture.planner import Planner, random_free_targets
-from aftir_rl.robot import Posture, body_points
-from aftir_rl.tank import load_tank
+from aftir_rl.cli import plan as plan_cli
+from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.robot import Posture, body_points
+from aftir_rl.core.tank import load_tank
+from aftir_rl.planning.ftl.model import Route, ftl_deviation, ftl_motion, ftl_postures, route_points
+from aftir_rl.planning.ftl.plan import plan_motion
+from aftir_rl.planning.posture.planner import Planner, random_free_targets
 
 REFERENCE = [(230, 140, 90), (-50, 140, 10), (-50, 72, 90), (230, 72, 10)]
 

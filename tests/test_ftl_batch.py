@@ -8,17 +8,17 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from aftir_rl.collision import CollisionScene, point_clearance
-from aftir_rl.envs.arm_ftl import ArmFTLEnv, ArmFTLVectorEnv
-from aftir_rl.envs.ftl_batch import (
+from aftir_rl.core.collision import CollisionScene, point_clearance
+from aftir_rl.core.robot import Posture, body_points, forward_kinematics
+from aftir_rl.core.tank import load_tank
+from aftir_rl.envs.ftl.env import ArmFTLEnv, ArmFTLVectorEnv
+from aftir_rl.envs.ftl.fields import (
     clearance_grid,
     draw_targets,
     field_guide,
     raster_distance_table,
 )
-from aftir_rl.motion.ftl import kappa_to_angles
-from aftir_rl.robot import Posture, body_points, forward_kinematics
-from aftir_rl.tank import load_tank
+from aftir_rl.planning.ftl.model import kappa_to_angles
 from tests.helpers import random_ftl_batch
 
 ENV_ID = "AFTIR-ArmFTL-v0"
@@ -110,7 +110,7 @@ def test_raster_distance_table_against_bfs():
 
 def test_guide_leads_through_the_hatch():
     """Following the guide's way from bay 1 reaches a bay-2 target, and P is GuideField's."""
-    from aftir_rl.motion.route import GuideField
+    from aftir_rl.planning.ftl.route import GuideField
 
     tank = load_tank("b737_center")
     guide = field_guide(tank)
@@ -146,7 +146,7 @@ def test_lookahead_follows_the_shortest_way():
     """Each hop goes to the neighbour that satisfies the field's Bellman equation, the way
     reaches the target (ending on it), and clearance as a cost keeps the way off the hatch's
     edges where the plain field hugs them."""
-    from aftir_rl.motion.route import GuideField
+    from aftir_rl.planning.ftl.route import GuideField
 
     tank = load_tank("b737_center")
     guide = field_guide(tank)
@@ -189,7 +189,7 @@ def dijkstra(field):
     """Shortest distances to the field's seeds by Dijkstra (heapq) over its edges and weights."""
     import heapq
 
-    from aftir_rl.motion.guide import _NEIGHBOURS
+    from aftir_rl.planning.ftl.guide import NEIGHBOURS
 
     shape = tuple(int(v) for v in field.shape)
     dist = np.full(shape, np.inf)
@@ -202,7 +202,7 @@ def dijkstra(field):
         d0, y = heapq.heappop(heap)
         if d0 > dist[y]:
             continue
-        for e, d in enumerate(_NEIGHBOURS):  # x -> y = x + d
+        for e, d in enumerate(NEIGHBOURS):  # x -> y = x + d
             x = tuple(np.subtract(y, d))
             if not all(0 <= x[i] < shape[i] for i in range(3)):
                 continue
@@ -235,7 +235,7 @@ def test_draw_targets_are_free_and_reproducible():
 @pytest.mark.parametrize("corners", [0.0, 0.5])
 def test_draw_targets_are_the_first_free_candidates(corners):
     """Each target is its generator's first candidate free by the exact distance (a numpy loop)."""
-    from aftir_rl.envs.ftl_batch import _corner_candidates
+    from aftir_rl.envs.ftl.fields import _corner_candidates
 
     env = ArmFTLEnv(bay=2)
     lo, hi = env.region
@@ -301,7 +301,7 @@ def test_guide_observation():
 
 def test_near_goal_observation():
     """The near-goal columns: the target's offset over max(d, 10 cm), in the steering frame."""
-    from aftir_rl.envs.ftl_model import NEAR_GOAL_RANGE
+    from aftir_rl.envs.ftl.state import NEAR_GOAL_RANGE
 
     env = gym.make(ENV_ID, guide=True, near_goal=True)
     plain = gym.make(ENV_ID, guide=True)
@@ -325,7 +325,7 @@ def test_near_goal_observation():
         assert np.linalg.norm(batch.near_goal_columns()[0]) == pytest.approx(
             min(d / NEAR_GOAL_RANGE, 1.0)
         )
-    from aftir_rl.errors import ConfigError
+    from aftir_rl.core.errors import ConfigError
 
     with pytest.raises(ConfigError, match="near_goal"):
         gym.make(ENV_ID, near_goal="yes")
@@ -366,7 +366,7 @@ def test_sb3_adapter_trains_ppo_and_sac_her():
     from stable_baselines3 import PPO, SAC, HerReplayBuffer
     from stable_baselines3.common.vec_env import VecEnv
 
-    from aftir_rl.agents.vec_adapter import make_batched_vec_env
+    from aftir_rl.rl.sb3.vec_adapter import make_batched_vec_env
 
     venv = make_batched_vec_env(f"aftir_rl:{ENV_ID}", 8, 0, {"guide": True, "shaping": True})
     assert isinstance(venv, VecEnv)
@@ -401,7 +401,7 @@ def test_sb3_adapter_trains_ppo_and_sac_her():
 @pytest.mark.parametrize("keys", [(), ("contact",)])
 def test_sb3_adapter_running_info_keys(keys):
     """Rows that did not finish get only the keys asked for; everything else is the same."""
-    from aftir_rl.agents.vec_adapter import make_batched_vec_env
+    from aftir_rl.rl.sb3.vec_adapter import make_batched_vec_env
 
     rng = np.random.default_rng(8)
     actions = rng.uniform(-1, 1, (60, 4, 3)).astype(np.float32)
@@ -444,8 +444,8 @@ def test_train_cli_ppo_on_the_batched_env(tmp_path):
     import yaml
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    from aftir_rl.agents.sb3 import load_run
-    from aftir_rl.train import main
+    from aftir_rl.cli.train import main
+    from aftir_rl.rl.sb3 import load_run
 
     config = yaml.safe_load(open("configs/ppo_ftl.yaml"))
     config.update(
@@ -468,7 +468,7 @@ def test_train_cli_ppo_on_the_batched_env(tmp_path):
     guided = gym.make(ENV_ID, guide=True).observation_space["observation"]
     assert model.observation_space["observation"].shape == guided.shape
     # evaluate (and bench --model) make the env with the run's env_kwargs, so the shapes fit
-    from aftir_rl.run import evaluate_run
+    from aftir_rl.experiments.runs import evaluate_run
 
     row = evaluate_run(run, targets=[np.array([200.0, 120.0, 50.0])])
     assert row["targets"] == 1 and 0.0 <= row["success_rate"] <= 1.0
@@ -481,8 +481,8 @@ def test_train_cli_ppo_on_the_batched_env(tmp_path):
     assert 0 < kept["timesteps"] <= json.loads((run / "summary.json").read_text())["timesteps"]
     assert load_run(best)[0] == "ppo"
     # evaluate --random N --seed S: the env's own draws with those seeds
-    from aftir_rl.agents.sb3 import evaluation_targets
-    from aftir_rl.evaluate import main as evaluate_main
+    from aftir_rl.cli.evaluate import main as evaluate_main
+    from aftir_rl.rl.sb3 import evaluation_targets
 
     drawn = evaluate_run(best, draw=(3, 777))
     assert drawn["targets"] == 3
@@ -497,8 +497,8 @@ def test_train_cli_ppo_on_the_batched_env(tmp_path):
 
 
 def test_config_limits_for_the_batched_env():
-    from aftir_rl.agents.sb3_config import SB3Config, check_sb3_config
-    from aftir_rl.errors import ConfigError
+    from aftir_rl.core.errors import ConfigError
+    from aftir_rl.rl.sb3.config import SB3Config, check_sb3_config
 
     ok = SB3Config(env_id=ENV_ID, n_envs=1024, env_kwargs={"guide": True, "shaping": "field"})
     check_sb3_config(ok, "ppo", "test")
@@ -530,7 +530,7 @@ def test_config_limits_for_the_batched_env():
 
 
 def test_field_guide_cache_starts_again_and_holders_ask_again():
-    from aftir_rl.envs.ftl_batch import FieldGuide
+    from aftir_rl.envs.ftl.fields import FieldGuide
 
     tank = load_tank("b737_center")
     guide = FieldGuide(tank)

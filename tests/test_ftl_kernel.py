@@ -13,14 +13,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from aftir_rl.envs import ftl_kernel as kernel
-from aftir_rl.envs.arm_ftl import ArmFTLVectorEnv
-from aftir_rl.envs.ftl_batch import kernel_grid
-from aftir_rl.envs.ftl_model import _RAY_AXES, RAY_DISTANCES, ftl_kappa_batch
-from aftir_rl.motion.ftl import kappa_to_angles
-from aftir_rl.robot import _bend_rotations, body_points
-from aftir_rl.tank import load_tank
-from aftir_rl.tank.solids import Box, Cylinder, Sphere
+from aftir_rl.core.robot import _bend_rotations, body_points
+from aftir_rl.core.tank import load_tank
+from aftir_rl.core.tank.solids import Box, Cylinder, Sphere
+from aftir_rl.envs.ftl import kernel
+from aftir_rl.envs.ftl.env import ArmFTLVectorEnv
+from aftir_rl.envs.ftl.fields import kernel_grid
+from aftir_rl.envs.ftl.state import _RAY_AXES, RAY_DISTANCES, ftl_kappa_batch
+from aftir_rl.planning.ftl.model import kappa_to_angles
 from tests.helpers import random_ftl_batch
 
 

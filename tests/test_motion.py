@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from aftir_rl.collision import CollisionScene
-from aftir_rl.posture import Planner
-from aftir_rl.posture.motion import (
+from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.robot import Posture, tip_position
+from aftir_rl.planning.jointspace import (
     align,
     bending_plane,
     bridge,
@@ -18,8 +18,13 @@ from aftir_rl.posture.motion import (
     rrt_connect,
     tip_path_length,
 )
-from aftir_rl.posture.trajectory import pad_sections, plan_trajectory, repair_posture, slide
-from aftir_rl.robot import Posture, tip_position
+from aftir_rl.planning.posture import Planner
+from aftir_rl.planning.posture.trajectory import (
+    pad_sections,
+    plan_trajectory,
+    repair_posture,
+    slide,
+)
 
 
 @pytest.fixture(scope="module")

@@ -9,13 +9,13 @@ import sys
 import numpy as np
 import pytest
 
-from aftir_rl.collision import CollisionScene
-from aftir_rl.errors import PlanningError
-from aftir_rl.papers import ICRA2014_OBSTACLES, ICRA2014_TANKS, ICRA2014_TARGET
-from aftir_rl.posture import Planner
-from aftir_rl.posture.obstacle_clipping import obstacle_clipping
-from aftir_rl.robot import body_points, tip_position
-from aftir_rl.tank import Sphere, load_tank
+from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.papers import ICRA2014_OBSTACLES, ICRA2014_TANKS, ICRA2014_TARGET
+from aftir_rl.core.robot import body_points, tip_position
+from aftir_rl.core.tank import Sphere, load_tank
+from aftir_rl.planning.posture import Planner
+from aftir_rl.planning.posture.obstacle_clipping import obstacle_clipping
 
 TARGET = np.array(ICRA2014_TARGET)
 OBSTACLES = list(ICRA2014_OBSTACLES)  # icra2014 §IV
@@ -68,7 +68,7 @@ def test_plan_cli_obstacle_clipping_json():
         [
             sys.executable,
             "-m",
-            "aftir_rl.plan",
+            "aftir_rl.cli.plan",
             "--tank",
             ROWS[3],
             "--target",

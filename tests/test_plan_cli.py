@@ -6,12 +6,12 @@ import sys
 
 import numpy as np
 
-from aftir_rl.robot import tip_position
+from aftir_rl.core.robot import tip_position
 
 
 def _run(*args):
     return subprocess.run(
-        [sys.executable, "-m", "aftir_rl.plan", *args], capture_output=True, text=True
+        [sys.executable, "-m", "aftir_rl.cli.plan", *args], capture_output=True, text=True
     )
 
 
@@ -53,7 +53,7 @@ def test_unreachable_exits_2_without_traceback():
 
 def test_does_not_import_torch():
     code = (
-        "import sys, aftir_rl.plan; "
+        "import sys, aftir_rl.cli.plan; "
         "print('torch' in sys.modules, 'stable_baselines3' in sys.modules)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

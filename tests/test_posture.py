@@ -5,10 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from aftir_rl.collision import CollisionScene
-from aftir_rl.errors import PlanningError
-from aftir_rl.papers import FILOMAT2018_TABLE2, ICRA2014_TARGET, JACE_TABLE2
-from aftir_rl.posture import (
+from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.papers import FILOMAT2018_TABLE2, ICRA2014_TARGET, JACE_TABLE2
+from aftir_rl.core.robot import body_points, tip_position
+from aftir_rl.planning.posture import (
     REGISTRY,
     PlanarProblem,
     Planner,
@@ -17,8 +18,7 @@ from aftir_rl.posture import (
     refine,
     region_clipping,
 )
-from aftir_rl.posture.planar import planar_points, to_frame
-from aftir_rl.robot import body_points, tip_position
+from aftir_rl.planning.posture.planar import planar_points, to_frame
 
 JACE = [(row.target, row.sections) for row in JACE_TABLE2]
 
@@ -92,7 +92,7 @@ def test_end_direction(open_planner):
     result = open_planner.tga(target, end_direction=u)
     assert_valid(open_planner, result, target)
     p = result.posture
-    from aftir_rl.robot import forward_kinematics
+    from aftir_rl.core.robot import forward_kinematics
 
     end = forward_kinematics(p.dis, p.theta, p.phi, 25.0)[-1, :3, 2]
     np.testing.assert_allclose(end, u, atol=1e-9)
@@ -179,7 +179,7 @@ def test_registry_and_dispatch(open_planner):
     import inspect
 
     for name in ("tga", "tsm", "obstacle_clipping", "region_division", "search", "clipping"):
-        source = inspect.getsource(importlib.import_module(f"aftir_rl.posture.{name}"))
+        source = inspect.getsource(importlib.import_module(f"aftir_rl.planning.posture.{name}"))
         assert "posture.planner" not in source and "posture.registry" not in source, name
     # Blind search names why it is not run on a target too far for its grid.
     blind = REGISTRY["blind"]

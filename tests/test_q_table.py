@@ -4,8 +4,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from aftir_rl.agents import QLearning, QLearningConfig, greedy_rollout
-from aftir_rl.errors import CheckpointError
+from aftir_rl.core.errors import CheckpointError
+from aftir_rl.rl.tabular import QLearning, QLearningConfig, greedy_rollout
 
 CFG = QLearningConfig()
 

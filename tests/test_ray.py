@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from aftir_rl.config import CONFIG_DIR
-from aftir_rl.errors import ConfigError
+from aftir_rl.core.config import CONFIG_DIR
+from aftir_rl.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -73,13 +73,18 @@ def _without_seconds(table: str) -> list[str]:
 def test_modules_import_without_ray():
     code = (
         "import sys; sys.modules['ray'] = None\n"  # `import ray` raises ImportError
-        "import aftir_rl.bench, aftir_rl.evaluate, aftir_rl.distributed, aftir_rl.tune, "
-        "aftir_rl.cli\n"
+        "import aftir_rl.experiments.bench, aftir_rl.cli.evaluate, "
+        "aftir_rl.experiments.distributed, "
+        "aftir_rl.experiments.tune, aftir_rl.cli.bench, aftir_rl.cli.tune, aftir_rl.cli.main\n"
         "print('ok')"
     )
     run = _python("-c", code)
     assert run.returncode == 0, run.stderr
-    run = _python("-c", "import aftir_rl.bench, aftir_rl.tune, sys; print('ray' in sys.modules)")
+    run = _python(
+        "-c",
+        "import aftir_rl.experiments.bench, aftir_rl.experiments.tune, sys; "
+        "print('ray' in sys.modules)",
+    )
     assert run.stdout.strip() == "False"
 
 
@@ -113,7 +118,7 @@ def test_ray_missing_is_one_line(module, args):
     ],
 )
 def test_bad_ray_options(args, message, capsys):
-    from aftir_rl.bench import main
+    from aftir_rl.cli.bench import main
 
     assert main(["--sets", "jace", "--quiet", *args]) == 2
     err = capsys.readouterr().err
@@ -124,7 +129,7 @@ def test_no_cluster_at_the_address_is_one_line(capsys):
     pytest.importorskip("ray")
     import socket
 
-    from aftir_rl.bench import main
+    from aftir_rl.cli.bench import main
 
     with socket.socket() as sock:  # a port nothing listens on
         sock.bind(("127.0.0.1", 0))
@@ -135,10 +140,10 @@ def test_no_cluster_at_the_address_is_one_line(capsys):
 
 
 def test_tune_help_and_dispatch(capsys):
-    from aftir_rl.cli import SUBCOMMANDS
-    from aftir_rl.cli import main as aftir
+    from aftir_rl.cli.main import SUBCOMMANDS
+    from aftir_rl.cli.main import main as aftir
 
-    assert SUBCOMMANDS["tune"][0] == "aftir_rl.tune"
+    assert SUBCOMMANDS["tune"][0] == "aftir_rl.cli.tune"
     with pytest.raises(SystemExit) as exit_:
         aftir(["tune", "--help"])
     assert exit_.value.code == 0
@@ -150,8 +155,8 @@ def test_tune_help_and_dispatch(capsys):
 
 @pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
 def test_shipped_search_spaces_load(algo):
-    from aftir_rl.agents.sb3 import load_sb3_config
-    from aftir_rl.tune import load_search_space
+    from aftir_rl.experiments.tune import load_search_space
+    from aftir_rl.rl.sb3 import load_sb3_config
 
     base = load_sb3_config(CONFIG_DIR / f"{algo}.yaml", algo)
     space = load_search_space(CONFIG_DIR / "search_spaces" / f"{algo}.yaml", algo, base)
@@ -177,8 +182,8 @@ def test_shipped_search_spaces_load(algo):
     ],
 )
 def test_search_space_is_checked(tmp_path, text, message):
-    from aftir_rl.agents.sb3 import load_sb3_config
-    from aftir_rl.tune import load_search_space
+    from aftir_rl.experiments.tune import load_search_space
+    from aftir_rl.rl.sb3 import load_sb3_config
 
     base = load_sb3_config(CONFIG_DIR / "ppo.yaml", "ppo")
     path = tmp_path / "space.yaml"
@@ -201,8 +206,8 @@ def test_bad_space_file_is_one_line(tmp_path):
 def test_best_config_yaml_is_a_training_config(tmp_path):
     import dataclasses
 
-    from aftir_rl.agents.sb3 import load_sb3_config
-    from aftir_rl.tune import write_config_yaml
+    from aftir_rl.experiments.tune import write_config_yaml
+    from aftir_rl.rl.sb3 import load_sb3_config
 
     base = load_sb3_config(CONFIG_DIR / "ppo.yaml", "ppo")
     best = dataclasses.replace(
@@ -215,7 +220,7 @@ def test_best_config_yaml_is_a_training_config(tmp_path):
 
 
 def test_a_stopped_trial_becomes_a_run_directory(tmp_path):
-    from aftir_rl.tune import _finish_stopped
+    from aftir_rl.experiments.tune import _finish_stopped
 
     run_dir = tmp_path / "ppo__AFTIR-ArmReach-v0__random__0__x"
     partial = tmp_path / f".{run_dir.name}.partial"
@@ -236,7 +241,7 @@ def test_a_stopped_trial_becomes_a_run_directory(tmp_path):
 def local_ray():
     """One in-process Ray with 2 CPUs for the in-process tests of this module."""
     ray = pytest.importorskip("ray")
-    from aftir_rl.distributed import ray_session
+    from aftir_rl.experiments.distributed import ray_session
 
     with ray_session("local", 2) as r:
         yield r
@@ -245,8 +250,13 @@ def local_ray():
 
 @pytest.mark.slow
 def test_failed_tasks_are_results(local_ray, tmp_path):
-    from aftir_rl.bench import target_sets
-    from aftir_rl.distributed import TaskFailure, benchmark_on_ray, evaluate_on_ray, run_tasks
+    from aftir_rl.experiments.bench import target_sets
+    from aftir_rl.experiments.distributed import (
+        TaskFailure,
+        benchmark_on_ray,
+        evaluate_on_ray,
+        run_tasks,
+    )
 
     out = run_tasks(divmod, [(7, 2), (1, 0), (9, 4)])
     assert out[0] == (3, 1) and out[2] == (2, 1)
@@ -288,7 +298,7 @@ def sweep(tmp_path_factory):
     (tmp / "space.yaml").write_text(SPACE_PPO)
     run = _python(
         "-m",
-        "aftir_rl.tune",
+        "aftir_rl.experiments.tune",
         "ppo",
         "--env",
         "AFTIR-ArmReach-v0",
@@ -328,7 +338,7 @@ def test_sweep_writes_runs_and_a_best_config(sweep):
     # `train ppo --config best.yaml` takes it
     run = _python(
         "-m",
-        "aftir_rl.train",
+        "aftir_rl.cli.train",
         "ppo",
         "--config",
         str(folder / "best.yaml"),

@@ -7,12 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from aftir_rl import tank as tank_cli
-from aftir_rl.collision import CollisionScene
-from aftir_rl.errors import PlanningError
-from aftir_rl.papers import ST2014_TABLE1, ST2014_TABLE2
-from aftir_rl.posture import Planner
-from aftir_rl.posture.region_division import (
+from aftir_rl.cli import tank as tank_cli
+from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.papers import ST2014_TABLE1, ST2014_TABLE2
+from aftir_rl.core.robot import tip_position
+from aftir_rl.core.tank import load_tank
+from aftir_rl.planning.posture import Planner
+from aftir_rl.planning.posture.region_division import (
     ARC_PEAK,
     REACH_RATIO,
     arc_tip,
@@ -25,8 +27,6 @@ from aftir_rl.posture.region_division import (
     region_division,
     solve_arc,
 )
-from aftir_rl.robot import tip_position
-from aftir_rl.tank import load_tank
 
 L = 25.0
 # Our numerical method for each row of Table 2 (the paper's, except row 4: see the module).

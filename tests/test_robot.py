@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from aftir_rl.papers import ICRA2014_TABLE2, JACE_TABLE2
-from aftir_rl.robot import (
+from aftir_rl.core.papers import ICRA2014_TABLE2, JACE_TABLE2
+from aftir_rl.core.robot import (
     ArmSpec,
     Posture,
     body_points,

@@ -8,11 +8,11 @@ import fcl
 import numpy as np
 import pytest
 
-from aftir_rl import tank as tank_module
-from aftir_rl.errors import ConfigError, TargetError
-from aftir_rl.tank import Box, Cylinder, SolidStack, Sphere, load_tank
+from aftir_rl.cli import tank as tank_module
+from aftir_rl.core.errors import ConfigError, TargetError
+from aftir_rl.core.tank import TANK_DIR, Box, Cylinder, SolidStack, Sphere, load_tank
 
-REF_YAML = tank_module.TANK_DIR / "b737_center.yaml"
+REF_YAML = TANK_DIR / "b737_center.yaml"
 
 
 def test_reference_tank_matches_design(tank):

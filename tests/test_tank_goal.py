@@ -12,9 +12,9 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from aftir_rl import ENV_IDS
-from aftir_rl.agents import GoalQLearning, QLearning, train_all_targets
+from aftir_rl.core.errors import CheckpointError, TargetError
 from aftir_rl.envs import Action, TankGoalEnv, TankGridEnv
-from aftir_rl.errors import CheckpointError, TargetError
+from aftir_rl.rl.tabular import GoalQLearning, QLearning, train_all_targets
 
 START = (3, 2, 0)
 

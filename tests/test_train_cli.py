@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from aftir_rl import train
-from aftir_rl.agents import QLearning, greedy_rollout
-from aftir_rl.robot import tip_position
+from aftir_rl.cli import train
+from aftir_rl.core.robot import tip_position
+from aftir_rl.rl.tabular import QLearning, greedy_rollout
 
 
 def _events(run_dir: Path) -> EventAccumulator:
@@ -137,7 +137,7 @@ def test_user_errors_exit_2_without_traceback(tmp_path, args, message):
         [
             sys.executable,
             "-m",
-            "aftir_rl.train",
+            "aftir_rl.cli.train",
             "q_table",
             "--logdir",
             str(tmp_path / "runs"),
@@ -184,7 +184,7 @@ def test_bad_config_and_corrupt_resume(tmp_path, capsys):
 
 def test_help():
     proc = subprocess.run(
-        [sys.executable, "-m", "aftir_rl.train", "q_table", "--help"],
+        [sys.executable, "-m", "aftir_rl.cli.train", "q_table", "--help"],
         capture_output=True,
         text=True,
     )
@@ -219,8 +219,8 @@ def test_all_targets_run(tmp_path, capsys):
 
 def test_linear_learning_rate_falls_to_zero_over_a_learn_call(tmp_path):
     """``learning_rate: lin_X`` (RL Zoo's form): X at the start of a run, 0 at its end."""
-    from aftir_rl.agents.sb3 import load_model
-    from aftir_rl.agents.sb3_config import SB3Config, build_model, check_sb3_config
+    from aftir_rl.rl.sb3 import load_model
+    from aftir_rl.rl.sb3.config import SB3Config, build_model, check_sb3_config
 
     hyper = {"learning_rate": "lin_1e-3", "n_steps": 64, "batch_size": 64, "n_epochs": 1}
     config = SB3Config(env_id="AFTIR-ArmReach-v0", n_envs=1, hyperparameters=hyper)

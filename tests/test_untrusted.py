@@ -22,13 +22,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from aftir_rl import bench, evaluate, train
-from aftir_rl.agents.q_table import QLearning
-from aftir_rl.agents.sb3 import AtomicCheckpoint, load_run
-from aftir_rl.atomic import write_json
-from aftir_rl.config import CONFIG_DIR
-from aftir_rl.errors import CheckpointError, ConfigError
-from aftir_rl.tank import load_tank
+from aftir_rl.cli import bench, evaluate, train
+from aftir_rl.core.config import CONFIG_DIR
+from aftir_rl.core.errors import CheckpointError, ConfigError
+from aftir_rl.core.files import write_json
+from aftir_rl.core.tank import load_tank
+from aftir_rl.rl.sb3 import AtomicCheckpoint, load_run
+from aftir_rl.rl.tabular.q_table import QLearning
 
 REF_YAML = CONFIG_DIR / "tanks" / "b737_center.yaml"
 PPO_YAML = (
@@ -399,7 +399,7 @@ def _bytes(tmp_path: Path) -> Path:
 
 
 def test_plan_does_not_build_the_raster(tmp_path):
-    from aftir_rl.posture.planner import Planner
+    from aftir_rl.planning.posture.planner import Planner
 
     path = _tank(tmp_path, REF_YAML.read_text(), "ref_copy.yaml")
     tank = load_tank(path)
@@ -411,14 +411,14 @@ def test_plan_does_not_build_the_raster(tmp_path):
 def test_tank_cli_one_line_and_closed_stdout(tmp_path):
     bad = _tank(tmp_path, _ref("box: {min: [-60, -50, 0]", "box: {min: [-1e200, -50, 0]"))
     proc = subprocess.run(
-        [sys.executable, "-m", "aftir_rl.cli", "tank", "--tank", str(bad)],
+        [sys.executable, "-m", "aftir_rl.cli.main", "tank", "--tank", str(bad)],
         capture_output=True,
         text=True,
     )
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
     # a reader that went away: one line, exit 2
     proc = subprocess.Popen(
-        [sys.executable, "-m", "aftir_rl.cli", "tank", "--json"],
+        [sys.executable, "-m", "aftir_rl.cli.main", "tank", "--json"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
@@ -428,7 +428,7 @@ def test_tank_cli_one_line_and_closed_stdout(tmp_path):
     # a full disk
     with open("/dev/full", "w") as full:
         proc = subprocess.run(
-            [sys.executable, "-m", "aftir_rl.cli", "tank", "--json"],
+            [sys.executable, "-m", "aftir_rl.cli.main", "tank", "--json"],
             stdout=full,
             stderr=subprocess.PIPE,
             text=True,
@@ -516,7 +516,7 @@ def test_ctrl_c_saves_a_resumable_partial_run(tmp_path):
         [
             sys.executable,
             "-m",
-            "aftir_rl.train",
+            "aftir_rl.cli.train",
             "ppo",
             "--config",
             str(config),

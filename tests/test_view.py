@@ -23,10 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aftir_rl.errors import AftirError, CheckpointError
-from aftir_rl.posture.motion import densify
-from aftir_rl.robot import Posture
-from aftir_rl.view import build_figure, read_run, write_view
+from aftir_rl.core.errors import AftirError, CheckpointError
+from aftir_rl.core.robot import Posture
+from aftir_rl.planning.jointspace import densify
+from aftir_rl.viz.page import build_figure, read_run, write_view
 
 CHROMIUM = Path("/usr/bin/chromium")
 L = 50.0
@@ -98,7 +98,7 @@ def test_read_run_and_figure(tmp_path, tank):
 
 def test_frames_are_bounded_and_keep_the_ends(tmp_path, tank):
     run = read_run(_q_table_run(tmp_path, tank))
-    from aftir_rl.view_figure import _frame_indices
+    from aftir_rl.viz.figure import _frame_indices
 
     idx = _frame_indices(run, 30)
     assert len(idx) <= 30 and idx[0] == 0 and idx[-1] == run.n_motion - 1
@@ -144,7 +144,7 @@ def test_unreadable_runs_raise_one_line(tmp_path, setup, message):
 
 def test_cli(tmp_path, tank):
     run = _q_table_run(tmp_path, tank)
-    cmd = [sys.executable, "-m", "aftir_rl.cli_view"]
+    cmd = [sys.executable, "-m", "aftir_rl.cli.view"]
     out = tmp_path / "page" / "v.html"
     proc = subprocess.run(
         [*cmd, str(run), "-o", str(out), "--max-frames", "10"], capture_output=True, text=True

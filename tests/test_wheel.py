@@ -46,7 +46,7 @@ def test_wheel_makes_every_env_from_outside_the_repo(installed) -> None:
     cwd, env = installed
     code = (
         "import aftir_rl, gymnasium as gym\n"
-        "from aftir_rl.config import CONFIG_DIR\n"
+        "from aftir_rl.core.config import CONFIG_DIR\n"
         "assert 'site' in aftir_rl.__file__, aftir_rl.__file__\n"
         "assert CONFIG_DIR.is_relative_to(aftir_rl.__path__[0]), CONFIG_DIR\n"
         "for env_id in aftir_rl.ENV_IDS:\n"
@@ -61,7 +61,17 @@ def test_wheel_makes_every_env_from_outside_the_repo(installed) -> None:
 def test_wheel_runs_train_and_plan(installed) -> None:
     cwd, env = installed
     out = _run(
-        [sys.executable, "-m", "aftir_rl.cli", "plan", "--target", "230", "140", "90", "--json"],
+        [
+            sys.executable,
+            "-m",
+            "aftir_rl.cli.main",
+            "plan",
+            "--target",
+            "230",
+            "140",
+            "90",
+            "--json",
+        ],
         cwd,
         env,
     )
@@ -71,7 +81,7 @@ def test_wheel_runs_train_and_plan(installed) -> None:
         [
             sys.executable,
             "-m",
-            "aftir_rl.train",
+            "aftir_rl.cli.train",
             "q_table",
             "--target",
             "20",

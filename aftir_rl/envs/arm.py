@@ -11,12 +11,12 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from aftir_rl.collision import CollisionScene, panel_violation
-from aftir_rl.envs.ftl_batch import bay_region, draw_targets
-from aftir_rl.envs.ftl_kernel import fk_points
-from aftir_rl.errors import InvalidActionError, TargetError
-from aftir_rl.robot import Posture
-from aftir_rl.tank import Tank, load_tank
+from aftir_rl.core.collision import CollisionScene, panel_violation
+from aftir_rl.core.errors import InvalidActionError, TargetError
+from aftir_rl.core.robot import Posture
+from aftir_rl.core.tank import Tank, load_tank
+from aftir_rl.envs.ftl.fields import bay_region, draw_targets
+from aftir_rl.envs.ftl.kernel import fk_points
 
 __all__ = ["ArmEnv"]
 
@@ -47,7 +47,8 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     ## Rewards
     ``(d_prev − d) / 10`` for progress towards the target [per cm], ``+10`` on success, ``−10`` on
-    a collision (python-fcl through :class:`~aftir_rl.collision.CollisionScene`, or the panel rule).
+    a collision (python-fcl through :class:`~aftir_rl.core.collision.CollisionScene`, or the panel
+    rule).
 
     ## Episode End
     Terminated on success or collision; truncated by ``max_episode_steps`` (registration).
@@ -286,7 +287,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             gym.logger.warn("render() called without a render_mode; pass render_mode= to make()")
             return None
         if getattr(self, "_renderer", None) is None:  # kept: blitting, a few ms per frame
-            from aftir_rl.plotting import PathRenderer
+            from aftir_rl.viz.plotting import PathRenderer
 
             self._renderer = PathRenderer(self.tank, title="AFTIR-Arm")
         return self._renderer.render(

@@ -46,8 +46,8 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
+from aftir_rl.core.errors import TargetError
 from aftir_rl.envs.tank_grid import TankGridEnv, step_reward, target_options
-from aftir_rl.errors import TargetError
 
 __all__ = ["TankGoalEnv", "GoalObs"]
 

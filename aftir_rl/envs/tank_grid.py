@@ -13,8 +13,8 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.errors import InvalidActionError, TargetError
-from aftir_rl.tank import Tank, load_tank
+from aftir_rl.core.errors import InvalidActionError, TargetError
+from aftir_rl.core.tank import Tank, load_tank
 
 __all__ = ["Action", "TankGridEnv", "step_reward", "target_options"]
 
@@ -259,7 +259,7 @@ class TankGridEnv(gym.Env[int, int]):
             legend = "# obstructed  . free  S start  T target  * path  A tip"
             return legend + "\n" + self.raster.ascii(marks)
         if getattr(self, "_renderer", None) is None:  # kept: blitting, a few ms per frame
-            from aftir_rl.plotting import PathRenderer
+            from aftir_rl.viz.plotting import PathRenderer
 
             self._renderer = PathRenderer(self.tank, title="AFTIR-Tank-v0")
         points = np.array([self.raster.cell_center(c) for c in cells])

@@ -1,45 +1,4 @@
-"""Tanks: geometry from YAML, the raster of cubic cells, the signed distance and the scene export.
+"""``python -m aftir_rl.tank``: the tank command line (:mod:`aftir_rl.cli.tank`).
 
-- :mod:`~aftir_rl.tank.solids`: boxes, axis-aligned cylinders and spheres, each with its bounds,
-  signed distance, python-fcl object and drawing geometry;
-- :mod:`~aftir_rl.tank.geometry`: :class:`Tank` (box, access panel, baffle and hatch, obstacles,
-  the arm) and its :class:`Enclosure` (the walls, the floor open at the panel, the guide below);
-- :mod:`~aftir_rl.tank.raster`: :class:`Raster`, the box split into cubes of ``cell_size``, BFS
-  through free cells and a z-slice text view;
-- :mod:`~aftir_rl.tank.distance`: :class:`TankDistance`, the signed distance to every solid and
-  wall, compiled once per tank;
-- :mod:`~aftir_rl.tank.loading`: :func:`load_tank` from ``configs/tanks/NAME.yaml`` or a path,
-  validated key by key;
-- :mod:`~aftir_rl.tank.cli`: ``python -m aftir_rl.tank [--tank NAME|PATH] [--json]`` prints a
-  z-slice view of the raster, or with ``--json`` the scene export of design.md §2.
+The tank model itself is :mod:`aftir_rl.core.tank`.
 """
-
-from __future__ import annotations
-
-from aftir_rl.tank.cli import main
-from aftir_rl.tank.distance import SolidStack, TankDistance
-from aftir_rl.tank.geometry import Baffle, Enclosure, Hatch, Panel, Tank
-from aftir_rl.tank.loading import TANK_DIR, available_tanks, load_tank, tank_from_mapping
-from aftir_rl.tank.raster import Raster
-from aftir_rl.tank.solids import Box, Cylinder, Solid, Sphere, Vec3
-
-__all__ = [
-    "Box",
-    "Cylinder",
-    "Sphere",
-    "Solid",
-    "Vec3",
-    "Panel",
-    "Baffle",
-    "Hatch",
-    "Enclosure",
-    "Raster",
-    "Tank",
-    "TankDistance",
-    "SolidStack",
-    "TANK_DIR",
-    "load_tank",
-    "tank_from_mapping",
-    "available_tanks",
-    "main",
-]

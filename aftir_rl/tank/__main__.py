@@ -1,8 +1,8 @@
-"""``python -m aftir_rl.tank``: see :mod:`aftir_rl.tank.cli`."""
+"""``python -m aftir_rl.tank``: see :mod:`aftir_rl.cli.tank`."""
 
 import sys
 
-from aftir_rl.tank.cli import main
+from aftir_rl.cli.tank import main
 
 if __name__ == "__main__":
     sys.exit(main())

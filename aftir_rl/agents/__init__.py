@@ -1,6 +1,0 @@
-"""Agents: tabular Q-learning (and, through the train CLI, SB3 baselines)."""
-
-from aftir_rl.agents.q_table import QLearning, QLearningConfig, greedy_rollout
-from aftir_rl.agents.q_table_goal import GoalQLearning, train_all_targets
-
-__all__ = ["QLearning", "QLearningConfig", "greedy_rollout", "GoalQLearning", "train_all_targets"]

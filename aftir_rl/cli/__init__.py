@@ -1,0 +1,1 @@
+"""Command lines: the ``aftir`` dispatcher and one thin module per subcommand."""

@@ -1,0 +1,150 @@
+"""``python -m aftir_rl.bench`` / ``aftir bench``: every method on the same fixed target sets.
+
+The sets and the methods are :mod:`aftir_rl.experiments.bench`'s; this module parses the
+command line, checks the inputs and prints the table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+
+from aftir_rl.cli.args import add_margin_option, add_ray_options
+from aftir_rl.cli.guard import cli
+from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
+from aftir_rl.core.errors import AftirError
+from aftir_rl.core.files import write_json
+from aftir_rl.experiments.bench import OLD_SET_NAMES, SETS, format_table, run_benchmark, target_sets
+
+__all__ = ["main"]
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m aftir_rl.bench``."""
+    parser = argparse.ArgumentParser(
+        prog="python -m aftir_rl.bench",
+        description="Measure every planner, Q-learning + postures, RRT-Connect and trained SB3 "
+        "agents on the same fixed target sets; print one markdown table.",
+    )
+    parser.add_argument(
+        "--sets",
+        nargs="+",
+        type=lambda name: OLD_SET_NAMES.get(name, name),
+        choices=SETS,
+        default=list(SETS),
+        help="target sets to run, named after the papers (aftir_rl.core.papers) and the two bays "
+        "(default: all)",
+    )
+    parser.add_argument(
+        "--n-random", type=int, default=10, metavar="N", help="random targets per bay (default 10)"
+    )
+    parser.add_argument("--seed", type=int, default=7, help="seed of the random targets")
+    parser.add_argument(
+        "--rrt-seconds",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="RRT-Connect's budget per target (default 10)",
+    )
+    parser.add_argument(
+        "--bridge-seconds",
+        type=float,
+        default=DEFAULT_BRIDGE_SECONDS,
+        metavar="S",
+        help="RRT-Connect's budget per colliding move of a "
+        f"q_table+postures trajectory, 0 for none (default "
+        f"{DEFAULT_BRIDGE_SECONDS:g})",
+    )
+    parser.add_argument(
+        "--model",
+        action="append",
+        default=[],
+        metavar="RUN_DIR",
+        help="an SB3 run directory (python -m aftir_rl.train ppo|sac|td3)",
+    )
+    parser.add_argument("--json", metavar="PATH", help="also write every outcome as JSON")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    add_margin_option(
+        parser, f"clearance the q_table+ftl motions keep (default {DEFAULT_MARGIN:g} cm)"
+    )
+    add_ray_options(parser, "run the items")
+    args = parser.parse_args(argv)
+    if args.n_random < 1 or not 0 < args.rrt_seconds < math.inf:
+        parser.error("--n-random must be at least 1 and --rrt-seconds positive and finite")
+    if not 0 <= args.bridge_seconds < math.inf:
+        parser.error("--bridge-seconds must be a finite 0 or more")
+    if not 0 <= args.margin <= 20:
+        parser.error("--margin must be between 0 and 20 cm")
+    if not 0 <= args.seed < 2**32:
+        parser.error("--seed must be from 0 to 2**32 - 1")
+    problem = _check_inputs(args.model, args.json)
+    if args.ray is not None or args.workers is not None:
+        from aftir_rl.experiments.distributed import check_ray_options
+
+        check_ray_options(args.ray, args.workers)  # one line and exit 2 (cli.guard)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
+    start = time.perf_counter()
+    try:
+        sets = {k: v for k, v in target_sets(args.n_random, args.seed).items() if k in args.sets}
+        progress = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
+        options = ("rrt_seconds", "bridge_seconds", "margin", "ray", "workers")
+        chosen = {name: getattr(args, name) for name in options}
+        rows = run_benchmark(sets, models=args.model, progress=progress, **chosen)
+    except AftirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    seconds = time.perf_counter() - start
+    print(
+        f"machine: {platform.machine()}, {platform.system()}, {_cores()} cores, "
+        f"Python {platform.python_version()}; {seconds:.0f} s in all"
+    )
+    print()
+    print(format_table(rows))
+    if args.json:
+        write_json(
+            args.json, [{**r.summary(), "outcomes": [asdict(o) for o in r.outcomes]} for r in rows]
+        )
+    return 0
+
+
+def _check_inputs(models: Sequence[str], json_path: str | None) -> str:
+    """What is wrong with the run directories or the JSON path ("" if nothing), before a run."""
+    for run_dir in models:
+        run = Path(run_dir)
+        if not (run / "model.zip").exists():
+            return f"{run_dir}: no model.zip; give a run directory of python -m aftir_rl.train"
+        from aftir_rl.core.files import read_json
+        from aftir_rl.experiments.runs import load_sb3_run
+        from aftir_rl.rl.sb3 import sb3_config_from_run
+
+        try:
+            sb3_config_from_run(read_json(run / "config.json", "config.json"), str(run))
+        except AftirError as exc:
+            return f"{run_dir}: config.json is missing or not a training run's ({exc})"
+        try:  # the model too, before any benchmark work (nothing in it is unpickled)
+            load_sb3_run(run)
+        except AftirError as exc:
+            return str(exc)
+    if json_path is not None:
+        folder = Path(json_path).resolve().parent
+        if not folder.is_dir() or not os.access(folder, os.W_OK):
+            return f"--json {json_path}: cannot write in {folder}"
+    return ""
+
+
+def _cores() -> int:
+    return os.cpu_count() or 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

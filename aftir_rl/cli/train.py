@@ -1,0 +1,252 @@
+"""Training command line: ``python -m aftir_rl.train q_table``.
+
+One run directory per target under ``--logdir``, named
+``{algo}__{env}__{target}__{seed}__{time}`` (design.md §8), holding:
+
+- ``q_table.npz``: the table and its metadata (resume with ``--resume``);
+- ``trajectory.json``: a checked arm posture for every cell of that path and the exact target
+  (:mod:`aftir_rl.planning.posture.trajectory`), unless ``--no-postures``;
+- ``path.json``: the greedy tip path, ``{"target", "target_cell", "cells", "points_cm", ...}``,
+  start cell first, target cell last;
+- ``progress.csv`` and a TensorBoard event file with ``rollout/ep_rew_mean``,
+  ``rollout/ep_len_mean``, ``eval/success_rate``, ``eval/tip_error_cm``, ``eval/path_length_cm``,
+  the picture ``paths/<target>`` and the hyperparameters as text.
+
+The directory is built under a hidden ``.partial`` name and renamed when the run is complete, so a
+failed or interrupted run leaves no directory that looks finished. User errors (a bad target, a
+malformed config, a corrupt checkpoint) print one line and exit with status 2.
+
+This module is the command line only: the runs are :mod:`aftir_rl.rl`'s, the replay and
+the measures :mod:`aftir_rl.experiments.runs`'s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from aftir_rl.cli.args import add_margin_option, add_target_option, check_margin
+from aftir_rl.cli.guard import cli
+from aftir_rl.core.config import CONFIG_DIR, DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
+from aftir_rl.core.errors import AftirError, ConfigError
+from aftir_rl.experiments.runs import load_q_table_config
+from aftir_rl.rl.sb3.train import train_sb3
+from aftir_rl.rl.tabular.train import train_q_table, train_q_table_all_targets
+
+__all__ = [
+    "main",
+    "train_q_table",
+    "train_q_table_all_targets",
+    "train_sb3",
+    "load_q_table_config",
+]
+
+ALGOS = ("q_table", "ppo", "sac", "td3")
+
+
+def _print_summary(s: dict[str, Any]) -> None:
+    verdict = "optimal" if s["optimal"] else ("reached, not optimal" if s["success"] else "FAILED")
+    target = ", ".join(f"{v:g}" for v in s["target"])
+    print(
+        f"target ({target}) cm -> cell {tuple(s['target_cell'])}: {s['episodes']} episodes in "
+        f"{s['seconds']:.2f} s; greedy path {s['length_steps']} steps, BFS optimum "
+        f"{s['bfs_optimal_steps']} ({verdict}); {s['path_length_cm']:.0f} cm"
+    )
+    print("  cells: " + " ".join("(" + ",".join(map(str, c)) + ")" for c in s["cells"]))
+    if "motion" in s:
+        m = s["motion"]
+        if m["complete"]:
+            dev = m["ftl_deviation_cm"]
+            print(
+                f"  motion: follow-the-leader, {m['n_sections']} sections, {m['entries']} entries "
+                f"in {m['seconds']:.2f} s; clearance {m['min_clearance_cm']:.2f} cm, FTL deviation "
+                f"max {dev[0]:.2f} / mean {dev[1]:.2f} cm, tip error {m['tip_error_cm']:.1e} cm"
+            )
+            if m["route_departure_cm"] is not None:
+                far, mean = m["route_departure_cm"]
+                print(
+                    f"  the tip passes {mean:.1f} cm from the cell centres on average "
+                    f"({far:.1f} max)"
+                )
+        else:
+            print(f"  motion: none in {m['seconds']:.2f} s: {m['reason']}")
+    if "trajectory" in s:
+        t = s["trajectory"]
+        print(
+            f"  postures: {t['postures']}/{t['waypoints']} waypoints; {t['blocked_moves']} of "
+            f"{t['moves']} moves collide ({t['bridged_moves']} bridged by RRT-Connect); "
+            f"largest joint step {t['max_joint_step_deg']:.0f} deg"
+        )
+        for failure in t["failures"]:
+            print(f"  no posture at {failure}")
+    print(f"  run dir: {s['run_dir']}")
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m aftir_rl.train",
+        description="Train an agent on an aftir_rl environment and log the run to TensorBoard.",
+    )
+    sub = parser.add_subparsers(dest="algo", required=True, metavar="ALGO")
+    q = sub.add_parser(
+        "q_table",
+        help="tabular Q-learning on AFTIR-Tank-v0 (filomat2018)",
+        description="Tabular Q-learning on the rasterised tank, one run directory per target.",
+    )
+    q.add_argument(
+        "--config",
+        default=str(CONFIG_DIR / "q_table.yaml"),
+        help="YAML of QLearningConfig fields (default: configs/q_table.yaml)",
+    )
+    add_target_option(
+        q, "target point in cm; repeat for several (default: the tank's reference targets)"
+    )
+    q.add_argument("--episodes", type=int, help="training episodes per target (overrides config)")
+    q.add_argument(
+        "--all-targets",
+        action="store_true",
+        help="one goal-conditioned run (AFTIR-TankGoal-v0) that learns every reachable cell",
+    )
+    q.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    q.add_argument("--logdir", default="runs", help="parent of the run directories (default runs/)")
+    q.add_argument("--resume", help="q_table.npz or run directory to continue training from")
+    q.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    q.add_argument(
+        "--no-postures",
+        action="store_true",
+        help="skip turning the greedy path into arm postures (trajectory.json)",
+    )
+    q.add_argument(
+        "--motion",
+        choices=("ftl", "progressive"),
+        default="ftl",
+        help="ftl: follow-the-leader motion along a route from the learned cells (default); "
+        "progressive: the papers' posture per cell, continued and bridged",
+    )
+    add_margin_option(
+        q, f"clearance of the arm's surface along the motion (default {DEFAULT_MARGIN:g} cm)"
+    )
+    q.add_argument(
+        "--bridge-seconds",
+        type=float,
+        default=DEFAULT_BRIDGE_SECONDS,
+        metavar="S",
+        help="RRT-Connect's budget for each colliding move of the postures, 0 for none "
+        f"(default {DEFAULT_BRIDGE_SECONDS:g})",
+    )
+    for algo in ("ppo", "sac", "td3"):
+        p = sub.add_parser(
+            algo,
+            help=f"{algo.upper()} (Stable-Baselines3) on an arm env",
+            description=f"{algo.upper()} on a continuous AFTIR arm env, one run directory.",
+        )
+        p.add_argument(
+            "--config",
+            default=str(CONFIG_DIR / f"{algo}.yaml"),
+            help=f"YAML of SB3Config fields (default: configs/{algo}.yaml)",
+        )
+        p.add_argument("--env", help="environment id (overrides config), e.g. AFTIR-ArmReach-v0")
+        p.add_argument("--total-timesteps", type=int, help="training steps (overrides config)")
+        p.add_argument("--n-envs", type=int, help="parallel subprocess envs (overrides config)")
+        p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+        p.add_argument("--logdir", default="runs", help="parent of the run directory")
+        p.add_argument("--resume", help="model.zip or run directory to continue training from")
+        p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    return parser
+
+
+def _main_sb3(args: argparse.Namespace) -> int:
+    from aftir_rl.rl.sb3 import load_sb3_config
+
+    config = load_sb3_config(args.config, args.algo)
+    overrides = {"env_id": args.env, "total_timesteps": args.total_timesteps, "n_envs": args.n_envs}
+    for key, value in overrides.items():
+        if value is not None:
+            if isinstance(value, int) and value < 1:
+                raise ConfigError(f"--{key.replace('_', '-')} must be at least 1, got {value}")
+            config = dataclasses.replace(config, **{key: value})
+    s = train_sb3(
+        args.algo,
+        config,
+        seed=args.seed,
+        logdir=args.logdir,
+        resume=args.resume,
+        progress_bar=not args.no_progress,
+    )
+    print(
+        f"{args.algo.upper()} on {s['env_id']}: {s['timesteps']} steps in {s['seconds']:.0f} s; "
+        f"evaluation: success {s['success_rate']:.0%}, tip error {s['tip_error_cm']:.1f} cm, "
+        f"path {s['path_length_cm']:.0f} cm, collisions {s['collision_rate']:.0%}"
+    )
+    print(f"  run dir: {s['run_dir']}")
+    return 0
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m aftir_rl.train``."""
+    args = _parser().parse_args(argv)
+    if not 0 <= args.seed < 2**32:
+        print(f"error: --seed must be from 0 to 2**32 - 1, got {args.seed}", file=sys.stderr)
+        return 2
+    if args.algo != "q_table":
+        try:
+            return _main_sb3(args)
+        except AftirError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+    try:
+        config = load_q_table_config(args.config)
+        if args.episodes is not None:
+            if args.episodes < 1:
+                raise ConfigError(f"--episodes must be at least 1, got {args.episodes}")
+            config = dataclasses.replace(config, episodes=args.episodes)
+        check_margin(args.margin)
+        if not 0 <= args.bridge_seconds < math.inf:
+            raise ConfigError(
+                f"--bridge-seconds must be a finite 0 or more, got {args.bridge_seconds}"
+            )
+        if args.all_targets:
+            if args.target or args.resume:
+                raise ConfigError("--all-targets learns every cell: drop --target and --resume")
+            s = train_q_table_all_targets(
+                config, seed=args.seed, logdir=args.logdir, progress_bar=not args.no_progress
+            )
+            print(
+                f"every target of {s['tank']}: {s['n_goals']} goals, {s['episodes']} episodes "
+                f"each in {s['seconds']:.1f} s; greedy paths reach {s['n_reached']} and are "
+                f"BFS-optimal for {s['n_optimal']}"
+            )
+            print(f"  run dir: {s['run_dir']}")
+            return 0
+        targets = args.target
+        if targets is None:
+            from aftir_rl.core.tank import load_tank
+
+            targets = [list(t) for t in load_tank(config.tank).targets]
+        summaries = train_q_table(
+            config,
+            targets,
+            seed=args.seed,
+            logdir=args.logdir,
+            resume=args.resume,
+            progress_bar=not args.no_progress,
+            postures=not args.no_postures,
+            bridge_seconds=args.bridge_seconds,
+            motion=args.motion,
+            margin=args.margin,
+        )
+    except AftirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for s in summaries:
+        _print_summary(s)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

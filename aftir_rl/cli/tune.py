@@ -1,0 +1,159 @@
+"""``aftir tune ALGO``: a hyperparameter sweep of PPO, SAC or TD3 on Ray Tune.
+
+The sweep itself is :func:`aftir_rl.experiments.tune.run_sweep`; this module parses the command
+line, builds the base config and prints the trials' table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from aftir_rl.cli.guard import cli
+from aftir_rl.core.config import CONFIG_DIR
+from aftir_rl.core.errors import ConfigError
+from aftir_rl.experiments.search_space import load_search_space
+from aftir_rl.experiments.tune import ALGOS, MAX_EVALUATIONS, MAX_TRIALS, run_sweep
+from aftir_rl.rl.common import check_env_id
+
+__all__ = ["main"]
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="aftir tune",
+        description="Hyperparameter sweep of an SB3 algorithm on Ray Tune: Optuna samples the "
+        "search space, ASHA stops the trials that trail on eval/success_rate, every trial is a "
+        "run directory, and the best config is written as a YAML for `aftir train`. Needs "
+        'pip install "aftir_rl[ray]".',
+    )
+    parser.add_argument("algo", choices=ALGOS, metavar="ALGO", help="ppo, sac or td3")
+    parser.add_argument(
+        "--env", help="environment id (default: the config's), e.g. AFTIR-ArmReach-v0"
+    )
+    parser.add_argument(
+        "--trials", type=int, default=8, metavar="N", help="number of trials (default 8)"
+    )
+    parser.add_argument(
+        "--ray",
+        default="local",
+        metavar="ADDRESS",
+        help="local (a Ray on this machine, the default), auto or HOST:PORT (a "
+        "cluster started with ray start)",
+    )
+    parser.add_argument(
+        "--workers", type=int, metavar="N", help="CPUs of --ray local (default: every core)"
+    )
+    parser.add_argument(
+        "--logdir", default="runs", help="parent of the sweep folder (default runs/)"
+    )
+    parser.add_argument(
+        "--total-timesteps",
+        type=int,
+        metavar="T",
+        help="training steps of each trial (default: the config's)",
+    )
+    parser.add_argument(
+        "--evaluations",
+        type=int,
+        default=4,
+        metavar="K",
+        help="evaluations per trial, ASHA's rungs (default 4)",
+    )
+    parser.add_argument(
+        "--n-envs",
+        type=int,
+        metavar="N",
+        help="envs (and CPUs) of each trial (default: the config's)",
+    )
+    parser.add_argument("--config", help="base config (default: configs/ALGO.yaml)")
+    parser.add_argument("--space", help="search space (default: configs/search_spaces/ALGO.yaml)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of every trial (default 0)")
+    parser.add_argument("--quiet", action="store_true", help="no Ray Tune status tables")
+    return parser
+
+
+def _base_config(args: argparse.Namespace) -> Any:
+    """The config every trial starts from: ``--config`` with the command line's overrides."""
+    from aftir_rl.rl.sb3 import check_sb3_config, load_sb3_config
+
+    config = load_sb3_config(args.config or CONFIG_DIR / f"{args.algo}.yaml", args.algo)
+    for flag, value in (
+        ("--trials", args.trials),
+        ("--evaluations", args.evaluations),
+        ("--total-timesteps", args.total_timesteps),
+        ("--n-envs", args.n_envs),
+    ):
+        if value is not None and value < 1:
+            raise ConfigError(f"{flag} must be at least 1, got {value}")
+    if args.trials > MAX_TRIALS or args.evaluations > MAX_EVALUATIONS:
+        raise ConfigError(
+            f"--trials must be at most {MAX_TRIALS} and --evaluations at most {MAX_EVALUATIONS}"
+        )
+    if not 0 <= args.seed < 2**32:
+        raise ConfigError(f"--seed must be from 0 to 2**32 - 1, got {args.seed}")
+    changes: dict[str, Any] = {}
+    if args.env is not None:
+        changes["env_id"] = args.env
+    if args.total_timesteps is not None:
+        changes["total_timesteps"] = args.total_timesteps
+    if args.n_envs is not None:
+        changes["n_envs"] = args.n_envs
+    config = dataclasses.replace(config, **changes)
+    total = config.total_timesteps
+    config = dataclasses.replace(config, eval_freq=max(1, math.ceil(total / args.evaluations)))
+    check_sb3_config(config, args.algo, "the command line")
+    from aftir_rl.rl.sb3.config import SB3_ENV_IDS
+
+    check_env_id(config.env_id, SB3_ENV_IDS, args.algo)
+    return config
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``aftir tune``."""
+    args = _parser().parse_args(argv)
+    from aftir_rl.experiments.distributed import check_ray_options
+
+    check_ray_options(args.ray, args.workers)  # Ray installed, the address well formed
+    base = _base_config(args)
+    space_path = args.space or CONFIG_DIR / "search_spaces" / f"{args.algo}.yaml"
+    space = load_search_space(space_path, args.algo, base)
+    out = run_sweep(
+        args.algo,
+        base,
+        space,
+        args.trials,
+        logdir=args.logdir,
+        ray=args.ray,
+        workers=args.workers,
+        seed=args.seed,
+        verbose=0 if args.quiet else 1,
+    )
+    keys = [d.key for d in space]
+    print(f"| trial | {' | '.join(keys)} | success | tip error (cm) | steps | run |")
+    print("|---:|" + "---:|" * len(keys) + "---:|---:|---:|---|")
+    for i, r in enumerate(out["trials"]):
+        values = " | ".join(f"{r[k]:.3g}" if isinstance(r[k], float) else str(r[k]) for k in keys)
+        run = Path(r["run_dir"]).name if r["run_dir"] else "–"
+        note = (
+            f" (error: {r['error']})"
+            if r["error"]
+            else (" (stopped early)" if r["stopped_early"] else "")
+        )
+        print(
+            f"| {i} | {values} | {r['success_rate']:.0%} | {r['tip_error_cm']:.2f} | "
+            f"{r['timesteps']} | {run}{note} |"
+        )
+    print(f"sweep: {out['sweep_dir']}")
+    print(f"best config: {out['best_yaml']} (aftir train {args.algo} --config {out['best_yaml']})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,318 @@
+"""Collision checking of the arm against a tank with python-fcl, and a fast point pre-filter.
+
+:class:`CollisionScene` builds the tank's solids once as python-fcl *solid* primitives (Box,
+Cylinder, Sphere; BVH meshes are hollow surfaces and would miss an arm buried in a wall) in one
+broad-phase manager. The walls of the tank box are thick slabs around it; the floor slab has a
+square opening of half-size ``panel.radius`` around the access panel. The arm is a chain of
+capsules of the arm's body radius, ``links_per_section`` per section, each spanning the chord
+between two consecutive backbone points with the section's arc length ``l/K`` (never shorter than
+the chord). The capsules are built once per number of sections and moved with ``setTransform``
+(rebuilding fcl objects per query is the classic slowdown, moveit_core#295). The arc bows out of a
+chord by at most its sagitta, ``(l/θ)(1 − cos(θ/2K))``: 0.10 cm for ``l = 50``, ``θ = π/2`` and
+the default ``K = 10``; that is the precision of the check.
+
+Only arm-against-tank pairs are tested: links of the same arm are never tested against each other
+(adjacent ones always touch), so self-collision is not checked. The planners' postures are
+piecewise planar and turn by less than a full circle, where it cannot occur.
+
+The access-panel rule (design.md §1): every backbone point below the floor (``z < 0``) must lie
+within the panel radius of the ``z`` axis, i.e. inside the linear module's guide.
+
+:func:`point_clearance` is the vectorised numpy counterpart on backbone points (signed distance to
+the nearest solid or wall, :class:`~aftir_rl.core.tank.distance.TankDistance`), used by the planners
+to
+pre-filter thousands of candidate postures at once before the exact fcl check of the one they
+return.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import fcl
+import numpy as np
+from numba import njit
+from numpy.typing import ArrayLike, NDArray
+
+from aftir_rl.core.robot import ArmSpec, Posture, body_points
+from aftir_rl.core.tank import Solid, Tank, TankDistance
+from aftir_rl.core.tank.solids import rotation_z_to
+
+__all__ = [
+    "CollisionScene",
+    "CollisionReport",
+    "point_clearance",
+    "points_clear",
+    "panel_violation",
+]
+
+
+@dataclass(frozen=True)
+class CollisionReport:
+    """Result of checking one posture.
+
+    Attributes:
+        collides: True if the arm touches a solid or wall, or breaks the panel rule.
+        clearance_cm: smallest distance between the arm's body and any solid or wall [cm];
+            0 or negative when they touch.
+        panel_ok: whether the access-panel rule holds.
+        hit: name of a solid the arm touches, "" if none.
+
+    """
+
+    collides: bool
+    clearance_cm: float
+    panel_ok: bool
+    hit: str = ""
+
+
+class CollisionScene:
+    """A tank's solids and walls in python-fcl, and the arm as capsules moved by ``setTransform``.
+
+    Args:
+        tank: the tank.
+        arm: the arm (default: the tank's).
+        links_per_section: capsules per section, K.
+        walls: include the box walls and floor (default: the tank's ``walls``).
+
+    """
+
+    def __init__(
+        self,
+        tank: Tank,
+        arm: ArmSpec | None = None,
+        links_per_section: int = 10,
+        walls: bool | None = None,
+    ) -> None:
+        self.tank = tank
+        self.arm = arm or tank.arm
+        self.links_per_section = int(links_per_section)
+        self.walls = tank.walls if walls is None else walls
+        solids = list(tank.solids) + (tank.enclosure.slabs() if self.walls else [])
+        self._names = {}
+        objects = []
+        for solid in solids:
+            obj = solid.fcl_object()
+            self._names[id(obj)] = solid.name or type(solid).__name__.lower()
+            objects.append(obj)
+        self._objects = objects  # keep the Python objects alive for the manager
+        self._scene = fcl.DynamicAABBTreeCollisionManager()
+        self._scene.registerObjects(objects)
+        self._scene.setup()
+        self._arms: dict[
+            int, tuple[list[fcl.CollisionObject], fcl.DynamicAABBTreeCollisionManager]
+        ] = {}
+        # For far_from_everything, which runs on every step of the arm env.
+        bounds = [s.aabb() for s in tank.solids]
+        self._solid_lo = np.array([b[0] for b in bounds]).reshape(-1, 3)
+        self._solid_hi = np.array([b[1] for b in bounds]).reshape(-1, 3)
+        self._box_lo = np.array(tank.box_min, dtype=np.float64)
+        self._box_hi = np.array(tank.box_max, dtype=np.float64)
+
+    def __getstate__(self) -> dict[str, object]:
+        # fcl objects do not pickle; a copy rebuilds them (envs are pickled by vector wrappers).
+        return dict(tank=self.tank, arm=self.arm, links=self.links_per_section, walls=self.walls)
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__init__(state["tank"], state["arm"], state["links"], state["walls"])  # type: ignore[misc]
+
+    def _arm_links(
+        self, n_sections: int
+    ) -> tuple[list[fcl.CollisionObject], fcl.DynamicAABBTreeCollisionManager]:
+        if n_sections not in self._arms:
+            length = self.arm.section_length / self.links_per_section
+            links = [
+                fcl.CollisionObject(fcl.Capsule(self.arm.radius, length), fcl.Transform())
+                for _ in range(n_sections * self.links_per_section)
+            ]
+            manager = fcl.DynamicAABBTreeCollisionManager()
+            manager.registerObjects(links)
+            manager.setup()
+            self._arms[n_sections] = (links, manager)
+        return self._arms[n_sections]
+
+    def _place(self, posture: Posture) -> fcl.DynamicAABBTreeCollisionManager:
+        pts = body_points(
+            posture.dis, posture.theta, posture.phi, self.arm.section_length, self.links_per_section
+        )
+        links, manager = self._arm_links(posture.n_sections)
+        chords = pts[1:] - pts[:-1]
+        rotations = rotation_z_to(chords)
+        centres = (pts[1:] + pts[:-1]) / 2
+        for link, rot, centre in zip(links, rotations, centres):
+            link.setTransform(fcl.Transform(rot, centre))
+        manager.update()
+        return manager
+
+    def panel_ok(self, posture: Posture) -> bool:
+        """Whether every backbone point below the floor lies inside the panel's guide."""
+        pts = posture.points(self.arm.section_length, self.links_per_section * 2)
+        return not bool(panel_violation(self.tank, pts[None])[0])
+
+    def collides(self, posture: Posture) -> bool:
+        """True if the arm touches a solid or wall, or breaks the panel rule."""
+        return not self.panel_ok(posture) or self._touches(posture)
+
+    def _touches(self, posture: Posture) -> bool:
+        """Whether python-fcl finds a capsule of the arm touching a solid or wall."""
+        data = fcl.CollisionData()
+        self._scene.collide(self._place(posture), data, fcl.defaultCollisionCallback)
+        return bool(data.result.is_collision)
+
+    def clearance(self, posture: Posture) -> float:
+        """Smallest distance between the arm's body and any solid or wall [cm] (≤ 0 on contact)."""
+        data = fcl.DistanceData()
+        self._scene.distance(self._place(posture), data, fcl.defaultDistanceCallback)
+        return _finite_or_inf(data.result.min_distance)
+
+    def check(self, posture: Posture) -> CollisionReport:
+        """Collision, clearance and panel rule of one posture, and what it hits."""
+        panel = self.panel_ok(posture)
+        manager = self._place(posture)
+        data = fcl.CollisionData()
+        self._scene.collide(manager, data, fcl.defaultCollisionCallback)
+        hit = ""
+        if data.result.is_collision:
+            hit = self._hit_name(manager)
+        dist = fcl.DistanceData()
+        self._scene.distance(manager, dist, fcl.defaultDistanceCallback)
+        clearance = _finite_or_inf(dist.result.min_distance)
+        if data.result.is_collision:
+            clearance = min(clearance, 0.0)
+        return CollisionReport(bool(data.result.is_collision) or not panel, clearance, panel, hit)
+
+    def _hit_name(self, manager: fcl.DynamicAABBTreeCollisionManager) -> str:
+        for obj in self._objects:
+            data = fcl.CollisionData()
+            manager.collide(obj, data, fcl.defaultCollisionCallback)
+            if data.result.is_collision:
+                return self._names[id(obj)]
+        return ""
+
+    def far_from_everything(self, points: NDArray[np.float64], clear: float) -> bool:
+        """Whether every point ``(P, 3)`` is farther than ``clear`` [cm] from the tank.
+
+        Conservative and cheap: the solids are taken as their bounding boxes, and the floor as a
+        plane with the panel's round opening. False only means "maybe closer".
+        """
+        if not _outside_boxes(np.ascontiguousarray(points), self._solid_lo, self._solid_hi, clear):
+            return False
+        if not self.walls:
+            return True
+        lo, hi = self._box_lo, self._box_hi
+        if (points[:, :2] <= lo[:2] + clear).any() or (points >= hi - clear).any():
+            return False
+        floor = self.tank.enclosure.floor_distance_xyz(points[:, 0], points[:, 1], points[:, 2])
+        return bool(np.all(floor > clear))
+
+    def sample_margin(self, samples_per_section: int) -> float:
+        """How far [cm] a point of the capsules' axes can be from the nearest backbone sample.
+
+        A capsule's axis is a chord of the arc, within the link's sagitta of it (and a capsule of
+        arc length reaches past the chord's ends by less than 0.01 cm at the defaults); any
+        point of the arc is within half the sample spacing ``l/2k`` of a sample. With 0.1 cm of
+        slack for rounding.
+        """
+        bend = self.arm.theta_max / self.links_per_section
+        link = self.arm.section_length / self.links_per_section
+        sagitta = link / bend * (1 - math.cos(bend / 2)) if bend > 0 else 0.0
+        return self.arm.section_length / (2 * samples_per_section) + sagitta + 0.1
+
+    def collides_fast(self, posture: Posture) -> bool:
+        """:meth:`collides`, with a numpy pre-check that skips python-fcl when it can.
+
+        The same verdict, several times faster away from the tank's solids. The panel rule is
+        checked on the same backbone samples as :meth:`panel_ok`, ``l/2K`` apart, and samples
+        farther than radius + :meth:`sample_margin` from everything clear every capsule.
+        """
+        k = 2 * self.links_per_section
+        pts = posture.points(self.arm.section_length, k)
+        if panel_violation(self.tank, pts[None])[0]:
+            return True
+        if self.far_from_everything(pts, self.arm.radius + self.sample_margin(k)):
+            return False
+        return self._touches(posture)
+
+    def collides_batch(self, dis: ArrayLike, theta: ArrayLike, phi: ArrayLike) -> NDArray[np.bool_]:
+        """:meth:`collides` for postures stacked as arrays ``(B,)``, ``(B, N)``, ``(B, N)``."""
+        dis, theta, phi = np.atleast_1d(dis), np.atleast_2d(theta), np.atleast_2d(phi)
+        return np.array(
+            [self.collides(Posture(d, t, p)) for d, t, p in zip(dis, theta, phi)], dtype=bool
+        )
+
+
+@njit(cache=True)
+def _outside_boxes(
+    points: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64], clear: float
+) -> bool:
+    """Whether no point ``(P, 3)`` lies inside a box ``lo[j]..hi[j]`` grown by ``clear``."""
+    for i in range(points.shape[0]):
+        for j in range(lo.shape[0]):
+            inside = True
+            for a in range(3):
+                if not lo[j, a] - clear < points[i, a] < hi[j, a] + clear:
+                    inside = False
+                    break
+            if inside:
+                return False
+    return True
+
+
+def _finite_or_inf(distance: float) -> float:
+    """Distance from python-fcl, which reports the largest double when nothing is there."""
+    return math.inf if distance >= 1e300 else float(distance)
+
+
+def panel_violation(tank: Tank, points: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Per posture (points ``(B, P, 3)``): a backbone point below the floor outside the guide."""
+    c = np.array(tank.panel.center)
+    below = points[..., 2] < c[2]
+    radial = np.hypot(points[..., 0] - c[0], points[..., 1] - c[1])
+    return np.any(below & (radial > tank.panel.radius + 1e-9), axis=-1)
+
+
+def point_clearance(
+    tank: Tank, points: NDArray[np.float64], solids: Sequence[Solid] | None = None
+) -> NDArray[np.float64]:
+    """Signed distance [cm] from points ``(..., 3)`` to the nearest solid or wall (< 0 inside).
+
+    The floor has a round opening of the panel's radius, continued below the floor as the guide
+    tube (the fcl floor slab's opening is the square around that circle, so this is stricter).
+    This is :attr:`Tank.distance <aftir_rl.core.tank.geometry.Tank.distance>` (built once per tank),
+    or with ``solids`` a :class:`~aftir_rl.core.tank.distance.TankDistance` of those solids.
+    """
+    return (tank.distance if solids is None else TankDistance(tank, solids))(points)
+
+
+def points_clear(tank: Tank, points: NDArray[np.float64], limit: float) -> NDArray[np.bool_]:
+    """Per posture ``(B, P, 3)``: whether every point is farther than ``limit`` from the tank.
+
+    The distances are those of :func:`point_clearance` (every solid and wall).
+
+    Built for the planners' pre-filter on 10⁴–10⁶ points: coordinates stay separate ``(B, P)``
+    arrays, each solid is tested only on the postures still clear and skipped when its bounds,
+    grown by ``limit``, miss those postures' points.
+    """
+    x, y, z = points[..., 0], points[..., 1], points[..., 2]
+    ok = np.ones(points.shape[0], dtype=bool)
+    if tank.walls:
+        ok &= np.all(tank.enclosure.signed_distance_xyz(x, y, z) > limit, axis=1)
+    for solid in tank.solids:
+        idx = np.flatnonzero(ok)
+        if len(idx) == 0:
+            break
+        sx, sy, sz = x[idx], y[idx], z[idx]
+        a, b = solid.aabb()
+        if (
+            sx.min() > b[0] + limit
+            or sx.max() < a[0] - limit
+            or sy.min() > b[1] + limit
+            or sy.max() < a[1] - limit
+            or sz.min() > b[2] + limit
+            or sz.max() < a[2] - limit
+        ):
+            continue
+        ok[idx] = np.all(solid.signed_distance_xyz(sx, sy, sz) > limit, axis=1)
+    return ok

@@ -1,0 +1,345 @@
+"""Reading tanks from YAML: ``configs/tanks/NAME.yaml`` or a path, validated key by key.
+
+Files load into the frozen dataclasses of :mod:`aftir_rl.core.tank.geometry`; an unknown key, a
+negative size, a hatch outside its baffle or an obstacle outside the box is a
+:class:`~aftir_rl.core.errors.ConfigError` naming the file and the key (design.md §2).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any, cast
+
+import numpy as np
+
+from aftir_rl.core.config import CONFIG_DIR, brief, read_yaml, to_float, to_int, to_vector
+from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.robot import ArmSpec
+from aftir_rl.core.tank.geometry import Baffle, Hatch, Panel, Tank
+from aftir_rl.core.tank.raster import format_point
+from aftir_rl.core.tank.solids import Box, Cylinder, Solid, Sphere, Vec3
+
+__all__ = ["TANK_DIR", "load_tank", "available_tanks", "tank_from_mapping"]
+
+TANK_DIR = CONFIG_DIR / "tanks"
+
+#: Largest magnitude of any coordinate or size in a tank file [cm] (100 m): beyond, python-fcl
+#: loses the precision of the arm (and crashes near 1e200).
+MAX_COORD = 1e4
+#: Most cells a raster may have (the reference tank has 750); 48 bytes of work memory each.
+MAX_CELLS = 1_000_000
+#: Most obstacles and reference targets in one tank file.
+MAX_OBSTACLES = 256
+MAX_TARGETS = 1000
+#: Most sections of an arm (the papers use at most 12).
+MAX_SECTIONS = 64
+
+
+def _section(data: Mapping[str, Any], key: str, allowed: Iterable[str], src: str) -> dict[str, Any]:
+    value = data[key]
+    if not isinstance(value, Mapping):
+        raise ConfigError(f"{src}: {key}: expected a mapping, got {brief(value)}")
+    unknown = sorted(set(value) - set(allowed), key=str)
+    if unknown:
+        raise ConfigError(
+            f"{src}: {key}: unknown key {brief(unknown[0])}; allowed keys are "
+            f"{', '.join(sorted(allowed))}"
+        )
+    return dict(value)
+
+
+def _require(data: Mapping[str, Any], keys: Iterable[str], where: str) -> None:
+    for key in keys:
+        if key not in data:
+            raise ConfigError(f"{where}: missing key {key!r}")
+
+
+def _positive(value: Any, where: str, allow_zero: bool = False) -> float:
+    x = to_float(value, where, limit=MAX_COORD)
+    if x < 0 or (x == 0 and not allow_zero):
+        raise ConfigError(
+            f"{where}: must be {'non-negative' if allow_zero else 'positive'}, got {x:g}"
+        )
+    return x
+
+
+def _parse_solid(item: Any, where: str) -> Solid:
+    if not isinstance(item, Mapping):
+        raise ConfigError(f"{where}: expected a mapping, got {brief(item)}")
+    kind = item.get("type")
+    kind = kind if isinstance(kind, str) else repr(type(kind))
+    allowed = {
+        "box": {"type", "name", "min", "max"},
+        "cylinder": {"type", "name", "p0", "p1", "radius"},
+        "sphere": {"type", "name", "center", "radius"},
+    }
+    if kind not in allowed:
+        raise ConfigError(
+            f"{where}: type: expected one of box, cylinder, sphere, got {brief(kind)}"
+        )
+    unknown = sorted(set(item) - allowed[kind], key=str)
+    if unknown:
+        raise ConfigError(
+            f"{where}: unknown key {brief(unknown[0])} for a {kind}; allowed keys are "
+            f"{', '.join(sorted(allowed[kind]))}"
+        )
+    _require(item, allowed[kind] - {"name"}, where)
+    name = str(item.get("name", ""))
+    if kind == "box":
+        lo, hi = (
+            to_vector(item["min"], f"{where}: min", limit=MAX_COORD),
+            to_vector(item["max"], f"{where}: max", limit=MAX_COORD),
+        )
+        if any(h <= lo_ for lo_, h in zip(lo, hi)):
+            raise ConfigError(f"{where}: max must exceed min on every axis, got {lo} and {hi}")
+        return Box(lo, hi, name)  # type: ignore[arg-type]
+    if kind == "cylinder":
+        p0, p1 = (
+            to_vector(item["p0"], f"{where}: p0", limit=MAX_COORD),
+            to_vector(item["p1"], f"{where}: p1", limit=MAX_COORD),
+        )
+        if sum(a != b for a, b in zip(p0, p1)) != 1:
+            raise ConfigError(
+                f"{where}: p0 and p1 must differ along exactly one axis (cylinders are "
+                f"axis-aligned), got {p0} and {p1}"
+            )
+        return Cylinder(p0, p1, _positive(item["radius"], f"{where}: radius"), name)  # type: ignore[arg-type]
+    centre = to_vector(item["center"], f"{where}: center", limit=MAX_COORD)
+    return Sphere(centre, _positive(item["radius"], f"{where}: radius"), name)  # type: ignore[arg-type]
+
+
+_TOP_KEYS = {
+    "name",
+    "description",
+    "box",
+    "cell_size",
+    "panel",
+    "start_point",
+    "baffle",
+    "hatch",
+    "obstacles",
+    "arm",
+    "targets",
+    "walls",
+}
+
+
+def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
+    """Build and validate a :class:`Tank` from a mapping read from YAML.
+
+    Raises:
+        ConfigError: naming ``source`` and the offending key.
+
+    """
+    src = source
+    unknown = sorted(set(data) - _TOP_KEYS, key=str)
+    if unknown:
+        raise ConfigError(
+            f"{src}: unknown key {brief(unknown[0])}; allowed keys are "
+            f"{', '.join(sorted(_TOP_KEYS))}"
+        )
+    _require(data, ["box"], src)
+    box = _section(data, "box", {"min", "max"}, src)
+    _require(box, ["min", "max"], f"{src}: box")
+    lo, hi = (
+        cast(Vec3, to_vector(box["min"], f"{src}: box.min", limit=MAX_COORD)),
+        cast(Vec3, to_vector(box["max"], f"{src}: box.max", limit=MAX_COORD)),
+    )
+    if any(h <= lo_ for lo_, h in zip(lo, hi)):
+        raise ConfigError(f"{src}: box: max must exceed min on every axis, got {lo} and {hi}")
+    kwargs: dict[str, Any] = {"box_min": lo, "box_max": hi, "source": src}
+    kwargs["name"] = str(data.get("name", Path(src).stem))
+    kwargs["description"] = str(data.get("description", ""))
+    walls = data.get("walls", True)
+    if not isinstance(walls, bool):
+        raise ConfigError(f"{src}: walls: expected true or false, got {brief(walls)}")
+    kwargs["walls"] = walls
+    if data.get("cell_size") is not None:
+        cell = _positive(data["cell_size"], f"{src}: cell_size")
+        for axis, (a, b) in enumerate(zip(lo, hi)):
+            n = (b - a) / cell
+            if abs(n - round(n)) > 1e-9:
+                raise ConfigError(
+                    f"{src}: cell_size: {cell:g} does not divide the box extent {b - a:g} along "
+                    f"{'xyz'[axis]}"
+                )
+        cells = math.prod(round((b - a) / cell) for a, b in zip(lo, hi))
+        if cells > MAX_CELLS:
+            raise ConfigError(
+                f"{src}: cell_size: {cell:g} cm splits the box into {cells:,} cells, more than the "
+                f"{MAX_CELLS:,} allowed; use a larger cell_size"
+            )
+        kwargs["cell_size"] = cell
+    if "panel" in data:
+        panel = _section(data, "panel", {"center", "radius"}, src)
+        centre = to_vector(panel.get("center", (0, 0, 0)), f"{src}: panel.center", limit=MAX_COORD)
+        radius = _positive(panel.get("radius", 12), f"{src}: panel.radius")
+        kwargs["panel"] = Panel(centre, radius)  # type: ignore[arg-type]
+    if "start_point" in data:
+        kwargs["start_point"] = to_vector(
+            data["start_point"], f"{src}: start_point", limit=MAX_COORD
+        )
+    kwargs["obstacles"] = _parse_obstacles(data, lo, hi, src)
+    if data.get("baffle") is not None:
+        kwargs["baffle"], kwargs["hatch"] = _parse_baffle(data, lo, hi, src)
+    elif data.get("hatch") is not None:
+        raise ConfigError(f"{src}: hatch: a hatch needs a baffle")
+    if "arm" in data:
+        arm = _section(data, "arm", {"section_length", "max_sections", "radius", "theta_max"}, src)
+        try:
+            kwargs["arm"] = ArmSpec(
+                section_length=to_float(
+                    arm.get("section_length", 50), f"{src}: arm.section_length", limit=MAX_COORD
+                ),
+                max_sections=to_int(
+                    arm.get("max_sections", 12), f"{src}: arm.max_sections", limit=MAX_SECTIONS
+                ),
+                radius=to_float(arm.get("radius", 2.5), f"{src}: arm.radius", limit=MAX_COORD),
+                theta_max=to_float(arm.get("theta_max", math.pi / 2), f"{src}: arm.theta_max"),
+            )
+        except ValueError as exc:
+            if isinstance(exc, ConfigError):
+                raise
+            raise ConfigError(f"{src}: arm: {exc}") from None
+    targets = data.get("targets") or []
+    if not isinstance(targets, list):
+        raise ConfigError(f"{src}: targets: expected a list of [x, y, z], got {brief(targets)}")
+    if len(targets) > MAX_TARGETS:
+        raise ConfigError(f"{src}: targets: {len(targets)} targets, at most {MAX_TARGETS}")
+    kwargs["targets"] = tuple(
+        to_vector(t, f"{src}: targets[{i}]", limit=MAX_COORD) for i, t in enumerate(targets)
+    )
+    tank = Tank(**kwargs)
+    _check_points(tank, src)
+    return tank
+
+
+def _parse_obstacles(data: Mapping[str, Any], lo: Vec3, hi: Vec3, src: str) -> tuple[Solid, ...]:
+    items = data.get("obstacles") or []
+    if not isinstance(items, list):
+        raise ConfigError(f"{src}: obstacles: expected a list, got {brief(items)}")
+    if len(items) > MAX_OBSTACLES:
+        raise ConfigError(f"{src}: obstacles: {len(items)} obstacles, at most {MAX_OBSTACLES}")
+    out = []
+    for i, item in enumerate(items):
+        solid = _parse_solid(item, f"{src}: obstacles[{i}]")
+        s_lo, s_hi = solid.aabb()
+        if np.any(s_lo < np.array(lo) - 1e-9) or np.any(s_hi > np.array(hi) + 1e-9):
+            raise ConfigError(
+                f"{src}: obstacles[{i}] ({solid.name or type(solid).__name__}) reaches outside the "
+                f"box {lo}..{hi}: its bounds are {format_point(s_lo)}..{format_point(s_hi)}"
+            )
+        out.append(solid)
+    return tuple(out)
+
+
+def _parse_baffle(
+    data: Mapping[str, Any], lo: Vec3, hi: Vec3, src: str
+) -> tuple[Baffle, Hatch | None]:
+    raw = _section(data, "baffle", {"axis", "position", "thickness"}, src)
+    _require(raw, ["axis", "position", "thickness"], f"{src}: baffle")
+    if raw["axis"] not in ("x", "y"):
+        raise ConfigError(f"{src}: baffle.axis: expected 'x' or 'y', got {brief(raw['axis'])}")
+    baffle = Baffle(
+        raw["axis"],
+        to_float(raw["position"], f"{src}: baffle.position", limit=MAX_COORD),
+        _positive(raw["thickness"], f"{src}: baffle.thickness"),
+    )
+    k = baffle.index
+    if (
+        not lo[k]
+        < baffle.position - baffle.thickness / 2
+        < baffle.position + baffle.thickness / 2
+        < hi[k]
+    ):
+        raise ConfigError(f"{src}: baffle.position: the baffle slab must lie inside the box")
+    if data.get("hatch") is None:
+        return baffle, None
+    raw_h = _section(data, "hatch", {"center", "width", "height"}, src)
+    _require(raw_h, ["center", "width", "height"], f"{src}: hatch")
+    hatch = Hatch(
+        to_vector(raw_h["center"], f"{src}: hatch.center", limit=MAX_COORD),  # type: ignore[arg-type]
+        _positive(raw_h["width"], f"{src}: hatch.width"),
+        _positive(raw_h["height"], f"{src}: hatch.height"),
+    )
+    u = 1 - k
+    if abs(hatch.center[k] - baffle.position) > 1e-9:
+        raise ConfigError(
+            f"{src}: hatch.center: the hatch is not in its baffle ({'xy'[k]} = "
+            f"{hatch.center[k]:g}, the baffle is at {baffle.position:g})"
+        )
+    if not (
+        lo[u] <= hatch.center[u] - hatch.width / 2
+        and hatch.center[u] + hatch.width / 2 <= hi[u]
+        and lo[2] <= hatch.center[2] - hatch.height / 2
+        and hatch.center[2] + hatch.height / 2 <= hi[2]
+    ):
+        raise ConfigError(f"{src}: hatch: the opening reaches outside the baffle")
+    return baffle, hatch
+
+
+def _check_points(tank: Tank, src: str) -> None:
+    if not tank.contains_point(tank.start_point):
+        raise ConfigError(f"{src}: start_point: {tank.start_point} is outside the box")
+    if tank.cell_size is not None and _start_cell_obstructed(tank):
+        raise ConfigError(
+            f"{src}: start_point: {tank.start_point} lies in obstructed cell "
+            f"{list(tank.start_cell)}; the grid world must start in a free cell"
+        )
+    if abs(tank.panel.center[2] - tank.box_min[2]) > 1e-9:
+        raise ConfigError(
+            f"{src}: panel.center: the panel must lie in the floor z = {tank.box_min[2]:g}"
+        )
+    for i, target in enumerate(tank.targets):
+        if not tank.contains_point(target):
+            raise ConfigError(f"{src}: targets[{i}]: {target} is outside the box")
+        hit = tank.solid_at(target)
+        if hit is not None:
+            raise ConfigError(f"{src}: targets[{i}]: {target} is inside {hit.name or 'a solid'}")
+
+
+def _start_cell_obstructed(tank: Tank) -> bool:
+    """Whether a solid overlaps the start cell, without building the raster (O(solids))."""
+    assert tank.cell_size is not None
+    size = tank.cell_size
+    lo, hi = np.array(tank.box_min), np.array(tank.box_max)
+    upper = np.round((hi - lo) / size).astype(int)
+    rel = (np.array(tank.start_point) - lo) / size
+    cell = np.minimum(np.floor(rel).astype(int), upper - 1)
+    c_lo = lo + cell * size
+    return any(bool(s.overlaps(c_lo, c_lo + size)) for s in tank.solids)
+
+
+def available_tanks() -> list[str]:
+    """Names of the tanks shipped in ``configs/tanks``."""
+    return sorted(p.stem for p in TANK_DIR.glob("*.yaml"))
+
+
+_CACHE: dict[str, Tank] = {}
+
+
+def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
+    """Load a tank by name (``configs/tanks/NAME.yaml``) or by path to a YAML file.
+
+    Loaded tanks are cached by resolved path, so envs share one raster.
+
+    Raises:
+        ConfigError: the tank does not exist or its file is malformed.
+
+    """
+    if isinstance(tank, Tank):
+        return tank
+    text = str(tank)
+    path = Path(text)
+    if not (path.suffix in (".yaml", ".yml") or path.exists()):
+        path = TANK_DIR / f"{text}.yaml"
+        if not path.exists():
+            raise ConfigError(
+                f"unknown tank {text!r}: give a YAML path or one of {', '.join(available_tanks())}"
+            )
+    key = str(path.resolve())
+    if key not in _CACHE:
+        _CACHE[key] = tank_from_mapping(read_yaml(path), str(path))
+    return _CACHE[key]

@@ -1,0 +1,545 @@
+"""``AFTIR-ArmFTL-v0``: the whole arm deployed by follow-the-leader, goal-conditioned, batched.
+
+The agent drives the follow-the-leader (FTL) model of :mod:`aftir_rl.planning.ftl.model`: it steers
+the
+bending vector ``κ = (θ cos φ, θ sin φ)`` [rad] of the route section the tip is tracing and pushes
+or pulls the linear module; the body follows the traced route. The env state is a route as that
+module defines it (:class:`~aftir_rl.planning.ftl.model.Route` with ``lead = 0``: bending starts at
+the
+floor), i.e. a ``κ`` history, plus the tip's arc length ``s`` [cm] along it:
+
+- route sections ``0..k−1`` are frozen, section ``k = min(⌊s / l⌋, N − 1)`` is the one being
+  traced and the only one the agent steers;
+- when a push carries ``s`` past ``(k + 1)·l`` the steered ``κ`` is frozen and the new leading
+  section starts as a copy of it (shift-and-copy); a pull below ``k·l`` retracts along the route
+  and the previous section becomes the steered one again;
+- the posture is :func:`~aftir_rl.planning.ftl.model.ftl_postures` of that route at ``s``
+  (:func:`ftl_kappa_batch` is the same formula over a batch of routes; the tests compare the
+  two), so at whole-section stages the body lies exactly on the route.
+
+**Collision** is the numpy signed distance of :func:`~aftir_rl.core.collision.point_clearance` on
+``samples_per_section`` backbone samples per section (5 cm apart at the default 10), batched over
+envs; no python-fcl in the step. *Contact* is a sample whose surface clearance (distance minus the
+arm's radius) is below ``margin`` (1 cm; the panel guide below the floor counts as a wall). Between
+two samples ``δ`` apart the backbone can come closer than the samples by at most ``δ/2`` (2.5 cm at
+the default sampling); the check is on the samples, as stated. The tests cross-check it with
+python-fcl's capsules on 16,000 random postures in three tanks: a contact of the env is always
+one of python-fcl's, and the verdicts differ only where python-fcl's clearance lies within
+:meth:`~aftir_rl.core.collision.CollisionScene.sample_margin` (2.7 cm at 50 cm sections) below the
+margin.
+
+**Goal-conditioned** (Gymnasium-Robotics / panda-gym): observations are
+``Dict(observation, achieved_goal, desired_goal)``; ``achieved_goal`` is the tip and
+``desired_goal`` the target, both in cm. ``observation`` holds no goal (HER relabels goals), only
+the arm and what it senses: see :class:`ArmFTLEnv`. :meth:`ArmFTLEnv.compute_reward` is
+vectorised and the step reward *is* its value on the step's own goal, so SB3's
+``HerReplayBuffer`` relabels with the same function. It needs the step's ``info`` (the previous tip
+and the contact flag): give HER ``replay_buffer_kwargs={"copy_info_dict": True}``; without infos
+it raises :class:`~aftir_rl.core.errors.AftirError` rather than returning a different reward.
+
+**Reward** (per step, ``d`` = distance from tip to target [cm])::
+
+    r = (d_prev − d) / 10  +  shaping · (Φ(tip) − Φ(tip_prev))  +  10·success  −  10·contact
+        − step_cost
+
+The progress term is itself potential-based (``Φ = −d/10``, γ = 1). The switchable shaping term
+(Ng, Harada & Russell 1999, with γ = 1 as for the progress term; the optimal policy of the
+undiscounted episodic task is unchanged) is grounded in the grid world: ``Φ(p) = −cell · e(p, g)
+/ 10``, where ``e`` is the *detour* of the shortest 6-connected path through the tank's raster
+(the BFS that Q-learning is checked against, :meth:`aftir_rl.core.tank.Raster.bfs_distances`) from
+the tip's cell to the target's cell beyond the Manhattan distance of the two cells. ``e`` is 0
+wherever nothing blocks the straight way, so ``(d_prev − d)/10 + ΔΦ`` is the progress along
+``d + cell·e``, a distance-to-go through the hatch: for a bay-2 target a tip in bay 1 is paid for
+moving towards the hatch and up to its height, which the Euclidean term alone punishes. The
+all-pairs raster distances are computed once per tank (numpy relaxation, < 0.5 s) and looked up,
+so the term costs nothing per step and HER can relabel it. Measured with and without: see
+``benchmarks/bench_arm_ftl.py`` and the README.
+
+``shaping="field"`` takes the potential from the guide's free-space field instead
+(:class:`~aftir_rl.envs.ftl.fields.FieldGuide`, the motion planner's field on a grid of half the
+raster's cell with clearance as a cost): ``Φ(p) = −(P(p, g) − d)/10``, ``P`` the field's
+cost-to-go, so ``(d_prev − d)/10 + ΔΦ`` is the progress along ``P`` itself: through the hatch's
+middle, not along its edge, and without the 20 cm raster's steps. ``P`` of a relabelled goal
+needs that goal's field (built once per 10 cm cell, about 28 ms), so it suits PPO better than
+HER.
+
+**Batched.** :class:`ArmFTLVectorEnv` (``gym.make_vec(..., vectorization_mode=
+"vector_entry_point")``) steps ``num_envs`` arms in one numpy pass; both classes share
+:class:`FTLBatch`, so a vector env seeded ``seed`` gives row ``i`` exactly the transitions of a
+single env seeded ``seed + i`` under the same actions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+from numpy.typing import NDArray
+
+from aftir_rl.core.errors import ConfigError, TargetError
+from aftir_rl.core.robot import Posture, body_points
+from aftir_rl.core.tank import Tank, TankDistance
+from aftir_rl.envs.ftl.setup import _check_options, _GoalReward, _Setup
+from aftir_rl.envs.ftl.state import FTLBatch, ftl_kappa_batch, raster_detour_table
+
+__all__ = [
+    "ArmFTLEnv",
+    "ArmFTLVectorEnv",
+    "FTLBatch",
+    "ftl_kappa_batch",
+    "raster_detour_table",
+    "TankDistance",
+]
+
+
+class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
+    """The whole arm, deployed through the panel by follow-the-leader, reaching targets.
+
+    ## Description
+    The AFTIR arm (``n_sections`` sections, default the tank's maximum, 12 × 50 cm in the
+    reference tank) on its linear module. The agent steers the section the tip is tracing and
+    pushes or pulls the module; the body follows the traced route (module docstring). The task:
+    bring the tip within ``success_tolerance`` of a target anywhere free in the tank (both bays
+    by default), through the hatch for bay-2 targets, without contact.
+
+    ## Action Space
+    ``Box(-1, 1, (3,), float32)``: the steering (two components) and the insertion (scaled by
+    ``push_step`` [cm], ``s`` clipped to ``[0, N·l]``). With ``steer="increment"`` (the default)
+    the steering is the change of the steered ``κ`` (scaled by ``kappa_step`` [rad], ``|κ|``
+    clipped to ``θ_max``); with ``steer="target"`` it is the bend the steered section should
+    have, ``κ* = θ_max·a`` (``|κ*|`` clipped to ``θ_max``), which ``κ`` approaches by at most
+    ``kappa_step`` per component and step: the same bending rates, but the policy names a bend
+    rather than a rate, and holds a bend by holding its action.
+
+    ## Observation Space
+    ``Dict``: ``achieved_goal`` (tip) and ``desired_goal`` (target), ``Box(float32, (3,))`` in cm
+    (the tank box grown by 100 cm); ``observation``, ``Box(-10, 10, float32)``: ``dis/(N·l)``,
+    ``k/N``, the steered ``κ/θ_max``, every section's ``θ/θ_max``, ``sin φ``, ``cos φ``, the tip
+    (cm/100), its heading, the body's surface clearance (cm/10, clipped to ±1), the clearance at
+    10, 25 and 50 cm along 7 rays from the tip (heading, ±x, ±y, ±z; cm/50, clipped to ±1) and
+    the heights of the last three section ends (cm/100).
+
+    ## Starting State
+    Straight, the tip ``start_height`` (10 cm) above the floor.
+
+    ## Rewards
+    Progress ``(d_prev − d)/10`` [per cm], the raster-detour potential term when ``shaping``,
+    ``+10`` on success, ``−10`` on contact, ``−step_cost`` per step: :meth:`compute_reward`
+    (module docstring).
+
+    ## Episode End
+    Terminated on success (tip within ``success_tolerance`` and no contact) or contact (surface
+    clearance below ``margin``); truncated by ``max_episode_steps`` (300 at registration).
+
+    ## Arguments
+    - ``tank``: tank name or YAML path; ``n_sections``: default the tank arm's maximum.
+    - ``target``: fixed target [cm] for every episode; default drawn per episode with
+      ``np_random``, uniformly among points ``target_clearance`` (10 cm) from every surface and
+      20 cm from the start, in ``bay`` (1, 2, or None for the whole tank).
+    - ``success_tolerance`` (2 cm), ``margin`` (1 cm), ``kappa_step`` (0.1 rad), ``push_step``
+      (5 cm), ``start_height`` (10 cm), ``samples_per_section`` (10).
+    - ``shaping`` (False): the reward's potential term, ``True`` or ``"raster"`` (the raster
+      BFS's detour) or ``"field"`` (the guide field's cost-to-go; module docstring).
+    - ``guide`` (False): append to ``observation`` what the way to *this* target looks like: the
+      free-space distance-to-go (cm/100, at most 10), then, in the frame the steered section
+      bends in (:meth:`FTLBatch.steering_frames`), the unit way to the next point of the
+      shortest way (:class:`~aftir_rl.envs.ftl.fields.FieldGuide`), ``(target − tip)/100``,
+      the tip's heading, and the unit directions to the points of that way 3 and 6 grid steps
+      ahead (about 30-50 and 60-100 cm; :meth:`FieldGuide.lookahead`), so the policy sees a turn
+      coming while the arm can still bend into it. These depend on the goal, so HER's relabelled
+      goals would not match them: use it with PPO, not HER.
+    - ``near_goal`` (False): append to ``observation`` the target's offset from the tip at a
+      fine scale, in the steering frame: ``(target − tip)/max(d, 10 cm)``, the unit way beyond
+      10 cm and within it the offset in tenths of 10 cm, ten times the resolution of the
+      guide's ``(target − tip)/100`` (:meth:`FTLBatch.near_goal_columns`), for the last
+      centimetres. Goal-dependent like ``guide``: not with HER.
+    - ``detour_bias`` (0): the fraction of drawn targets whose density is weighted by
+      ``1 + e``, ``e`` the detour of the raster's shortest way from the start beyond the straight
+      (Manhattan) one, in cells: targets behind obstacles (in bay 2, far from the hatch) come up
+      more often; the other targets are uniform as before. A curriculum knob for training; the
+      evaluations of ``train`` and ``evaluate`` draw their targets uniformly.
+    - ``corner_bias`` (0): the fraction of drawn targets drawn in the corners of the target
+      region instead (``target_clearance`` to ``target_clearance`` + 15 cm inward from one of
+      its eight corners, free as the others): where the arm bends most with walls on three
+      sides. A curriculum knob for training, like ``detour_bias`` (not both at once).
+    - ``failure_bias`` (0): the fraction of drawn targets whose density is weighted by the
+      running failure rate of the episodes aimed at their raster cell
+      (:class:`~aftir_rl.envs.ftl.setup.FailureRates`, kept by the env from its own episodes;
+      cells never aimed at count as hard): training comes back to where the policy still fails,
+      wherever that is. With ``corner_bias`` the corner targets are weighted too; not with
+      ``detour_bias``. Training-only, like ``detour_bias``; the rates start again with each
+      env (a resumed run learns them anew), and the vector env's targets then depend on its
+      rows' outcomes, not on the seeds alone.
+    - ``slack`` (0 cm): training demands this much more than the success rule: the tip within
+      ``success_tolerance − slack``, the surface clearance at least ``margin + slack``, so that
+      a policy measured by the rule itself has that much in hand rather than ending its
+      episodes exactly at the 2 cm tolerance or the 1 cm margin (docs/benchmarks.md measures
+      it). Training-only, like ``detour_bias``: evaluations drop it.
+    - ``steer`` (``"increment"``): what the two steering actions command, a change of ``κ``
+      or ``"target"``, the bend itself (Action Space).
+    - ``step_cost`` (0): a cost paid on every step (at most 0.03, so that ending an episode
+      on contact, −10, never pays better than waiting out the 300 steps). A policy that
+      stops a few cm short of a target it cannot reach by pushing on earns 0 per step there
+      without it; with it, stopping costs ``step_cost/(1 − γ)``, and pulling back to bend
+      again becomes worth trying.
+    - ``render_mode``: ``"rgb_array"``.
+
+    ``reset(options={"target": (x, y, z)})`` sets the target of one episode.
+
+    ## Version History
+    - v0: initial version.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        tank: str | Path | Tank = "b737_center",
+        n_sections: int | None = None,
+        target: Sequence[float] | None = None,
+        bay: int | None = None,
+        target_clearance: float = 10.0,
+        success_tolerance: float = 2.0,
+        margin: float = 1.0,
+        kappa_step: float = 0.1,
+        push_step: float = 5.0,
+        start_height: float = 10.0,
+        samples_per_section: int = 10,
+        shaping: bool | str = False,
+        guide: bool = False,
+        detour_bias: float = 0.0,
+        steer: str = "increment",
+        step_cost: float = 0.0,
+        corner_bias: float = 0.0,
+        slack: float = 0.0,
+        failure_bias: float = 0.0,
+        near_goal: bool = False,
+        render_mode: str | None = None,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ConfigError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
+        self.render_mode = render_mode
+        self._setup(
+            tank,
+            n_sections,
+            1,
+            target,
+            bay,
+            target_clearance,
+            success_tolerance,
+            margin,
+            kappa_step,
+            push_step,
+            start_height,
+            samples_per_section,
+            shaping,
+            guide,
+            detour_bias,
+            steer,
+            step_cost,
+            corner_bias,
+            slack,
+            failure_bias,
+            near_goal,
+        )
+        self.arm = self.tank.arm
+        # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
+        self.action_space, self.observation_space = self._spaces()  # type: ignore[assignment]
+        self._tips: list[NDArray[np.float64]] = []
+        #: The shaping's potential at the tip (NaN: not known; see ``_step_reward``).
+        self._potential: NDArray[np.float64] | None = np.full(1, np.nan)
+        self._achieved = np.zeros((1, 3), dtype=np.float32)
+        self._open = False  # an episode has steps and has not ended (for failure_bias)
+
+    @property
+    def target(self) -> NDArray[np.float64]:
+        """The episode's target [cm]."""
+        return self.batch.target[0].copy()
+
+    @property
+    def tip(self) -> NDArray[np.float64]:
+        """The tip's position [cm]."""
+        return self.batch.tip[0].copy()
+
+    @property
+    def posture(self) -> Posture:
+        """The current joint variables ``(dis, θ, φ)``."""
+        b = self.batch
+        return Posture(b.dis[0], b.theta[0], b.phi[0])
+
+    @property
+    def route_kappa(self) -> NDArray[np.float64]:
+        """The traced route's ``κ`` ``(k + 1, 2)`` [rad], the steered section last."""
+        return self.batch.kappa[0, : self.batch.k[0] + 1].copy()
+
+    @property
+    def insertion(self) -> float:
+        """The tip's arc length ``s`` along the route, from the floor [cm]."""
+        return float(self.batch.s[0])
+
+    def body(self, points_per_section: int = 10) -> NDArray[np.float64]:
+        """Backbone points of the current posture [cm]."""
+        b = self.batch
+        return body_points(b.dis[0], b.theta[0], b.phi[0], b.l, points_per_section)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
+        """Straighten the arm just inside the panel and set a target."""
+        super().reset(seed=seed)
+        options = _check_options(options)
+        if self._open:  # the last episode ended without success (truncated or left)
+            self._record_outcomes(self.batch.target, [False])
+        self._open = False
+        if options.get("target") is not None:
+            target = self._check_target(options["target"])
+        elif self.fixed_target is not None:
+            target = self.fixed_target
+        else:
+            target = self._draw_targets([self.np_random])[0]
+        self.batch.reset_rows(np.array([0]), target[None])
+        self._potential = np.full(1, np.nan)
+        self._tips = [self.tip]
+        info = {"distance_cm": float(np.linalg.norm(self.tip - target)), "target": target.copy()}
+        rows = self._obs_dict()
+        self._achieved = rows["achieved_goal"].copy()  # the next step's previous tip, clipped
+        return {k: v[0] for k, v in rows.items()}, info
+
+    def step(
+        self, action: NDArray[np.float32]
+    ) -> tuple[dict[str, NDArray[np.float32]], SupportsFloat, bool, bool, dict[str, Any]]:
+        """Steer and push; see the class docstring for rewards and termination."""
+        a = self._check_action(action, self.action_space.shape)
+        b = self.batch
+        b.step(a[None])
+        prev = self._achieved  # the previous tip, as the last observation held it
+        self._tips.append(self.tip)
+        rows = self._obs_dict()
+        self._achieved = rows["achieved_goal"].copy()
+        contact = b.contact
+        # compute_reward's formula on the same float32 goals
+        reward, distance, self._potential = self._step_reward(
+            rows["achieved_goal"], rows["desired_goal"], prev, contact, self._potential
+        )
+        hit = bool(contact[0])
+        success = bool(distance[0] < b.success_tolerance) and not hit
+        self._open = not (success or hit)
+        if not self._open:
+            self._record_outcomes(b.target, [success])
+        info: dict[str, Any] = {
+            "prev_achieved_goal": prev[0],
+            "contact": hit,
+            "is_success": success,
+            "collision": hit,
+            "distance_cm": float(distance[0]),
+            "min_clearance_cm": float(b.body_clearance[0]),
+        }
+        obs = {k: v[0] for k, v in rows.items()}
+        return obs, float(reward[0]), success or hit, False, info
+
+    def render(self) -> NDArray[np.uint8] | None:
+        """The tank, the arm, its tip path and the target (``rgb_array``)."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode= to make()")
+            return None
+        if getattr(self, "_renderer", None) is None:
+            from aftir_rl.viz.plotting import PathRenderer
+
+            self._renderer = PathRenderer(self.tank, title="AFTIR-ArmFTL")
+        return self._renderer.render(np.array(self._tips), self.target, arms=[self.body()])
+
+
+class ArmFTLVectorEnv(
+    _Setup, _GoalReward, VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], Any]
+):
+    """``num_envs`` :class:`ArmFTLEnv` s stepped together in numpy (autoreset: next step).
+
+    Same arguments as :class:`ArmFTLEnv` plus ``num_envs`` and ``max_episode_steps``
+    (truncation). Row ``i`` draws its targets from its own generator, seeded ``seed + i`` by
+    ``reset(seed=seed)``, so it reproduces a single env seeded ``seed + i``. As in Gymnasium's
+    ``CartPoleVectorEnv``, a row that ended is reset by the next ``step`` (which returns its
+    first observation with reward 0 and no termination, ignoring that row's action).
+    ``reset(options={"target": ...})`` takes one target for all rows or one per row ``(B, 3)``.
+    ``info`` holds per-row arrays ``prev_achieved_goal``, ``contact``, ``is_success``,
+    ``distance_cm`` and ``min_clearance_cm``. With ``autoreset_mode="SameStep"`` rows that end are
+    reset within the step instead: their last observations are in ``info["final_obs"]`` (the
+    batched ``Dict``, valid where ``info["_final_obs"]``) and the step returns their first ones
+    (what SB3's ``VecEnv`` adapter :class:`aftir_rl.rl.sb3.vec_adapter.SB3VectorEnv` wants).
+    """
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        max_episode_steps: int = 300,
+        tank: str | Path | Tank = "b737_center",
+        n_sections: int | None = None,
+        target: Sequence[float] | None = None,
+        bay: int | None = None,
+        target_clearance: float = 10.0,
+        success_tolerance: float = 2.0,
+        margin: float = 1.0,
+        kappa_step: float = 0.1,
+        push_step: float = 5.0,
+        start_height: float = 10.0,
+        samples_per_section: int = 10,
+        shaping: bool | str = False,
+        guide: bool = False,
+        detour_bias: float = 0.0,
+        steer: str = "increment",
+        step_cost: float = 0.0,
+        corner_bias: float = 0.0,
+        slack: float = 0.0,
+        failure_bias: float = 0.0,
+        near_goal: bool = False,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        render_mode: str | None = None,
+    ) -> None:
+        if render_mode is not None:
+            raise ConfigError("ArmFTLVectorEnv does not render; use ArmFTLEnv for pictures")
+        if num_envs < 1 or max_episode_steps < 1:
+            raise ConfigError("num_envs and max_episode_steps must be at least 1")
+        self.num_envs = int(num_envs)
+        self.max_episode_steps = int(max_episode_steps)
+        self.render_mode = None
+        self._setup(
+            tank,
+            n_sections,
+            self.num_envs,
+            target,
+            bay,
+            target_clearance,
+            success_tolerance,
+            margin,
+            kappa_step,
+            push_step,
+            start_height,
+            samples_per_section,
+            shaping,
+            guide,
+            detour_bias,
+            steer,
+            step_cost,
+            corner_bias,
+            slack,
+            failure_bias,
+            near_goal,
+        )
+        try:
+            self.autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ConfigError(
+                f"autoreset_mode must be 'NextStep' or 'SameStep', got {autoreset_mode!r}"
+            ) from None
+        if self.autoreset_mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+            raise ConfigError("autoreset_mode must be 'NextStep' or 'SameStep'")
+        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
+        self.single_action_space, self.single_observation_space = self._spaces()
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self._rngs = [seeding.np_random()[0] for _ in range(self.num_envs)]
+        self.steps = np.zeros(self.num_envs, dtype=np.int64)
+        self.prev_done = np.zeros(self.num_envs, dtype=bool)
+        #: The shaping's potential at each row's tip (NaN: not known; see ``_step_reward``).
+        self._potential = np.full(self.num_envs, np.nan)
+        self._targets_option: NDArray[np.float64] | None = None
+
+    def _new_targets(self, rows: NDArray[np.int64]) -> NDArray[np.float64]:
+        if self._targets_option is not None:
+            return self._targets_option[rows]
+        if self.fixed_target is not None:
+            return np.repeat(self.fixed_target[None], len(rows), axis=0)
+        rngs = [self._rngs[i] for i in rows]
+        return self._draw_targets(rngs)
+
+    def reset(
+        self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
+        """Reset every row; ``seed`` seeds row ``i`` with ``seed + i`` (or a list, one each)."""
+        if seed is not None:
+            seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else seed
+            if len(seeds) != self.num_envs:
+                raise ConfigError(f"reset got {len(seeds)} seeds for {self.num_envs} envs")
+            self._rngs = [seeding.np_random(int(s))[0] for s in seeds]
+            self._np_random, self._np_random_seed = seeding.np_random(seeds[0])
+        options = _check_options(options)
+        self._targets_option = None
+        if options.get("target") is not None:
+            t = np.asarray(options["target"], dtype=np.float64)
+            rows = t.reshape(-1, 3) if t.size % 3 == 0 else t
+            if rows.ndim != 2 or len(rows) not in (1, self.num_envs):
+                raise TargetError(f"target must be (3,) or ({self.num_envs}, 3), got {t.shape}")
+            checked = np.array([self._check_target(r) for r in rows])
+            self._targets_option = np.broadcast_to(checked, (self.num_envs, 3)).copy()
+        every = np.arange(self.num_envs)
+        self.batch.reset_rows(every, self._new_targets(every))
+        self._potential = np.full(self.num_envs, np.nan)
+        self.steps[:] = 0
+        self.prev_done[:] = False
+        return self._obs_dict(), {"target": self.batch.target.copy()}
+
+    def step(
+        self, actions: NDArray[np.float32]
+    ) -> tuple[
+        dict[str, NDArray[np.float32]],
+        NDArray[np.float64],
+        NDArray[np.bool_],
+        NDArray[np.bool_],
+        dict[str, Any],
+    ]:
+        """Step every row; rows that ended on the previous step are reset instead."""
+        a = self._check_action(actions, self.action_space.shape)
+        b = self.batch
+        done_rows = np.flatnonzero(self.prev_done)
+        if len(done_rows):
+            a[done_rows] = 0.0
+            b.reset_rows(done_rows, self._new_targets(done_rows), refresh=False)
+            # (their rewards are 0 this step; their potentials at the new start follow from it)
+        prev_tip = b.step(a)
+        prev_tip[done_rows] = b.tip[done_rows]
+        obs = self._obs_dict()
+        prev = self._goal_clip(prev_tip)
+        contact = b.contact.copy()
+        info: dict[str, Any] = {"prev_achieved_goal": prev, "contact": contact}
+        # compute_reward's formula on the same float32 goals
+        reward, distance, potential = self._step_reward(
+            obs["achieved_goal"], obs["desired_goal"], prev, contact, self._potential
+        )
+        if potential is not None:  # the next step's potentials at its previous tips
+            self._potential = potential
+        success = (distance < b.success_tolerance) & ~contact
+        terminated = success | contact
+        self.steps += 1
+        truncated = self.steps >= self.max_episode_steps
+        reward[done_rows] = 0.0
+        terminated[done_rows] = False
+        truncated[done_rows] = False
+        self.steps[done_rows] = 0
+        info.update(
+            is_success=success,
+            collision=contact,
+            distance_cm=distance,
+            min_clearance_cm=b.body_clearance.copy(),
+        )
+        done = terminated | truncated
+        ended = np.flatnonzero(done)
+        self._record_outcomes(b.target[ended], success[ended])
+        if self.autoreset_mode is AutoresetMode.NEXT_STEP:
+            self.prev_done = done
+        elif done.any():  # SAME_STEP: the last observations go to info, the rows start again
+            rows = np.flatnonzero(done)
+            info.update(final_obs=obs, _final_obs=done)
+            b.reset_rows(rows, self._new_targets(rows))
+            self._potential[rows] = np.nan
+            self.steps[rows] = 0
+            obs = {k: v.copy() for k, v in obs.items()}
+            for key, value in self._obs_dict(rows).items():  # only the rows that started again
+                obs[key][rows] = value
+        return obs, reward, terminated, truncated, info

@@ -1,0 +1,511 @@
+"""Batched kernels of ``AFTIR-ArmFTL-v0``: exact clearances through a distance grid, raster guides.
+
+Two things make the batched follow-the-leader env fast and goal-aware without approximations:
+
+- :class:`ClearanceGrid` answers "the smallest signed distance of each arm's backbone samples"
+  exactly, but computes the exact distance only where it can matter. The tank's signed distance
+  is tabulated once on grids of spacing ``g`` laid where the distance is 1-Lipschitz, so a
+  point's value lies within ``δ = g·√3/2`` of its nearest node's. Per arm, the smallest upper
+  bound ``v + δ`` over its samples bounds the minimum; only samples whose lower bound ``v − δ``
+  is below it can hold the minimum, and only those (typically a handful of 121) go to the exact
+  function. The result equals the exact minimum (the tests compare them). The sensing rays of
+  the observation read the nearest node's value (:meth:`ClearanceGrid.approx`, within
+  ``δ`` = 1.7 cm).
+- :class:`FieldGuide` keeps the free-space distance-to-go fields of the targets seen so far
+  (the motion planner's guide field, one per target grid cell) and reads, for every tip at once,
+  the distance-to-go and the way to the next grid point: the way through the hatch as numbers a
+  policy can read.
+- :func:`raster_distance_table`: the all-pairs shortest 6-connected distances through the tank's
+  raster (the BFS the grid world is checked against), for the reward's shaping term.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from aftir_rl.core.errors import ConfigError, TargetError
+from aftir_rl.core.tank import Tank
+from aftir_rl.envs.ftl import kernel
+from aftir_rl.envs.ftl.kernel import KernelTank, kernel_tank
+
+__all__ = [
+    "ClearanceGrid",
+    "FieldGuide",
+    "bay_region",
+    "clearance_grid",
+    "kernel_grid",
+    "field_guide",
+    "draw_targets",
+    "raster_distance_table",
+]
+
+#: Grid spacing [cm] of :class:`ClearanceGrid`.
+GRID_SPACING = 2.0
+#: Largest number of grid nodes a tank may ask for (about 8 bytes each).
+MAX_GRID_NODES = 8_000_000
+#: Largest number of distance-to-go values :class:`FieldGuide` keeps (8 bytes each, with the
+#: next-step table).
+MAX_GUIDE_VALUES = 50_000_000
+#: ``clearance_cost`` of :class:`FieldGuide`'s fields: ways keep off surfaces where they can.
+GUIDE_CLEARANCE_COST = 2.0
+#: Grid steps ahead of the tip of :meth:`FieldGuide.lookahead`'s points.
+LOOKAHEAD_HOPS = (3, 6)
+
+
+class ClearanceGrid:
+    """Exact per-row minimum signed distance of many points, pruned by tabulated bounds.
+
+    Args:
+        distance: the exact signed distance [cm] of points ``(..., 3)`` (e.g.
+            :class:`aftir_rl.core.tank.TankDistance`).
+        boxes: ``(lo, hi)`` corners [cm] of the boxes the grids cover (e.g. the tank and the
+            guide tube below its floor); points outside every box are always computed exactly.
+            Within each box ``distance`` must be 1-Lipschitz (a true signed distance, with no
+            jump), or the bounds are wrong.
+        spacing: grid spacing ``g`` [cm] (grown for a box until its grid has at most
+            :data:`MAX_GRID_NODES` nodes).
+
+    """
+
+    def __init__(
+        self,
+        distance: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+        boxes: Sequence[tuple[ArrayLike, ArrayLike]],
+        spacing: float = GRID_SPACING,
+    ) -> None:
+        self.distance = distance
+        self.grids: list[tuple[NDArray[np.float64], float, NDArray[np.int64], NDArray[np.float64]]]
+        self.grids = []
+        self.slack = 0.0
+        for box_lo, box_hi in boxes:
+            lo, hi = np.asarray(box_lo, dtype=np.float64), np.asarray(box_hi, dtype=np.float64)
+            g = float(spacing)
+            while np.prod(np.ceil((hi - lo) / g) + 1) > MAX_GRID_NODES:
+                g *= 1.25
+            shape = np.ceil((hi - lo) / g).astype(np.int64) + 1
+            axes = [lo[i] + g * np.arange(shape[i]) for i in range(3)]
+            nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+            chunks = np.array_split(nodes, 1 + len(nodes) // 65536)
+            values = np.concatenate([distance(c) for c in chunks]).astype(np.float64)
+            self.grids.append((lo, g, shape, values))
+            self.slack = max(self.slack, g * math.sqrt(3.0) / 2.0)
+
+    def bound(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Nearest-node values of points ``(..., 3)``; NaN outside every grid.
+
+        The first grid that holds a point answers; the exact distance is within :attr:`slack`.
+        """
+        out = np.full(points.shape[:-1], np.nan)
+        for lo, g, shape, values in self.grids:
+            idx = np.rint((points - lo) / g).astype(np.int64)
+            inside = ((idx >= 0) & (idx < shape)).all(-1) & np.isnan(out)
+            idx = np.clip(idx, 0, shape - 1)
+            flat = (idx[..., 0] * shape[1] + idx[..., 1]) * shape[2] + idx[..., 2]
+            out = np.where(inside, values[flat], out)
+        return out
+
+    def row_min(
+        self, points: NDArray[np.float64], use: NDArray[np.bool_] | None = None
+    ) -> NDArray[np.float64]:
+        """Exact ``distance(points).min(-1)`` of points ``(B, P, 3)``, shape ``(B,)``.
+
+        ``use`` ``(B, P)``: only these points count (``inf`` for a row without any).
+        """
+        if use is None:
+            use = np.ones(points.shape[:2], dtype=bool)
+        rows, cols = np.nonzero(use)
+        pts = points[rows, cols]
+        v = self.bound(pts)
+        upper = np.full(len(points), np.inf)
+        np.minimum.at(upper, rows, np.where(np.isnan(v), np.inf, v + self.slack))
+        need = np.isnan(v) | (v - self.slack <= upper[rows])
+        exact = self.distance(pts[need])
+        out = np.full(len(points), np.inf)
+        np.minimum.at(out, rows[need], exact)
+        return out
+
+    def approx(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Signed distance of points ``(..., 3)`` within :attr:`slack` [cm].
+
+        The nearest node's value; exact outside the grids.
+        """
+        v = self.bound(points)
+        far = np.isnan(v)
+        if far.any():
+            v[far] = self.distance(points[far])
+        return v
+
+
+_GRIDS: weakref.WeakKeyDictionary[Tank, ClearanceGrid] = weakref.WeakKeyDictionary()
+
+
+def clearance_grid(tank: Tank) -> ClearanceGrid:
+    """The :class:`ClearanceGrid` of a tank, built once per tank.
+
+    The grids cover only where the signed distance is 1-Lipschitz, as their bound needs: the
+    tank's box grown by 10 cm sideways and above (not below the floor, where the distance jumps
+    at the guide's wall), and a column around the guide's axis below the floor, narrow enough
+    that no node or point of it reaches the wall, down to the deepest base of the longest arm.
+    Everything else is computed exactly.
+    """
+    grid = _GRIDS.get(tank)
+    if grid is None:
+        lo, hi = np.asarray(tank.box_min, float) - 10.0, np.asarray(tank.box_max, float) + 10.0
+        lo[2] = tank.box_min[2]
+        c, r = np.asarray(tank.panel.center, float), float(tank.panel.radius)
+        half = max((r - 2.0 * GRID_SPACING) / math.sqrt(2.0), 0.0)
+        depth = tank.arm.max_sections * tank.arm.section_length + 10.0
+        column = (c - [half, half, depth], c + [half, half, 0.0])
+        grid = _GRIDS[tank] = ClearanceGrid(tank.distance, [(lo, hi), column])
+    return grid
+
+
+_KERNEL_TANKS: weakref.WeakKeyDictionary[Tank, KernelTank] = weakref.WeakKeyDictionary()
+
+
+def kernel_grid(tank: Tank) -> KernelTank:
+    """The tank's signed distance and :func:`clearance_grid` as the compiled kernels read them.
+
+    Built once per tank (:func:`aftir_rl.envs.ftl.kernel.kernel_tank`).
+    """
+    packed = _KERNEL_TANKS.get(tank)
+    if packed is None:
+        packed = _KERNEL_TANKS[tank] = kernel_tank(tank, clearance_grid(tank))
+    return packed
+
+
+def bay_region(tank: Tank, bay: int | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Corners [cm] of the tank's box, or of bay 1 / 2 (either side of the baffle)."""
+    lo, hi = np.array(tank.box_min, float), np.array(tank.box_max, float)
+    if bay is None:
+        return lo, hi
+    baffle = tank.baffle
+    if baffle is None or bay not in (1, 2):
+        raise ConfigError(
+            f"bay must be None, 1 or 2 (and the tank must have a baffle), got {bay!r}"
+        )
+    i, half = baffle.index, baffle.thickness / 2
+    if bay == 1:
+        hi[i] = baffle.position - half
+    else:
+        lo[i] = baffle.position + half
+    return lo, hi
+
+
+def draw_targets(
+    rngs: Sequence[np.random.Generator],
+    tank: Tank,
+    region: tuple[NDArray[np.float64], NDArray[np.float64]],
+    clearance: float,
+    start: NDArray[np.float64],
+    biased: float = 0.0,
+    weight: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
+    corners: float = 0.0,
+) -> NDArray[np.float64]:
+    """One target per generator: uniform in ``region``, ``clearance`` [cm] from every surface.
+
+    Each generator draws batches of 64 uniform candidates until one is at least ``clearance``
+    from every surface and 20 cm from ``start``; its first such candidate is its target (the
+    tank's :func:`clearance_grid` settles most candidates, the rest are computed exactly, so the
+    verdicts are the exact ones: :func:`aftir_rl.envs.ftl.kernel.usable`). Shape
+    ``(len(rngs), 3)``.
+
+    With ``biased > 0`` each generator first draws whether its target is biased (probability
+    ``biased``); a biased one keeps each free candidate with probability ``weight(candidate)``
+    (points ``(..., 3)`` → values in ``[0, 1]``), so targets are drawn with density proportional to
+    ``weight``. ``biased = 0`` draws nothing more: the targets are the same as without it.
+
+    With ``corners > 0`` each generator then draws whether its target lies in a corner of
+    ``region`` (probability ``corners``): then its candidates are uniform in the cubes of side
+    :data:`CORNER_DEPTH` that start ``clearance`` inward from the region's eight corners (a
+    corner drawn per candidate), where an arm must bend most with walls on three sides. The
+    same checks apply (and a biased generator's weighting, in a corner too).
+    """
+    lo, hi = region
+    start = np.ascontiguousarray(start, dtype=np.float64)
+    packed = kernel_grid(tank)
+    out = np.empty((len(rngs), 3))
+    todo = np.arange(len(rngs))
+    if biased > 0 and weight is None:
+        raise ConfigError("draw_targets: biased > 0 needs a weight function")
+    want = np.array([biased > 0 and rng.random() < biased for rng in rngs], dtype=bool)
+    corner = np.zeros(len(rngs), dtype=bool)
+    if corners > 0:
+        corner[:] = [rng.random() < corners for rng in rngs]
+    for _ in range(200):
+        if not len(todo):
+            return out
+        cand = np.stack(
+            [
+                _corner_candidates(rngs[int(i)], lo, hi, clearance)
+                if corner[i]
+                else rngs[int(i)].uniform(lo, hi, (64, 3))
+                for i in todo
+            ]
+        )
+        # clear of the surfaces and 20 cm from the start: up to each row's first such candidate
+        ok = kernel.usable(cand, float(clearance), start, 20.0, packed, True)
+        if want[todo].any():  # biased rows: every candidate's verdict, then the weights
+            assert weight is not None
+            rows = np.flatnonzero(want[todo])
+            keep = np.stack([rngs[int(todo[r])].random(64) for r in rows]) < weight(cand[rows])
+            ok[rows] = kernel.usable(cand[rows], float(clearance), start, 20.0, packed) & keep
+        found = ok.any(1)
+        rows = np.flatnonzero(found)
+        out[todo[rows]] = cand[rows, ok[rows].argmax(1)]
+        todo = todo[~found]
+    if len(todo):
+        raise TargetError(f"no free point {clearance:g} cm from every surface in the target region")
+    return out
+
+
+#: Side [cm] of the cubes in the corners of a target region that ``corners`` draws from
+#: (:func:`draw_targets`).
+CORNER_DEPTH = 15.0
+
+
+def _corner_candidates(
+    rng: np.random.Generator, lo: NDArray[np.float64], hi: NDArray[np.float64], clearance: float
+) -> NDArray[np.float64]:
+    """64 points ``(64, 3)``, each in the cube ``clearance`` inward from a random corner.
+
+    Kept inside the region (a region narrower than the cubes gets points on its faces, which the
+    clearance check rejects).
+    """
+    high = rng.integers(0, 2, (64, 3)).astype(bool)
+    depth = clearance + rng.uniform(0.0, CORNER_DEPTH, (64, 3))
+    return np.minimum(np.maximum(np.where(high, hi - depth, lo + depth), lo), hi)
+
+
+def raster_distance_table(tank: Tank) -> NDArray[np.int32]:
+    """Shortest 6-connected raster distances ``D[c, g]`` [cells] between every pair of cells.
+
+    The BFS through free cells (:meth:`~aftir_rl.core.tank.Raster.bfs_distances` from every cell at
+    once, by numpy relaxation); an obstructed end cell (a free point can lie in a cell a solid
+    only partly fills) counts as one step from its nearest free neighbour. Unreachable pairs get
+    the largest finite distance plus one. Shape ``(cells, cells)``, flat cell indices. Cached per
+    tank.
+    """
+    cached = _TABLES.get(tank)
+    if cached is not None:
+        return cached
+    raster = tank.raster
+    shape = raster.shape
+    free = ~raster.obstructed
+    n = raster.n_cells
+    big = np.int32(10 * n)
+    dist = np.full((n,) + shape, big, dtype=np.int32)
+    dist.reshape(n, n)[np.arange(n), np.arange(n)] = 0
+    moves = [(axis, step) for axis in range(3) for step in (-1, 1)]
+
+    def neighbour_min(d: NDArray[np.int32]) -> NDArray[np.int32]:
+        best = np.full_like(d, big)
+        for axis, step in moves:
+            src = [slice(None)] * 4
+            dst = [slice(None)] * 4
+            src[axis + 1] = slice(max(0, -step), shape[axis] - max(0, step))
+            dst[axis + 1] = slice(max(0, step), shape[axis] - max(0, -step))
+            best[tuple(dst)] = np.minimum(best[tuple(dst)], d[tuple(src)])
+        return best
+
+    for _ in range(4 * sum(shape)):
+        new = np.where(free[None], np.minimum(dist, neighbour_min(dist) + 1), dist)
+        if np.array_equal(new, dist):
+            break
+        dist = new
+    dist = np.where(free[None], dist, np.minimum(dist, neighbour_min(dist) + 1))
+    flat = dist.reshape(n, n)
+    flat = np.minimum(flat, flat.T)  # obstructed sources: from either end
+    finite = flat[flat < big]
+    flat = np.where(flat < big, flat, (finite.max() + 1) if finite.size else 0).astype(np.int32)
+    flat.setflags(write=False)
+    _TABLES[tank] = flat
+    return flat
+
+
+_TABLES: weakref.WeakKeyDictionary[Tank, NDArray[np.int32]] = weakref.WeakKeyDictionary()
+
+
+class FieldGuide:
+    """Distance-to-go through free space and the way to go, for many targets at once.
+
+    The field of a target is :class:`aftir_rl.planning.ftl.route.GuideField` (the fine grid of half
+    the raster's cell, points that keep the arm's radius from every surface, 26-neighbour edges
+    whose midpoints are free too, so a thin wall is crossed only through its hatch), built for
+    the centre of the target's grid cell the first time a target falls in that cell and kept
+    (at most :data:`MAX_GUIDE_VALUES` values in all, :attr:`capacity` fields; the cache starts
+    again when full, and :attr:`generation` tells holders of ids to ask again).
+    :meth:`__call__` returns, for each tip, the distance-to-go ``P`` [cm] (its cell's or a
+    joined neighbour's distance plus the straight line to that grid point, as ``GuideField``
+    does) and the unit vector towards the joined neighbour that minimises it: the next waypoint.
+    In the target's own cell both are the straight line to the target.
+
+    The fields are built with ``clearance_cost`` (:data:`GUIDE_CLEARANCE_COST`; see
+    ``GuideField``): edges near a surface cost more, so the way passes through the middle of the
+    hatch rather than along its edge, where an arm that cannot bend sharper than ``θ_max`` per
+    section would cut the corner. With each field the next grid point of its shortest way is kept
+    for every grid point, so :meth:`lookahead` follows the way several steps ahead in a few
+    gathers.
+    """
+
+    def __init__(self, tank: Tank, clearance_cost: float = GUIDE_CLEARANCE_COST) -> None:
+        from aftir_rl.planning.ftl.route import NEIGHBOURS, GuideField
+
+        lo, hi = np.asarray(tank.box_min, float), np.asarray(tank.box_max, float)
+        probe = GuideField(tank, (lo + hi) / 2)
+        self.size, self.origin = probe.size, probe.origin
+        self.shape = np.asarray(probe.shape, dtype=np.int64)
+        self.edges, self.neighbours = probe.edges, np.asarray(NEIGHBOURS, dtype=np.int64)
+        self._edges_flat = np.ascontiguousarray(self.edges.reshape(len(self.neighbours), -1))
+        self._origin = np.asarray(self.origin, dtype=np.float64)
+        self._last_cell = self.shape - 1
+        self.clearance_cost = float(clearance_cost)
+        self._tank = tank
+        self._field_cls = GuideField
+        n = int(np.prod(self.shape))
+        self.capacity = max(1, MAX_GUIDE_VALUES // n)
+        #: Incremented whenever the cache starts again: ids from an older generation are void.
+        self.generation = 0
+        #: The table row of each target cell's field (flat cell index; -1: not built).
+        self._row_of = np.full(n, -1, dtype=np.int64)
+        self._count = 0
+        self._table = np.empty((min(64, self.capacity), n), dtype=np.float32)
+        self._next = np.empty((min(64, self.capacity), n), dtype=np.int32)
+
+    def __len__(self) -> int:
+        """The number of fields kept."""
+        return self._count
+
+    def _flat(self, cell: NDArray[np.int64]) -> NDArray[np.int64]:
+        return (cell[..., 0] * self.shape[1] + cell[..., 1]) * self.shape[2] + cell[..., 2]
+
+    def _cell(self, p: NDArray[np.float64]) -> NDArray[np.int64]:
+        c = np.floor((p - self._origin) / self.size).astype(np.int64)
+        return np.minimum(np.maximum(c, 0), self._last_cell)
+
+    def field_ids(self, targets: NDArray[np.float64]) -> NDArray[np.int64]:
+        """Rows of the field table for targets ``(B, 3)``, building the missing fields."""
+        keys = self._flat(self._cell(np.asarray(targets, dtype=np.float64)))
+        out = self._row_of[keys]
+        if (out >= 0).all():  # every field built already: one gather
+            return out
+        for i, key in enumerate(keys.tolist()):
+            row = int(self._row_of[key])
+            if row < 0:
+                if self._count >= self.capacity:
+                    # full: start again; ids given out before are void (see generation)
+                    self._row_of[:] = -1
+                    self._count = 0
+                    self.generation += 1
+                row = self._count
+                if row >= len(self._table):
+                    size = min(2 * len(self._table), self.capacity)
+                    grown = np.empty((size,) + self._table.shape[1:], np.float32)
+                    grown[: len(self._table)] = self._table
+                    self._table = grown
+                    nxt = np.empty((size,) + self._next.shape[1:], np.int32)
+                    nxt[: len(self._next)] = self._next
+                    self._next = nxt
+                cell = np.array(
+                    [
+                        key // (self.shape[1] * self.shape[2]),
+                        key // self.shape[2] % self.shape[1],
+                        key % self.shape[2],
+                    ]
+                )
+                centre = self.origin + (cell + 0.5) * self.size
+                field = self._field_cls(self._tank, centre, None, self.clearance_cost)
+                self._table[row] = field.dist.reshape(-1)
+                self._next[row] = self._descent(field.dist, field.weights)
+                self._row_of[key] = row
+                self._count += 1
+            out[i] = row
+        return out
+
+    def _descent(
+        self, dist: NDArray[np.float64], weights: Sequence[NDArray[np.float64] | float]
+    ) -> NDArray[np.int32]:
+        """Per grid point (flat), the joined neighbour the shortest way goes to next (flat).
+
+        A point where no neighbour lowers the distance-to-go (the target's, an unreachable one)
+        points to itself.
+        """
+        from aftir_rl.planning.ftl.guide import shifted
+
+        shape = tuple(int(v) for v in self.shape)
+        flat = np.arange(int(np.prod(shape))).reshape(shape)
+        best, nxt = np.full_like(dist, np.inf), flat.copy()
+        for e, (d, w) in enumerate(zip(self.neighbours, weights)):
+            via = np.where(self.edges[e], shifted(dist, -d) + w, np.inf)
+            better = via < best
+            best = np.where(better, via, best)
+            nxt = np.where(better, flat + int(self._flat(d)), nxt)
+        # a seed point (the target's) is nearer than any way through a neighbour
+        nxt = np.where(dist < best - 1e-9, flat, nxt)
+        return nxt.reshape(-1).astype(np.int32)
+
+    def lookahead(
+        self,
+        p: NDArray[np.float64],
+        g: NDArray[np.float64],
+        ids: NDArray[np.int64],
+        hops: Sequence[int] = LOOKAHEAD_HOPS,
+    ) -> NDArray[np.float64]:
+        """Points ``(B, len(hops), 3)`` [cm] of the shortest ways from the tips ``p`` ahead.
+
+        Each is where the way reaches after that many ``hops`` (increasing; grid steps of 10-17
+        cm from the tip's grid point). A way that reaches the target's grid point ends at the
+        target ``g`` itself.
+        """
+        out = np.empty((len(p), len(hops), 3))
+        kernel.lookahead(
+            np.ascontiguousarray(p, dtype=np.float64),
+            np.ascontiguousarray(g, dtype=np.float64),
+            np.asarray(ids, dtype=np.int64),
+            self._next,
+            np.asarray(hops, dtype=np.int64),
+            self._origin,
+            float(self.size),
+            self.shape,
+            out,
+        )
+        return out
+
+    def __call__(
+        self, p: NDArray[np.float64], g: NDArray[np.float64], ids: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Distance-to-go and way to go of tips ``p`` to targets ``g`` (fields: rows ``ids``).
+
+        Returns ``P`` ``(B,)`` [cm] and the unit way ``(B, 3)``.
+        """
+        to_go, way = np.empty(len(p)), np.empty((len(p), 3))
+        kernel.guide_query(
+            np.ascontiguousarray(p, dtype=np.float64),
+            np.ascontiguousarray(g, dtype=np.float64),
+            np.asarray(ids, dtype=np.int64),
+            self._table,
+            self._edges_flat,
+            self.neighbours,
+            self._origin,
+            float(self.size),
+            self.shape,
+            to_go,
+            way,
+        )
+        return to_go, way
+
+
+_GUIDES: weakref.WeakKeyDictionary[Tank, FieldGuide] = weakref.WeakKeyDictionary()
+
+
+def field_guide(tank: Tank) -> FieldGuide:
+    """The :class:`FieldGuide` of a tank, shared by every env of it (its fields are kept)."""
+    guide = _GUIDES.get(tank)
+    if guide is None:
+        guide = _GUIDES[tank] = FieldGuide(tank)
+    return guide

@@ -1,0 +1,715 @@
+"""Compiled kernels (numba) of ``AFTIR-ArmFTL-v0``'s step: one loop per arm, no temporaries.
+
+The numpy pipeline of :class:`~aftir_rl.envs.ftl.state.FTLBatch` (shift-and-copy, forward
+kinematics of every backbone sample, the grid-pruned exact clearance, the rays, the guide's
+queries and the observation) made a few hundred small array operations per step, whatever the
+batch: about 650 µs for one arm. These kernels do the same per arm in one compiled loop, so a
+step costs a few µs per arm and almost nothing per call. They are written against the package's
+own definitions and tested equal to them (``tests/test_ftl_kernel.py``):
+
+- :func:`refresh` is :func:`~aftir_rl.envs.ftl.state.ftl_kappa_batch`,
+  :func:`~aftir_rl.planning.ftl.model.kappa_to_angles`, :func:`~aftir_rl.core.robot.body_points` and
+  :meth:`ClearanceGrid.row_min <aftir_rl.envs.ftl.fields.ClearanceGrid.row_min>` /
+  :meth:`~aftir_rl.envs.ftl.fields.ClearanceGrid.approx` of the tank's signed distance
+  (:class:`~aftir_rl.core.tank.distance.TankDistance`: boxes, axis-aligned cylinders, spheres, and
+  the walls with the panel's opening and guide tube), compiled from :class:`KernelTank`'s
+  stacked parameters;
+- :func:`guide_query` and :func:`lookahead` are :class:`~aftir_rl.envs.ftl.fields.FieldGuide`'s
+  queries; :func:`steering_frames` and :func:`observation` assemble the observation vector.
+
+The kernels are compiled on first use and cached next to this file (``cache=True``; numba falls
+back to its user cache directory where the package's folder is read-only).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from aftir_rl.core.robot import SMALL
+
+if TYPE_CHECKING:
+    from aftir_rl.core.tank import Tank
+    from aftir_rl.envs.ftl.fields import ClearanceGrid
+
+__all__ = [
+    "KernelTank",
+    "kernel_tank",
+    "sdf",
+    "refresh",
+    "guide_query",
+    "lookahead",
+    "steering_frames",
+    "observation",
+    "guide_columns",
+    "advance",
+    "goal_reward",
+    "fk_points",
+    "usable",
+]
+
+#: Reward of a success and penalty of a contact.
+SUCCESS_REWARD = 10.0
+CONTACT_PENALTY = 10.0
+#: Progress reward per cm of distance-to-go.
+PROGRESS_PER_CM = 0.1
+#: Every observation column is clipped to ``[-OBS_LIMIT, OBS_LIMIT]`` (the observation space).
+OBS_LIMIT = 10.0
+
+
+class KernelTank(NamedTuple):
+    """A tank's signed distance and clearance grids as the arrays the kernels read.
+
+    ``boxes (S, 6)``: centre and half-size; ``cylinders (S, 6)``: the axis's two coordinates
+    across, radius, middle and half-length along, and the axis (0, 1, 2); ``spheres (S, 4)``;
+    ``walls (11,)``: whether the tank has walls, its box's corners, the panel's centre (x, y)
+    and radius, and the height below which solids are skipped (as
+    :class:`~aftir_rl.core.tank.distance.TankDistance`). The grids: per grid its corner ``lo (G,
+    3)``,
+    spacing ``(G,)``, shape ``(G, 3)`` and offset ``(G,)`` into the concatenated values; ``slack``
+    bounds a value's distance from the exact one.
+    """
+
+    boxes: NDArray[np.float64]
+    cylinders: NDArray[np.float64]
+    spheres: NDArray[np.float64]
+    walls: NDArray[np.float64]
+    grid_lo: NDArray[np.float64]
+    grid_spacing: NDArray[np.float64]
+    grid_shape: NDArray[np.int64]
+    grid_offset: NDArray[np.int64]
+    grid_values: NDArray[np.float64]
+    slack: float
+
+
+def kernel_tank(tank: Tank, grid: ClearanceGrid) -> KernelTank:
+    """The :class:`KernelTank` of a tank and its clearance grid."""
+    groups: dict[str, list[tuple[float, ...]]] = {"box": [], "cylinder": [], "sphere": []}
+    for solid in tank.solids:
+        params = tuple(float(v) for v in solid.distance_params)
+        if solid.kind == "cylinder":
+            params += (float(solid.stack_key),)
+        groups[solid.kind].append(params)
+
+    def stack(rows: list[tuple[float, ...]], width: int) -> NDArray[np.float64]:
+        return np.array(rows, dtype=np.float64).reshape(-1, width)
+
+    lowest = min((float(s.aabb()[0][2]) for s in tank.solids), default=math.inf)
+    c, r = tank.panel.center, float(tank.panel.radius)
+    walls = np.array(
+        [float(tank.walls), *tank.box_min, *tank.box_max, c[0], c[1], r,
+         min(float(tank.box_min[2]), lowest) - r],
+        dtype=np.float64,
+    )  # fmt: skip
+    offsets, total = [], 0
+    for _, _, _, values in grid.grids:
+        offsets.append(total)
+        total += len(values)
+    return KernelTank(
+        stack(groups["box"], 6),
+        stack(groups["cylinder"], 6),
+        stack(groups["sphere"], 4),
+        walls,
+        np.array([lo for lo, _, _, _ in grid.grids], dtype=np.float64).reshape(-1, 3),
+        np.array([g for _, g, _, _ in grid.grids], dtype=np.float64),
+        np.array([shape for _, _, shape, _ in grid.grids], dtype=np.int64).reshape(-1, 3),
+        np.array(offsets, dtype=np.int64),
+        np.concatenate([values for _, _, _, values in grid.grids]).astype(np.float64),
+        float(grid.slack),
+    )
+
+
+@njit(cache=True)
+def sdf(
+    x: float,
+    y: float,
+    z: float,
+    boxes: NDArray[np.float64],
+    cylinders: NDArray[np.float64],
+    spheres: NDArray[np.float64],
+    walls: NDArray[np.float64],
+) -> float:
+    """Signed distance [cm] of one point to the tank (:class:`TankDistance`'s, compiled)."""
+    best = math.inf
+    if walls[0] == 0.0 or z > walls[10]:
+        for i in range(boxes.shape[0]):
+            qx = abs(x - boxes[i, 0]) - boxes[i, 3]
+            qy = abs(y - boxes[i, 1]) - boxes[i, 4]
+            qz = abs(z - boxes[i, 2]) - boxes[i, 5]
+            ox, oy, oz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
+            d = math.sqrt(ox * ox + oy * oy + oz * oz) + min(max(max(qx, qy), qz), 0.0)
+            best = min(best, d)
+        for i in range(cylinders.shape[0]):
+            axis = int(cylinders[i, 5])
+            if axis == 0:
+                along, c1, c2 = x, y, z
+            elif axis == 1:
+                along, c1, c2 = y, x, z
+            else:
+                along, c1, c2 = z, x, y
+            radial = math.hypot(c1 - cylinders[i, 0], c2 - cylinders[i, 1]) - cylinders[i, 2]
+            axial = abs(along - cylinders[i, 3]) - cylinders[i, 4]
+            d = math.hypot(max(radial, 0.0), max(axial, 0.0)) + min(max(radial, axial), 0.0)
+            best = min(best, d)
+        for i in range(spheres.shape[0]):
+            dx, dy, dz = x - spheres[i, 0], y - spheres[i, 1], z - spheres[i, 2]
+            best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3])
+    if walls[0] != 0.0:
+        side = min(min(x - walls[1], walls[4] - x), min(y - walls[2], walls[5] - y))
+        radial = math.hypot(x - walls[7], y - walls[8])
+        height = z - walls[3]
+        if radial > walls[9]:
+            floor = height
+        elif height >= 0:
+            floor = math.hypot(walls[9] - radial, height)
+        else:
+            floor = walls[9] - radial
+        best = min(best, min(min(side, walls[6] - z), floor))
+    return best
+
+
+@njit(cache=True)
+def _grid_value(
+    x: float,
+    y: float,
+    z: float,
+    lo: NDArray[np.float64],
+    spacing: NDArray[np.float64],
+    shape: NDArray[np.int64],
+    offset: NDArray[np.int64],
+    values: NDArray[np.float64],
+) -> float:
+    """The nearest node's value of the first grid holding the point; NaN outside every grid."""
+    for gi in range(lo.shape[0]):
+        g = spacing[gi]
+        ix = int(np.rint((x - lo[gi, 0]) / g))
+        iy = int(np.rint((y - lo[gi, 1]) / g))
+        iz = int(np.rint((z - lo[gi, 2]) / g))
+        if 0 <= ix < shape[gi, 0] and 0 <= iy < shape[gi, 1] and 0 <= iz < shape[gi, 2]:
+            return values[offset[gi] + (ix * shape[gi, 1] + iy) * shape[gi, 2] + iz]
+    return math.nan
+
+
+@njit(cache=True)
+def _rotate(r: NDArray[np.float64], theta: float, cp: float, sp: float) -> None:
+    """``r ← r @ E``, ``E`` the rotation of an arc bent by ``θ`` in the plane at ``φ``."""
+    ct, st = math.cos(theta), math.sin(theta)
+    off = cp * sp * (ct - 1.0)
+    e00, e01, e02 = cp * cp * ct + sp * sp, off, cp * st
+    e10, e11, e12 = off, sp * sp * ct + cp * cp, sp * st
+    e20, e21, e22 = -cp * st, -sp * st, ct
+    for i in range(3):
+        a, b, c = r[i, 0], r[i, 1], r[i, 2]
+        r[i, 0] = a * e00 + b * e10 + c * e20
+        r[i, 1] = a * e01 + b * e11 + c * e21
+        r[i, 2] = a * e02 + b * e12 + c * e22
+
+
+@njit(cache=True)
+def _fk_row(
+    dis: float,
+    theta: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    section_length: float,
+    samples: int,
+    rot: NDArray[np.float64],
+    points: NDArray[np.float64],
+) -> None:
+    """:func:`~aftir_rl.core.robot.body_points` of one posture into ``points (N·K + 1, 3)``.
+
+    ``rot (3, 3)`` is scratch space.
+    """
+    l = section_length
+    points[0, 0], points[0, 1], points[0, 2] = 0.0, 0.0, dis
+    ox, oy, oz = 0.0, 0.0, dis
+    rot[:] = 0.0
+    rot[0, 0], rot[1, 1], rot[2, 2] = 1.0, 1.0, 1.0
+    for i in range(theta.shape[0]):
+        th, cp, sp = theta[i], math.cos(phi[i]), math.sin(phi[i])
+        # sample j bends by h_j = j·h₁ (half its angle): sin, cos by the addition formulas
+        h1 = 0.5 * th / samples
+        s1, c1 = math.sin(h1), math.cos(h1)
+        sj, cj = 0.0, 1.0
+        for j in range(1, samples + 1):
+            sj, cj = sj * c1 + cj * s1, cj * c1 - sj * s1
+            h = h1 * j
+            sinc_h = 1.0 - h * h / 6.0 if abs(h) < 0.5 * SMALL else sj / h
+            arc = l * (j / samples)
+            radial = arc * (h * sinc_h * sinc_h)
+            lx, ly, lz = radial * cp, radial * sp, arc * (sinc_h * cj)
+            row = 1 + i * samples + j - 1
+            points[row, 0] = rot[0, 0] * lx + rot[0, 1] * ly + rot[0, 2] * lz + ox
+            points[row, 1] = rot[1, 0] * lx + rot[1, 1] * ly + rot[1, 2] * lz + oy
+            points[row, 2] = rot[2, 0] * lx + rot[2, 1] * ly + rot[2, 2] * lz + oz
+        end = i * samples + samples
+        ox, oy, oz = points[end, 0], points[end, 1], points[end, 2]
+        _rotate(rot, th, cp, sp)
+
+
+@njit(cache=True)
+def fk_points(
+    dis: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    section_length: float,
+    samples: int,
+    points: NDArray[np.float64],
+) -> None:
+    """:func:`~aftir_rl.core.robot.body_points` of many postures, into ``points (B, N·K + 1, 3)``.
+
+    ``dis (B,)``, ``theta`` and ``phi`` ``(B, N)``.
+    """
+    rot = np.empty((3, 3))
+    for b in range(theta.shape[0]):
+        _fk_row(dis[b], theta[b], phi[b], section_length, samples, rot, points[b])
+
+
+@njit(cache=True)
+def refresh(
+    rows: NDArray[np.int64],
+    kappa: NDArray[np.float64],
+    k: NDArray[np.int64],
+    s: NDArray[np.float64],
+    section_length: float,
+    samples: int,
+    radius: float,
+    deep: float,
+    ray_axes: NDArray[np.float64],
+    ray_distances: NDArray[np.float64],
+    tank: KernelTank,
+    theta: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    points: NDArray[np.float64],
+    heading: NDArray[np.float64],
+    body_clearance: NDArray[np.float64],
+    ray_clearance: NDArray[np.float64],
+) -> None:
+    """Postures, backbone samples, headings and clearances of the arms ``rows``, in place.
+
+    Per row ``b``: ``θ, φ (N,)`` of the FTL posture of route ``kappa[b, :k[b] + 1]`` with the
+    tip at arc length ``s[b]``; ``points (N·K + 1, 3)`` from the base at ``(0, 0, s − N·l)``;
+    the unit heading of the last sample step; the surface clearance ``min(distance) − radius``
+    over the samples above ``deep`` (and the base), exact (grid-pruned); the clearances at
+    ``ray_distances`` along the heading and ``ray_axes`` (grid values, exact outside).
+    """
+    n = kappa.shape[1]
+    boxes, cylinders, spheres, walls = tank.boxes, tank.cylinders, tank.spheres, tank.walls
+    lo, spacing, shape = tank.grid_lo, tank.grid_spacing, tank.grid_shape
+    offset, values, slack = tank.grid_offset, tank.grid_values, tank.slack
+    l = section_length
+    n_points = n * samples + 1
+    bound = np.empty(n_points)
+    rot = np.empty((3, 3))
+    for b in rows:
+        # shift-and-copy: the route's κ interpolated at the sections' arc lengths
+        m = k[b] + 1
+        u = min(max(s[b] / l, 0.0), float(m))
+        kk = min(int(math.floor(u)), m)
+        f = u - kk
+        for j in range(n):
+            q0, q1 = 0.0, 0.0  # (1 − f)·κ(j) + f·κ(j + 1), straight before the route
+            for side in range(2):
+                idx = kk + j - n + side
+                if idx >= 0:
+                    src = min(max(min(idx, m - 1), 0), n - 1)
+                    w = f if side else 1.0 - f
+                    q0 += w * kappa[b, src, 0]
+                    q1 += w * kappa[b, src, 1]
+            th = math.hypot(q0, q1)
+            theta[b, j] = th
+            phi[b, j] = math.atan2(q1, q0) if th > 1e-12 else 0.0
+        # forward kinematics of every sample
+        _fk_row(s[b] - n * l, theta[b], phi[b], l, samples, rot, points[b])
+        last, before = n_points - 1, n_points - 2
+        tx, ty, tz = points[b, last, 0], points[b, last, 1], points[b, last, 2]
+        hx, hy, hz = tx - points[b, before, 0], ty - points[b, before, 1], tz - points[b, before, 2]
+        norm = max(math.sqrt(hx * hx + hy * hy + hz * hz), 1e-12)
+        heading[b, 0], heading[b, 1], heading[b, 2] = hx / norm, hy / norm, hz / norm
+        # the exact minimum over the used samples: only those whose bound can hold it
+        upper = math.inf
+        for p in range(n_points):
+            if p > 0 and points[b, p, 2] <= deep:
+                bound[p] = math.inf
+                continue
+            v = _grid_value(points[b, p, 0], points[b, p, 1], points[b, p, 2], lo, spacing,
+                            shape, offset, values)  # fmt: skip
+            bound[p] = v
+            if not math.isnan(v):
+                upper = min(upper, v + slack)
+        best = math.inf
+        for p in range(n_points):
+            v = bound[p]
+            if v == math.inf:
+                continue
+            if math.isnan(v) or v - slack <= upper:
+                d = sdf(points[b, p, 0], points[b, p, 1], points[b, p, 2], boxes, cylinders,
+                        spheres, walls)  # fmt: skip
+                best = min(best, d)
+        body_clearance[b] = best - radius
+        # the rays: the heading, then the fixed axes
+        n_d = ray_distances.shape[0]
+        for a in range(ray_axes.shape[0] + 1):
+            if a == 0:
+                ax, ay, az = heading[b, 0], heading[b, 1], heading[b, 2]
+            else:
+                ax, ay, az = ray_axes[a - 1, 0], ray_axes[a - 1, 1], ray_axes[a - 1, 2]
+            for di in range(n_d):
+                dd = ray_distances[di]
+                px, py, pz = tx + ax * dd, ty + ay * dd, tz + az * dd
+                v = _grid_value(px, py, pz, lo, spacing, shape, offset, values)
+                if math.isnan(v):
+                    v = sdf(px, py, pz, boxes, cylinders, spheres, walls)
+                ray_clearance[b, a * n_d + di] = v
+
+
+@njit(cache=True)
+def _cell_of(
+    px: float,
+    py: float,
+    pz: float,
+    origin: NDArray[np.float64],
+    size: float,
+    shape: NDArray[np.int64],
+) -> tuple[int, int, int]:
+    c0 = min(max(int(math.floor((px - origin[0]) / size)), 0), shape[0] - 1)
+    c1 = min(max(int(math.floor((py - origin[1]) / size)), 0), shape[1] - 1)
+    c2 = min(max(int(math.floor((pz - origin[2]) / size)), 0), shape[2] - 1)
+    return c0, c1, c2
+
+
+@njit(cache=True)
+def guide_query(
+    p: NDArray[np.float64],
+    g: NDArray[np.float64],
+    ids: NDArray[np.int64],
+    table: NDArray[np.float32],
+    edges: NDArray[np.bool_],
+    neighbours: NDArray[np.int64],
+    origin: NDArray[np.float64],
+    size: float,
+    shape: NDArray[np.int64],
+    to_go: NDArray[np.float64],
+    way: NDArray[np.float64],
+) -> None:
+    """:meth:`FieldGuide.__call__ <aftir_rl.envs.ftl.fields.FieldGuide.__call__>`, in place."""
+    s1, s2 = shape[1], shape[2]
+    for b in range(p.shape[0]):
+        px, py, pz = p[b, 0], p[b, 1], p[b, 2]
+        c0, c1, c2 = _cell_of(px, py, pz, origin, size, shape)
+        flat = (c0 * s1 + c1) * s2 + c2
+        row = ids[b]
+        dx = px - (origin[0] + (c0 + 0.5) * size)
+        dy = py - (origin[1] + (c1 + 0.5) * size)
+        dz = pz - (origin[2] + (c2 + 0.5) * size)
+        value = float(table[row, flat]) + math.sqrt(dx * dx + dy * dy + dz * dz)
+        best, wx, wy, wz = math.inf, 0.0, 0.0, 0.0
+        first = True
+        for e in range(neighbours.shape[0]):
+            n0, n1, n2 = c0 + neighbours[e, 0], c1 + neighbours[e, 1], c2 + neighbours[e, 2]
+            ok = 0 <= n0 < shape[0] and 0 <= n1 < shape[1] and 0 <= n2 < s2
+            if not ok:
+                n0, n1, n2 = 0, 0, 0
+            ok = ok and edges[e, flat]
+            sx = origin[0] + (n0 + 0.5) * size - px
+            sy = origin[1] + (n1 + 0.5) * size - py
+            sz = origin[2] + (n2 + 0.5) * size - pz
+            v = math.inf
+            if ok:
+                v = float(table[row, (n0 * s1 + n1) * s2 + n2]) + math.sqrt(
+                    sx * sx + sy * sy + sz * sz
+                )
+            if first or v < best:  # argmin: the first of equals
+                best, wx, wy, wz = v, sx, sy, sz
+                first = False
+        value = min(value, best)
+        g0, g1, g2 = _cell_of(g[b, 0], g[b, 1], g[b, 2], origin, size, shape)
+        if (c0 == g0 and c1 == g1 and c2 == g2) or not math.isfinite(best):
+            wx, wy, wz = g[b, 0] - px, g[b, 1] - py, g[b, 2] - pz
+            value = math.sqrt(wx * wx + wy * wy + wz * wz)
+        to_go[b] = value
+        norm = math.sqrt(wx * wx + wy * wy + wz * wz)
+        if norm > 1e-9:
+            way[b, 0], way[b, 1], way[b, 2] = wx / norm, wy / norm, wz / norm
+        else:
+            way[b, 0], way[b, 1], way[b, 2] = 0.0, 0.0, 0.0
+
+
+@njit(cache=True)
+def lookahead(
+    p: NDArray[np.float64],
+    g: NDArray[np.float64],
+    ids: NDArray[np.int64],
+    nxt: NDArray[np.int32],
+    hops: NDArray[np.int64],
+    origin: NDArray[np.float64],
+    size: float,
+    shape: NDArray[np.int64],
+    out: NDArray[np.float64],
+) -> None:
+    """:meth:`FieldGuide.lookahead <aftir_rl.envs.ftl.fields.FieldGuide.lookahead>`, in place."""
+    s1, s2 = shape[1], shape[2]
+    for b in range(p.shape[0]):
+        c0, c1, c2 = _cell_of(p[b, 0], p[b, 1], p[b, 2], origin, size, shape)
+        cell = (c0 * s1 + c1) * s2 + c2
+        g0, g1, g2 = _cell_of(g[b, 0], g[b, 1], g[b, 2], origin, size, shape)
+        home = (g0 * s1 + g1) * s2 + g2
+        done = 0
+        for j in range(hops.shape[0]):
+            for _ in range(hops[j] - done):
+                cell = int(nxt[ids[b], cell])
+            done = hops[j]
+            if cell == home:
+                out[b, j, 0], out[b, j, 1], out[b, j, 2] = g[b, 0], g[b, 1], g[b, 2]
+            else:
+                a0, rem = cell // (s1 * s2), cell % (s1 * s2)
+                out[b, j, 0] = origin[0] + (a0 + 0.5) * size
+                out[b, j, 1] = origin[1] + (rem // s2 + 0.5) * size
+                out[b, j, 2] = origin[2] + (rem % s2 + 0.5) * size
+
+
+@njit(cache=True)
+def steering_frames(
+    kappa: NDArray[np.float64], k: NDArray[np.int64], out: NDArray[np.float64]
+) -> None:
+    """Rotations ``(B, 3, 3)`` of the frames the steered sections bend in, in place.
+
+    The product of the end rotations of the route's frozen sections ``0..k−1`` (arc length
+    irrelevant: a rotation depends on ``θ, φ`` only).
+    """
+    for b in range(kappa.shape[0]):
+        r = out[b]
+        r[:] = 0.0
+        r[0, 0], r[1, 1], r[2, 2] = 1.0, 1.0, 1.0
+        for j in range(k[b]):
+            th = math.hypot(kappa[b, j, 0], kappa[b, j, 1])
+            ph = math.atan2(kappa[b, j, 1], kappa[b, j, 0]) if th > 1e-12 else 0.0
+            _rotate(r, th, math.cos(ph), math.sin(ph))
+
+
+@njit(cache=True)
+def observation(
+    rows: NDArray[np.int64],
+    kappa: NDArray[np.float64],
+    k: NDArray[np.int64],
+    s: NDArray[np.float64],
+    theta: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    points: NDArray[np.float64],
+    heading: NDArray[np.float64],
+    body_clearance: NDArray[np.float64],
+    ray_clearance: NDArray[np.float64],
+    section_length: float,
+    samples: int,
+    theta_max: float,
+    clear_scale: float,
+    out: NDArray[np.float32],
+) -> None:
+    """The goal-free part of the observation vectors of ``rows`` into ``out``'s rows, in place.
+
+    Columns ``0 .. 35 + 3N`` (:meth:`FTLBatch.observation`); the guide's columns after them
+    are filled by the caller.
+    """
+    n = theta.shape[1]
+    s_max = n * section_length
+    tip = points.shape[1] - 1
+    for r in range(rows.shape[0]):
+        b = rows[r]
+        o = out[r]
+        o[0] = (s[b] - s_max) / s_max
+        o[1] = k[b] / n
+        o[2] = kappa[b, k[b], 0] / theta_max
+        o[3] = kappa[b, k[b], 1] / theta_max
+        c = 4
+        for j in range(n):
+            o[c + j] = theta[b, j] / theta_max
+            o[c + n + j] = math.sin(phi[b, j])
+            o[c + 2 * n + j] = math.cos(phi[b, j])
+        c += 3 * n
+        for i in range(3):
+            o[c + i] = points[b, tip, i] / 100.0
+            o[c + 3 + i] = heading[b, i]
+        c += 6
+        o[c] = min(max(body_clearance[b] / 10.0, -1.0), 1.0)
+        c += 1
+        for r in range(ray_clearance.shape[1]):
+            o[c + r] = min(max(ray_clearance[b, r] / clear_scale, -1.0), 1.0)
+        c += ray_clearance.shape[1]
+        for i in range(3):  # heights of the last three section ends (the base's below them)
+            o[c + i] = points[b, max(n - 2 + i, 0) * samples, 2] / 100.0
+        for i in range(c + 3):
+            o[i] = min(max(o[i], -OBS_LIMIT), OBS_LIMIT)
+
+
+@njit(cache=True)
+def guide_columns(
+    frames: NDArray[np.float64],
+    to_go: NDArray[np.float64],
+    way: NDArray[np.float64],
+    target: NDArray[np.float64],
+    tip: NDArray[np.float64],
+    heading: NDArray[np.float64],
+    ahead: NDArray[np.float64],
+    out: NDArray[np.float32],
+    start: int,
+) -> None:
+    """The guide's columns of the observation from column ``start``, in place.
+
+    ``min(to_go, 1000)/100``, then in the steering frame (``Fᵀ v``): the way, ``(target −
+    tip)/100``, the heading and the unit directions to the ``ahead`` points ``(B, H, 3)``.
+    """
+    for b in range(to_go.shape[0]):
+        o = out[b]
+        f = frames[b]
+        o[start] = min(to_go[b], 1000.0) / 100.0
+        c = start + 1
+        for v in range(3 + ahead.shape[1]):
+            if v == 0:
+                x, y, z = way[b, 0], way[b, 1], way[b, 2]
+            elif v == 1:
+                x = (target[b, 0] - tip[b, 0]) / 100.0
+                y = (target[b, 1] - tip[b, 1]) / 100.0
+                z = (target[b, 2] - tip[b, 2]) / 100.0
+            elif v == 2:
+                x, y, z = heading[b, 0], heading[b, 1], heading[b, 2]
+            else:
+                h = v - 3
+                x = ahead[b, h, 0] - tip[b, 0]
+                y = ahead[b, h, 1] - tip[b, 1]
+                z = ahead[b, h, 2] - tip[b, 2]
+                norm = max(math.sqrt(x * x + y * y + z * z), 1e-9)
+                x, y, z = x / norm, y / norm, z / norm
+            for i in range(3):
+                o[c + i] = min(max(f[0, i] * x + f[1, i] * y + f[2, i] * z, -OBS_LIMIT), OBS_LIMIT)
+            c += 3
+
+
+@njit(cache=True)
+def advance(
+    action: NDArray[np.float64],
+    kappa: NDArray[np.float64],
+    k: NDArray[np.int64],
+    s: NDArray[np.float64],
+    steer_target: bool,
+    kappa_step: float,
+    push_step: float,
+    theta_max: float,
+    section_length: float,
+) -> None:
+    """Steer and push every arm by its action ``(B, 3)`` in ``[-1, 1]``, in place.
+
+    The steered ``κ`` (the route's last) changes by ``action[:2]·kappa_step`` or, with
+    ``steer_target``, approaches ``action[:2]·θ_max`` by at most ``kappa_step`` per component,
+    its norm kept within ``θ_max``; the tip's arc length ``s`` changes by
+    ``action[2]·push_step`` within ``[0, N·l]``. A tip that enters a new section starts it with
+    the steered ``κ`` (``push_step ≤ l``: at most one per step).
+    """
+    n = kappa.shape[1]
+    s_max = n * section_length
+    for b in range(kappa.shape[0]):
+        kb = k[b]
+        l0, l1 = kappa[b, kb, 0], kappa[b, kb, 1]
+        if steer_target:
+            w0, w1 = action[b, 0] * theta_max, action[b, 1] * theta_max
+            norm = math.hypot(w0, w1)
+            if norm > theta_max:
+                scale = theta_max / max(norm, 1e-12)
+                w0, w1 = w0 * scale, w1 * scale
+            q0 = l0 + min(max(w0 - l0, -kappa_step), kappa_step)
+            q1 = l1 + min(max(w1 - l1, -kappa_step), kappa_step)
+        else:
+            q0, q1 = l0 + action[b, 0] * kappa_step, l1 + action[b, 1] * kappa_step
+            norm = math.hypot(q0, q1)
+            if norm > theta_max:
+                scale = theta_max / max(norm, 1e-12)
+                q0, q1 = q0 * scale, q1 * scale
+        kappa[b, kb, 0], kappa[b, kb, 1] = q0, q1
+        s[b] = min(max(s[b] + action[b, 2] * push_step, 0.0), s_max)
+        new_k = min(int(math.floor(s[b] / section_length)), n - 1)
+        if new_k > kb:
+            kappa[b, new_k, 0], kappa[b, new_k, 1] = q0, q1
+        k[b] = new_k
+
+
+@njit(cache=True)
+def goal_reward(
+    a: NDArray[np.float64],
+    g: NDArray[np.float64],
+    prev: NDArray[np.float64],
+    contact: NDArray[np.bool_],
+    success_tolerance: float,
+    step_cost: float,
+    reward: NDArray[np.float64],
+    distance: NDArray[np.float64],
+) -> None:
+    """Rewards without the shaping term and tip-to-target distances, in place.
+
+    ``PROGRESS_PER_CM·(|prev − g| − |a − g|)``, ``+SUCCESS_REWARD`` within ``success_tolerance``
+    without contact, ``−CONTACT_PENALTY`` on contact, ``−step_cost``.
+    """
+    for r in range(a.shape[0]):
+        dx, dy, dz = a[r, 0] - g[r, 0], a[r, 1] - g[r, 1], a[r, 2] - g[r, 2]
+        d = math.sqrt(dx * dx + dy * dy + dz * dz)
+        px, py, pz = prev[r, 0] - g[r, 0], prev[r, 1] - g[r, 1], prev[r, 2] - g[r, 2]
+        value = PROGRESS_PER_CM * (math.sqrt(px * px + py * py + pz * pz) - d)
+        if contact[r]:
+            value -= CONTACT_PENALTY
+        elif d < success_tolerance:
+            value += SUCCESS_REWARD
+        reward[r] = value - step_cost
+        distance[r] = d
+
+
+@njit(cache=True)
+def _usable(
+    x: float,
+    y: float,
+    z: float,
+    clearance: float,
+    start: NDArray[np.float64],
+    far: float,
+    tank: KernelTank,
+) -> bool:
+    """Whether a point is at least ``clearance`` from the surfaces and ``√far`` from ``start``.
+
+    The exact verdict: the grid's value settles a point when it is more than ``slack`` from
+    ``clearance``, the exact signed distance the others.
+    """
+    dx, dy, dz = x - start[0], y - start[1], z - start[2]
+    if dx * dx + dy * dy + dz * dz < far:
+        return False
+    v = _grid_value(x, y, z, tank.grid_lo, tank.grid_spacing, tank.grid_shape,
+                    tank.grid_offset, tank.grid_values)  # fmt: skip
+    if math.isnan(v) or abs(v - clearance) <= tank.slack:
+        v = sdf(x, y, z, tank.boxes, tank.cylinders, tank.spheres, tank.walls)
+    return v >= clearance
+
+
+@njit(cache=True)
+def usable(
+    points: NDArray[np.float64],
+    clearance: float,
+    start: NDArray[np.float64],
+    min_distance: float,
+    tank: KernelTank,
+    first_only: bool = False,
+) -> NDArray[np.bool_]:
+    """Whether each candidate ``(R, C, 3)`` is usable as a target (exact verdicts).
+
+    At least ``clearance`` [cm] from the tank's surfaces and ``min_distance`` [cm] from
+    ``start`` (:func:`_usable`). With ``first_only`` each row stops at its first usable
+    candidate (the rest of the row reads False), so a row whose first candidate is usable
+    costs one check.
+    """
+    out = np.zeros(points.shape[:2], dtype=np.bool_)
+    far = min_distance * min_distance
+    for r in range(points.shape[0]):
+        for c in range(points.shape[1]):
+            p = points[r, c]
+            out[r, c] = _usable(p[0], p[1], p[2], clearance, start, far, tank)
+            if first_only and out[r, c]:
+                break
+    return out

@@ -1,0 +1,100 @@
+"""The ids of this package's environments, their registration, and checking an id read from a file.
+
+Registration uses string entry points, so registering imports nothing but Gymnasium: an env's
+module (numba, python-fcl) loads at its first ``gym.make``. An id read from a file must be one
+of :data:`ENV_IDS` (bare or prefixed ``aftir_rl:``); Gymnasium would import the module before
+the colon of any other, so nothing else is accepted (:func:`registered_env_id`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+import gymnasium as gym
+
+from aftir_rl.core.config import shorten
+from aftir_rl.core.errors import ConfigError
+
+__all__ = ["ENV_IDS", "REACH_REGION", "register_envs", "registered_env_id"]
+
+#: Every environment id registered by :func:`register_envs`.
+ENV_IDS: tuple[str, ...] = (
+    "AFTIR-Tank-v0",
+    "AFTIR-TankGoal-v0",
+    "AFTIR-Arm-v0",
+    "AFTIR-ArmReach-v0",
+    "AFTIR-ArmFull-v0",
+    "AFTIR-ArmFTL-v0",
+)
+
+#: Bay-1 reach task: targets in front of the panel that 2 sections reach, drawn per episode.
+REACH_REGION = ((-40.0, -40.0, 20.0), (60.0, 40.0, 90.0))
+
+
+def register_envs() -> None:
+    """Register the aftir_rl environments with Gymnasium (idempotent).
+
+    Runs at ``import aftir_rl``; Gymnasium 1.x no longer reads pyproject entry points, and
+    ``gym.make("aftir_rl:AFTIR-Tank-v0")`` imports ``aftir_rl`` first, which is what subprocess
+    vector envs rely on.
+    """
+    if "AFTIR-Tank-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-Tank-v0",
+            entry_point="aftir_rl.envs.tank_grid:TankGridEnv",
+            max_episode_steps=500,
+        )
+    if "AFTIR-TankGoal-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-TankGoal-v0",
+            entry_point="aftir_rl.envs.tank_goal:TankGoalEnv",
+            max_episode_steps=100,
+        )
+    if "AFTIR-Arm-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-Arm-v0",
+            entry_point="aftir_rl.envs.arm:ArmEnv",
+            max_episode_steps=300,
+            kwargs={"n_sections": 4},
+        )
+    if "AFTIR-ArmReach-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-ArmReach-v0",
+            entry_point="aftir_rl.envs.arm:ArmEnv",
+            max_episode_steps=100,
+            kwargs={"n_sections": 2, "target_region": REACH_REGION},
+        )
+    if "AFTIR-ArmFull-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-ArmFull-v0",
+            entry_point="aftir_rl.envs.arm:ArmEnv",
+            max_episode_steps=300,
+            kwargs={"n_sections": 12, "free_targets": True},
+        )
+    if "AFTIR-ArmFTL-v0" not in gym.registry:
+        gym.register(
+            id="AFTIR-ArmFTL-v0",
+            entry_point="aftir_rl.envs.ftl.env:ArmFTLEnv",
+            vector_entry_point="aftir_rl.envs.ftl.env:ArmFTLVectorEnv",
+            max_episode_steps=300,
+        )
+
+
+def registered_env_id(value: Any, where: str, allowed: Iterable[str] | None = None) -> str:
+    """The bare id of one of this package's environments, from ``value`` read from a file.
+
+    Accepts ``ID`` or ``aftir_rl:ID`` where ``ID`` is in ``allowed`` (default: every id
+    :data:`aftir_rl.envs.ENV_IDS` registers). Anything else, a ``module:ID`` that Gymnasium would
+    import above all, is a :class:`ConfigError`; nothing is imported.
+    """
+    ids = tuple(allowed) if allowed is not None else tuple(ENV_IDS)
+    if not isinstance(value, str) or len(value) > 200:
+        raise ConfigError(f"{where}: env_id must be one of {', '.join(ids)}")
+    bare = value[len("aftir_rl:") :] if value.startswith("aftir_rl:") else value
+    if bare not in ids:
+        raise ConfigError(
+            f"{where}: env_id {shorten(repr(value), 80)} is not one of {', '.join(ids)} "
+            "(optionally prefixed 'aftir_rl:'); no other module is imported"
+        )
+    return bare

@@ -1,0 +1,1 @@
+"""Experiments: run directories, evaluation, the benchmark, Ray fan-out and tuning."""

@@ -1,0 +1,251 @@
+"""A run directory of any kind: load it, replay its greedy policy, measure what it does.
+
+The kinds (:func:`run_kind`), as ``python -m aftir_rl.train`` writes them:
+
+- ``q_table``: ``q_table.npz``, one target (:func:`load_q_table_run`);
+- ``q_table_goal``: ``q_table_goal.npz``, every reachable cell (``--all-targets``,
+  :func:`load_goal_run`);
+- ``sb3``: ``model.zip`` with ``config.json`` (``ppo | sac | td3``, :func:`load_sb3_run`:
+  ``config.json`` checked key by key, the model loaded without unpickling).
+
+The workflow shared by ``train``, ``evaluate`` and ``bench``: a tabular agent's greedy cells
+(:func:`greedy_cells`, :func:`learn_cells`) become a follow-the-leader motion
+(:func:`aftir_rl.planning.ftl.plan.plan_motion`, summarised by :func:`motion_summary`) or the
+papers'
+postures per cell (:func:`aftir_rl.planning.posture.trajectory.plan_trajectory`);
+:func:`evaluate_run`
+gives the measures of one run directory. Environment ids read from a file or a config are
+checked before anything is made (:func:`check_env_id`,
+:func:`aftir_rl.envs.registration.registered_env_id`): no other module is imported.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
+
+from aftir_rl.core.config import DEFAULT_MARGIN, from_mapping, read_yaml
+from aftir_rl.core.errors import CheckpointError
+from aftir_rl.rl.tabular.paths import greedy_cells
+
+if TYPE_CHECKING:
+    from aftir_rl.envs.tank_grid import TankGridEnv
+
+__all__ = [
+    "QTableRun",
+    "GoalRun",
+    "SB3Run",
+    "load_q_table_config",
+    "run_kind",
+    "load_run",
+    "load_q_table_run",
+    "load_goal_run",
+    "load_sb3_run",
+    "evaluate_run",
+]
+
+#: The file that marks each kind of run directory.
+RUN_FILES = {"q_table": "q_table.npz", "q_table_goal": "q_table_goal.npz", "sb3": "model.zip"}
+
+
+def load_q_table_config(path: str | Path) -> Any:
+    """Read ``configs/q_table.yaml`` (or another file) into a ``QLearningConfig``."""
+    from aftir_rl.rl.tabular.q_table import QLearningConfig
+
+    return from_mapping(QLearningConfig, read_yaml(path), str(path))
+
+
+# ---------------------------------------------------------------- loading
+
+
+@dataclass
+class QTableRun:
+    """A ``q_table`` run: the agent in the env of the target it was trained for."""
+
+    run_dir: Path
+    agent: Any
+    env: Any
+    target: list[float]
+
+
+@dataclass
+class GoalRun:
+    """A ``q_table_goal`` run: one goal-conditioned agent for every reachable cell."""
+
+    run_dir: Path
+    agent: Any
+    env: Any
+
+
+@dataclass
+class SB3Run:
+    """An ``sb3`` run: its algorithm, checked config, ``aftir_rl:``-prefixed env id and model."""
+
+    run_dir: Path
+    algo: str
+    config: Any
+    env_id: str
+    model: Any
+
+
+def run_kind(run_dir: str | Path) -> str | None:
+    """``"q_table"``, ``"sb3"``, ``"q_table_goal"`` or None (not a run directory)."""
+    run = Path(run_dir)
+    if (run / RUN_FILES["q_table"]).exists():
+        return "q_table"
+    if (run / RUN_FILES["sb3"]).exists() and (run / "config.json").exists():
+        return "sb3"
+    if (run / RUN_FILES["q_table_goal"]).exists():
+        return "q_table_goal"
+    return None
+
+
+def load_run(
+    run_dir: str | Path, kinds: Sequence[str] = ("q_table", "sb3", "q_table_goal")
+) -> QTableRun | GoalRun | SB3Run:
+    """Load a run directory of one of ``kinds``.
+
+    Raises:
+        CheckpointError: not a run directory of those kinds, or unreadable files.
+
+    """
+    run = Path(run_dir)
+    kind = run_kind(run)
+    if kind is None or kind not in kinds:
+        files = " nor ".join(
+            "model.zip with config.json" if k == "sb3" else RUN_FILES[k] for k in kinds
+        )
+        raise CheckpointError(f"{run}: not a run directory (no {files})")
+    loaders: dict[str, Callable[[Path], QTableRun | GoalRun | SB3Run]]
+    loaders = {"q_table": load_q_table_run, "sb3": load_sb3_run, "q_table_goal": load_goal_run}
+    return loaders[kind](run)
+
+
+def load_q_table_run(run_dir: str | Path) -> QTableRun:
+    """The Q-table of a run and the env of its target (its metadata's env id, tank, target)."""
+    import gymnasium as gym
+
+    from aftir_rl.rl.tabular.q_table import QLearning
+
+    path = Path(run_dir) / RUN_FILES["q_table"]
+    _, meta = QLearning.read_checkpoint(path)  # the env id checked (agents.checkpoint)
+    target = meta.get("target")
+    if target is None:
+        raise CheckpointError(f"{run_dir}: the Q-table has no target in its metadata")
+    env = gym.make(
+        meta.get("env_id", "AFTIR-Tank-v0"),
+        tank=meta.get("tank", "b737_center"),
+        target=tuple(target),
+    )
+    return QTableRun(Path(run_dir), QLearning.load(path, env), env, list(target))
+
+
+def load_goal_run(run_dir: str | Path) -> GoalRun:
+    """The goal-conditioned Q-table of an ``--all-targets`` run, in an env of its tank."""
+    import gymnasium as gym
+
+    from aftir_rl.rl.tabular.q_table_goal import GoalQLearning
+
+    path = Path(run_dir) / RUN_FILES["q_table_goal"]
+    _, _, meta = GoalQLearning.read_checkpoint(path)
+    config = meta.get("config")
+    tank = meta.get("tank") or (config.get("tank") if isinstance(config, dict) else None)
+    env = gym.make("AFTIR-TankGoal-v0", tank=tank or "b737_center")
+    return GoalRun(Path(run_dir), GoalQLearning.load(path, env), env)
+
+
+def load_sb3_run(run_dir: str | Path) -> SB3Run:
+    """An SB3 run (``config.json`` checked key by key, the model loaded without unpickling)."""
+    from aftir_rl.rl.sb3 import load_run as load_sb3
+
+    algo, config, env_id, model = load_sb3(run_dir)
+    return SB3Run(Path(run_dir), algo, config, env_id, model)
+
+
+# ---------------------------------------------------------------- measuring
+
+
+def _evaluate_q_table(run: QTableRun, motion: str, margin: float) -> dict[str, Any]:
+    from aftir_rl.planning.posture import Planner
+    from aftir_rl.planning.posture.trajectory import plan_trajectory
+
+    start = time.perf_counter()
+    cells, reached = greedy_cells(run.agent, run.env)
+    grid = cast("TankGridEnv", run.env.unwrapped)
+    if motion == "ftl":
+        from aftir_rl.planning.ftl.plan import plan_motion
+
+        plan = plan_motion(grid.tank, run.target, cells, margin=margin)
+        nan = float("nan")
+        return {
+            "agent": "q_table + FTL motion",
+            "targets": 1,
+            "success_rate": float(reached and plan.complete),
+            "tip_error_cm": plan.tip_error_cm if plan.complete else nan,
+            "path_length_cm": plan.tip_path_length_cm if plan.complete else nan,
+            "min_clearance_cm": plan.min_clearance_cm if plan.complete else nan,
+            "seconds_per_target": time.perf_counter() - start,
+            "note": "" if plan.complete else (plan.reason or "")[:80],
+        }
+    points = [grid.raster.cell_center(c) for c in cells]
+    planner = Planner(grid.tank)
+    trajectory = plan_trajectory(planner, points, run.target)
+    seconds = time.perf_counter() - start
+    m = trajectory.measures(planner.scene)
+    return {
+        "agent": "q_table + TGA/TSM",
+        "targets": 1,
+        "success_rate": float(reached and trajectory.complete),
+        "tip_error_cm": m["tip_error_cm"],
+        "path_length_cm": m["path_cm"],
+        "min_clearance_cm": m["min_clearance_cm"],
+        "seconds_per_target": seconds,
+        "note": trajectory.note,
+    }
+
+
+def _evaluate_sb3(
+    run: SB3Run, targets: list[np.ndarray] | None, draw: tuple[int, int] | None = None
+) -> dict[str, Any]:
+    from aftir_rl.rl.sb3 import EVAL_SEED, evaluate_policy_on_targets, evaluation_targets
+
+    kwargs = dict(run.config.env_kwargs or {})  # the env the model was trained on (spaces)
+    if not targets:
+        count, seed = draw or (run.config.eval_targets, EVAL_SEED)
+        targets = evaluation_targets(run.env_id, count, seed=seed, env_kwargs=kwargs)
+    metrics, _ = evaluate_policy_on_targets(
+        run.model, run.env_id, targets, clearance=True, env_kwargs=kwargs
+    )
+    note = f"{metrics['collision_rate']:.1%} collided" if metrics["collision_rate"] else ""
+    agent = f"{run.algo} ({run.config.env_id})"
+    return {"agent": agent, "targets": len(targets), **metrics, "note": note}
+
+
+def evaluate_run(
+    run_dir: str | Path,
+    targets: list[np.ndarray] | None = None,
+    motion: str = "ftl",
+    margin: float = DEFAULT_MARGIN,
+    draw: tuple[int, int] | None = None,
+) -> dict[str, Any]:
+    """Evaluate one run directory (Q-table or SB3): one row of ``python -m aftir_rl.evaluate``.
+
+    A Q-table run is evaluated on the target it was trained for: its greedy path becomes a
+    follow-the-leader motion keeping ``margin`` [cm] (``motion="ftl"``) or the papers' postures
+    per cell (``"progressive"``). An SB3 run on ``targets``, else on ``draw = (count, seed)``
+    targets drawn by its env (seeds ``seed .. seed + count − 1``), else on the fixed evaluation
+    targets its training measured it on; one deterministic episode each.
+
+    Raises:
+        CheckpointError: not a run directory this knows, or unreadable files.
+
+    """
+    run = load_run(run_dir, ("q_table", "sb3"))
+    if isinstance(run, QTableRun):
+        return _evaluate_q_table(run, motion, margin)
+    return _evaluate_sb3(cast(SB3Run, run), targets, draw)

@@ -1,5 +1,0 @@
-"""Motions of the arm: follow-the-leader deployment along a route planned from the learned cells.
-
-- :mod:`aftir_rl.motion.ftl`: the follow-the-leader (shift-and-copy) deployment model.
-- :mod:`aftir_rl.motion.route`: a route an FTL arm can follow, from a learned cell path.
-"""

@@ -1,0 +1,164 @@
+"""The guide of the route search: a distance-to-go field over the free space of a tank.
+
+:class:`GuideField` runs Dijkstra-like relaxation over a grid of half the raster's cells
+(26-neighbourhood, Euclidean steps, an edge only where its midpoint is free, so a thin wall cuts
+it), optionally restricted to a corridor around a learned cell path (:func:`corridor`). Used by
+:func:`aftir_rl.planning.ftl.route.plan_route` and by the batched kernels of the FTL env
+(:mod:`aftir_rl.envs.ftl.fields`).
+"""
+
+from __future__ import annotations
+
+import weakref
+from collections.abc import Sequence
+from itertools import product
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from aftir_rl.core.collision import point_clearance
+from aftir_rl.core.tank import Tank
+
+__all__ = ["GuideField", "corridor"]
+
+NEIGHBOURS = np.array([d for d in product((-1, 0, 1), repeat=3) if any(d)], dtype=np.int64)
+"""The 26 neighbour directions of a grid point."""
+
+
+class GuideField:
+    """Distance-to-go [cm] to a target through the free space of a tank, on a fine grid.
+
+    The grid has cells of half the raster's size (10 cm in the reference tank). A grid point is
+    free when it keeps the arm's radius from every solid and wall; two neighbouring points
+    (26-neighbourhood) are joined when the midpoint between them is free too, so a thin wall
+    such as the 4 cm baffle cuts every edge across it except through the hatch. Distances are
+    Euclidean along the edges, relaxed with numpy until they settle. ``allowed`` (on the raster)
+    restricts the field to a corridor.
+
+    ``clearance_cost`` ``α`` (0: plain lengths) makes an edge near a surface dearer, so the
+    shortest way keeps away from surfaces where it can (clearance as a cost, after Kuntz et al.):
+    each end of an edge whose surface clearance ``c`` (centre clearance minus the arm's radius)
+    is below :data:`CLEARANCE_RANGE` adds ``α·(1 − c/CLEARANCE_RANGE)/2`` times the edge's
+    length.
+    """
+
+    def __init__(
+        self,
+        tank: Tank,
+        target: ArrayLike,
+        allowed: NDArray[np.bool_] | None = None,
+        clearance_cost: float = 0.0,
+    ) -> None:
+        raster = tank.raster
+        self.size = float(raster.cell_size) / 2
+        self.origin = np.array(raster.origin, dtype=np.float64)
+        self.shape = np.array(raster.shape) * 2
+        free, edges, clear = _grid_edges(tank, self.size)
+        if allowed is not None:
+            free = free & np.repeat(np.repeat(np.repeat(allowed, 2, 0), 2, 1), 2, 2)
+        self.free, self.edges = free, edges
+        target = np.asarray(target, dtype=np.float64)
+        centres = self.origin + (np.indices(tuple(self.shape)).transpose(1, 2, 3, 0) + 0.5) * (
+            self.size
+        )
+        dist = np.full(tuple(self.shape), np.inf)
+        near = np.linalg.norm(centres - target, axis=-1)
+        seed = free & (near <= 1.75 * self.size)
+        if not seed.any():
+            seed = free & (near <= near[free].min() + 1e-9) if free.any() else seed
+        dist[seed] = near[seed]
+        lengths = np.linalg.norm(NEIGHBOURS, axis=1) * self.size
+        weights: list[NDArray[np.float64] | float] = list(lengths)
+        if clearance_cost > 0:
+            cost = clearance_cost * np.clip(1.0 - (clear - tank.arm.radius) / CLEARANCE_RANGE, 0, 1)
+            weights = [
+                w * (1.0 + (cost + shifted(cost, -d)) / 2) for d, w in zip(NEIGHBOURS, lengths)
+            ]
+        self.weights = weights
+        for _ in range(int(self.shape.sum()) * 4):
+            new = dist.copy()
+            for e, (d, w) in enumerate(zip(NEIGHBOURS, weights)):
+                # dist[x] <- dist[x + d] + w where the edge x -> x + d exists
+                src = shifted(dist, -d)
+                new = np.minimum(new, np.where(edges[e] & free, src + w, np.inf))
+            new = np.where(free, new, np.inf)
+            if np.array_equal(new, dist):
+                break
+            dist = new
+        self.dist = dist
+        self.target = target
+
+    def __call__(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Distance-to-go of points ``(..., 3)``; ``inf`` where no reachable grid point is near.
+
+        A point uses its own grid cell and the neighbours joined to it by an edge (so nothing
+        leaks through a thin wall), each at its distance plus the straight line to it.
+        """
+        p = np.asarray(points, dtype=np.float64)
+        cell = np.clip(np.floor((p - self.origin) / self.size).astype(np.int64), 0, self.shape - 1)
+        own = self.dist[cell[..., 0], cell[..., 1], cell[..., 2]]
+        centre = self.origin + (cell + 0.5) * self.size
+        best = own + np.linalg.norm(p - centre, axis=-1)
+        for e, d in enumerate(NEIGHBOURS):
+            c = cell + d
+            ok = np.all((c >= 0) & (c < self.shape), axis=-1)
+            cc = np.where(ok[..., None], c, 0)
+            joined = self.edges[e][cell[..., 0], cell[..., 1], cell[..., 2]] & ok
+            dd = self.dist[cc[..., 0], cc[..., 1], cc[..., 2]]
+            v = dd + np.linalg.norm(p - (self.origin + (cc + 0.5) * self.size), axis=-1)
+            best = np.minimum(best, np.where(joined, v, np.inf))
+        near = np.linalg.norm(p - self.target, axis=-1)
+        return np.where(near < self.size, np.minimum(best, near), best)
+
+
+def shifted(a: NDArray[np.float64], d: NDArray[np.int64]) -> NDArray[np.float64]:
+    """``out[x] = a[x - d]`` with ``inf`` where ``x - d`` is outside."""
+    out = np.full_like(a, np.inf)
+    src = tuple(slice(max(0, -k), a.shape[i] - max(0, k)) for i, k in enumerate(d))
+    dst = tuple(slice(max(0, k), a.shape[i] - max(0, -k)) for i, k in enumerate(d))
+    out[dst] = a[src]
+    return out
+
+
+#: Per tank (by value, held weakly) and grid size: free grid points, edges, clearances.
+_EDGE_CACHE: weakref.WeakKeyDictionary[
+    Tank, dict[float, tuple[NDArray[np.bool_], NDArray[np.bool_], NDArray[np.float64]]]
+] = weakref.WeakKeyDictionary()
+
+#: Surface clearance [cm] below which ``clearance_cost`` makes an edge dearer.
+CLEARANCE_RANGE = 15.0
+
+
+def _grid_edges(
+    tank: Tank, size: float
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_], NDArray[np.float64]]:
+    """Free grid points, edges and the grid points' centre clearances [cm].
+
+    An edge (per neighbour direction) is there where both ends and its midpoint are free.
+    """
+    cache = _EDGE_CACHE.setdefault(tank, {})
+    if size not in cache:
+        shape = tuple(int(n) * 2 for n in tank.raster.shape)
+        origin = np.array(tank.raster.origin, dtype=np.float64)
+        centres = origin + (np.indices(shape).transpose(1, 2, 3, 0) + 0.5) * size
+        r = tank.arm.radius
+        clear = point_clearance(tank, centres)
+        free = clear >= r
+        edges = np.zeros((len(NEIGHBOURS),) + shape, dtype=bool)
+        for e, d in enumerate(NEIGHBOURS):
+            mid = centres + 0.5 * size * d
+            target_free = shifted(free.astype(np.float64), -d) == 1.0
+            edges[e] = free & target_free & (point_clearance(tank, mid) >= r)
+        cache[size] = (free, edges, clear)
+    return cache[size]
+
+
+def corridor(tank: Tank, cells: Sequence[Sequence[int]], grow: int) -> NDArray[np.bool_]:
+    """The raster cells within ``grow`` cells of ``cells`` (a box around each)."""
+    mask = np.zeros(tank.raster.shape, dtype=bool)
+    shape = np.array(tank.raster.shape)
+    for c in cells:
+        lo = np.clip(np.asarray(c) - grow, 0, shape)
+        hi = np.clip(np.asarray(c) + grow + 1, 0, shape)
+        mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]] = True
+    return mask

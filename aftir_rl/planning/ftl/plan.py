@@ -1,0 +1,236 @@
+"""A whole follow-the-leader motion for one target, checked, in the ``trajectory.json`` contract.
+
+:func:`plan_motion` plans a route (:func:`aftir_rl.planning.ftl.route.plan_route`, guided by the
+learned
+cells when given), deploys it by follow-the-leader (:func:`aftir_rl.planning.ftl.model.ftl_motion`)
+and
+checks the whole dense motion independently of the search: every entry's backbone, sampled
+2.5 cm apart, must keep the margin from the tank (entries are less than 1 cm of backbone movement
+apart). A route whose deployment misses the margin is replaced by the next search setting; a
+target that no setting reaches is ``complete: false`` with the reason.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from aftir_rl.core.collision import point_clearance
+from aftir_rl.core.config import DEFAULT_MARGIN
+from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.tank import Tank
+from aftir_rl.planning.ftl.model import FTLMotion, ftl_deviation, ftl_motion
+from aftir_rl.planning.ftl.route import RouteSettings, plan_route
+
+__all__ = ["MotionPlan", "plan_motion", "motion_summary", "DEFAULT_MARGIN", "SEARCH_VARIANTS"]
+
+#: Route-search settings tried in turn (the margin is set per call): the first whose motion
+#: keeps the margin and the deviation goal wins; otherwise the complete one of least deviation.
+SEARCH_VARIANTS: tuple[RouteSettings, ...] = (
+    RouteSettings(clearance_weight=1.0, change_weight=20.0),
+    RouteSettings(clearance_weight=1.0, change_weight=40.0, max_change=0.5),
+    RouteSettings(clearance_weight=1.0, change_weight=5.0),
+    RouteSettings(clearance_weight=0.5, change_weight=5.0, beam_width=250, max_change=1.0),
+    RouteSettings(
+        clearance_weight=1.0, change_weight=20.0, beam_width=400, bin_cm=6.0, bin_heading=0.3
+    ),
+)
+
+#: Largest follow-the-leader deviation [cm] a motion should keep (the published FTL anchors:
+#: about 2% of the shape); a motion above it is kept only when no search setting does better.
+DEVIATION_GOAL = 2.5
+
+
+@dataclass
+class MotionPlan:
+    """The result of :func:`plan_motion` (see ``to_json`` for the file contract)."""
+
+    target: NDArray[np.float64]
+    margin_cm: float
+    section_length: float
+    complete: bool
+    seconds: float
+    method: str = "ftl"
+    reason: str | None = None
+    motion: FTLMotion | None = None
+    waypoint_index: list[int] = field(default_factory=list)
+    min_clearance_cm: float | None = None
+    ftl_deviation_cm: tuple[float, float] | None = None
+    tip_error_cm: float | None = None
+    tip_path_length_cm: float | None = None
+    route_departure_cm: tuple[float, float] | None = None
+    corridor: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``trajectory.json`` contract of a q_table run directory."""
+        out: dict[str, Any] = {
+            "complete": self.complete,
+            "method": self.method,
+            "margin_cm": self.margin_cm,
+            "section_length": self.section_length,
+            "seconds": self.seconds,
+            "target": self.target.tolist(),
+        }
+        if self.reason is not None:
+            out["reason"] = self.reason
+        if self.motion is not None:
+            out.update(
+                n_sections=self.motion.n_sections,
+                motion=self.motion.to_list(),
+                waypoint_index=self.waypoint_index,
+                stage_index=list(self.motion.stage_index),
+                min_clearance_cm=self.min_clearance_cm,
+                ftl_deviation_cm={"max": self.ftl_deviation_cm[0], "mean": self.ftl_deviation_cm[1]}
+                if self.ftl_deviation_cm
+                else None,
+                tip_error_cm=self.tip_error_cm,
+                tip_path_length_cm=self.tip_path_length_cm,
+                route_departure_cm={
+                    "max": self.route_departure_cm[0],
+                    "mean": self.route_departure_cm[1],
+                }
+                if self.route_departure_cm
+                else None,
+                corridor=self.corridor,
+                route={
+                    "lead": self.motion.route.lead,
+                    "kappa": self.motion.route.kappa.tolist(),
+                },
+            )
+        return out
+
+
+def motion_clearance(tank: Tank, motion: FTLMotion) -> float:
+    """Smallest clearance [cm] of the arm's surface over every entry of a motion."""
+    worst = np.inf
+    for lo in range(0, len(motion), 256):
+        part = replace_slice(motion, lo, lo + 256)
+        worst = min(worst, float(point_clearance(tank, part.points()).min()))
+    return worst - tank.arm.radius
+
+
+def replace_slice(motion: FTLMotion, lo: int, hi: int) -> FTLMotion:
+    """Entries ``lo:hi`` of a motion (for memory-bounded checks)."""
+    return replace(
+        motion,
+        s=motion.s[lo:hi],
+        dis=motion.dis[lo:hi],
+        theta=motion.theta[lo:hi],
+        phi=motion.phi[lo:hi],
+        stage_index=(),
+    )
+
+
+def plan_motion(
+    tank: Tank,
+    target: ArrayLike,
+    cells: Sequence[Sequence[int]] | None = None,
+    margin: float = DEFAULT_MARGIN,
+    start_height: float | None = None,
+) -> MotionPlan:
+    """Plan, deploy and check a follow-the-leader motion from the panel to ``target`` [cm].
+
+    Args:
+        tank: the tank.
+        target: the target [cm].
+        cells: the learned cell path (start first) to guide the route, or None.
+        margin: clearance [cm] the arm's surface keeps along the whole motion.
+        start_height: the tip's height above the floor at the start (default: the tank's start
+            point, at most 20 cm).
+
+    Returns:
+        A :class:`MotionPlan`; ``complete`` is False, with ``reason``, when no motion keeps the
+        margin.
+
+    """
+    start = time.perf_counter()
+    target = np.asarray(target, dtype=np.float64)
+    arm = tank.arm
+    h0 = min(float(tank.start_point[2]) if start_height is None else float(start_height), 20.0)
+    reasons: list[str] = []
+    best: MotionPlan | None = None
+    best_deviation = float("inf")  # the largest FTL deviation of best [cm]
+    for settings in SEARCH_VARIANTS:
+        try:
+            found = plan_route(tank, target, cells, replace(settings, margin=margin), arm)
+        except PlanningError as exc:
+            reasons.append(str(exc).removeprefix("Cannot reach the target: "))
+            if "closer than" in str(exc):
+                break
+            continue
+        motion = ftl_motion(found.route, found.n_sections, h0, theta_max=arm.theta_max)
+        clearance = motion_clearance(tank, motion)
+        if clearance < margin:
+            reasons.append(f"a deployment kept only {clearance:.2f} cm")
+            continue
+        tips = motion.tips()
+        deviation = ftl_deviation(motion)
+        plan = MotionPlan(
+            target=target,
+            margin_cm=margin,
+            section_length=arm.section_length,
+            complete=True,
+            seconds=0.0,
+            motion=motion,
+            min_clearance_cm=clearance,
+            ftl_deviation_cm=deviation,
+            tip_error_cm=float(np.linalg.norm(tips[-1] - target)),
+            tip_path_length_cm=float(np.linalg.norm(np.diff(tips, axis=0), axis=1).sum()),
+            corridor=found.corridor,
+        )
+        if cells is not None and tank.cell_size is not None:
+            plan.waypoint_index, plan.route_departure_cm = _waypoints(tank, cells, tips)
+        if best is None or deviation[0] < best_deviation:
+            best, best_deviation = plan, deviation[0]
+        if best_deviation <= DEVIATION_GOAL:
+            break
+    if best is not None:
+        best.seconds = time.perf_counter() - start
+        return best
+    return MotionPlan(
+        target=target,
+        margin_cm=margin,
+        section_length=arm.section_length,
+        complete=False,
+        seconds=time.perf_counter() - start,
+        reason="Cannot reach the target with a margin of "
+        f"{margin:g} cm: " + "; ".join(dict.fromkeys(reasons)),
+    )
+
+
+def _waypoints(
+    tank: Tank, cells: Sequence[Sequence[int]], tips: NDArray[np.float64]
+) -> tuple[list[int], tuple[float, float]]:
+    """Per cell, the entry whose tip is in (or nearest to) it, in order; route departure."""
+    raster = tank.raster
+    half = raster.cell_size / 2
+    index, departure = [], []
+    lo_idx = 0
+    for c in cells:
+        centre = raster.cell_center(c)
+        outside = np.linalg.norm(np.maximum(np.abs(tips[lo_idx:] - centre) - half, 0.0), axis=1)
+        i = lo_idx + int(np.argmin(outside))
+        index.append(i)
+        lo_idx = i
+        departure.append(float(np.linalg.norm(tips - centre, axis=1).min()))
+    return index, (max(departure), float(np.mean(departure)))
+
+
+def motion_summary(plan: Any) -> dict[str, Any]:
+    """What ``path.json`` says of a :class:`~aftir_rl.planning.ftl.plan.MotionPlan`."""
+    return {
+        "complete": plan.complete,
+        "seconds": plan.seconds,
+        "reason": plan.reason,
+        "entries": len(plan.motion) if plan.motion is not None else 0,
+        "n_sections": plan.motion.n_sections if plan.motion is not None else None,
+        "min_clearance_cm": plan.min_clearance_cm,
+        "ftl_deviation_cm": plan.ftl_deviation_cm,
+        "tip_error_cm": plan.tip_error_cm,
+        "route_departure_cm": plan.route_departure_cm,
+    }

@@ -1,0 +1,356 @@
+"""A route that a follow-the-leader arm can follow, from the learned cell path to the exact target.
+
+The route (:class:`aftir_rl.planning.ftl.model.Route`) is planned as a beam search over the bending
+vector ``κ`` of one route section after another:
+
+- **Guide.** A distance-to-go field over the tank's raster: Dijkstra over free cells
+  (26-neighbourhood, Euclidean steps) from the target, restricted to a *corridor* around the
+  learned cell path (the path's cells grown by ``corridor`` cells; the whole free raster when no
+  path is given, or when no route is found in the corridor). A point's distance-to-go is the
+  smallest ``D(c) + |p − centre(c)|`` over the corridor cells ``c`` next to it, so the route
+  follows the learned cells without having to visit their centres (a constant-curvature arm
+  rising from the panel cannot hug the floor as the first cells of a greedy path do).
+- **Moves.** The next section's ``κ`` is the last one plus a change from a fixed set (at most
+  ``max_change`` rad), bounded by ``θ_max``. Small changes between neighbouring sections keep
+  the follow-the-leader deviation between stages small (:mod:`aftir_rl.planning.ftl.model`).
+- **Clearance as a cost** (Kuntz et al.: integrate 1/clearance along the path): each section's
+  backbone samples must keep ``radius + margin + slack`` from every solid, wall and the floor
+  outside the panel, and pay ``clearance_weight · Σ ds / (clearance − margin)``; with the length,
+  a curvature-change cost and the distance-to-go this ranks the beam.
+- **Closing.** A beam state whose tip is within reach of the target is closed exactly by damped
+  least squares on the bending vectors of its last sections (tip error ≤ 1e-6 cm); the closed
+  route is re-checked for clearance over its whole body; one that misses the clearance by less
+  than 3 cm is pushed away from the tank first (gradient ascent on a soft minimum of its
+  clearance in the null space of the tip's Jacobian, the tip staying on the target). Targets
+  within reach of the panel are also closed directly: one to three sections on a continuous
+  lead. The cheapest closed route wins.
+
+Units cm and rad. All candidates of one depth are evaluated in one batched call.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from aftir_rl.core.collision import point_clearance, points_clear
+from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.robot import ArmSpec, section_transforms
+from aftir_rl.core.tank import Tank
+from aftir_rl.planning.ftl.closing import close_batch, push_away, route_clearance
+from aftir_rl.planning.ftl.guide import NEIGHBOURS as NEIGHBOURS  # for aftir_rl.envs.ftl.fields
+from aftir_rl.planning.ftl.guide import GuideField, corridor
+from aftir_rl.planning.ftl.model import Route, clip_kappa, kappa_to_angles
+
+__all__ = ["RouteSettings", "RouteResult", "GuideField", "plan_route", "route_clearance"]
+
+
+@dataclass(frozen=True)
+class RouteSettings:
+    """Knobs of the route search (defaults measured on the reference tank, see docs/benchmarks.md).
+
+    Attributes:
+        margin: clearance the arm's surface keeps from everything [cm].
+        slack: extra clearance asked of the route, for the deviation between FTL stages [cm].
+        beam_width: states kept per depth.
+        max_change: largest change of ``κ`` between neighbouring sections [rad].
+        leads: straight travel above the floor before the first bend [cm]; negative: the
+            first bend starts inside the panel's guide (its rim is checked like any surface).
+        corridor: cells the learned path is grown by to make the corridor.
+        clearance_weight: weight of ``∫ ds / (clearance − margin)``.
+        change_weight: weight of ``Σ |Δκ|²·l``.
+        samples: backbone samples per section in the search.
+        max_seconds: wall-clock budget of one search.
+        bin_cm, bin_heading: the beam keeps the best state per cell of this size [cm] and
+            heading bin [rad], so that it stays diverse.
+        closings: beam states per depth that are tried for closing on the target.
+        lead_shift: how far [cm] a closing may move the lead of a route the beam has built.
+
+    """
+
+    margin: float = 1.0
+    slack: float = 1.5
+    beam_width: int = 160
+    max_change: float = 0.75
+    leads: tuple[float, ...] = (-20.0, -10.0, 0.0, 15.0, 30.0)
+    corridor: int = 2
+    clearance_weight: float = 4.0
+    change_weight: float = 20.0
+    samples: int = 10
+    max_seconds: float = 20.0
+    bin_cm: float = 12.0
+    closings: int = 10
+    lead_shift: float = 0.0
+    bin_heading: float = 0.5
+
+
+@dataclass
+class RouteResult:
+    """A planned route and what the search saw.
+
+    Attributes:
+        route: the route (its end is the target).
+        n_sections: arm sections that deploy it.
+        clearance_cm: smallest clearance of the route's body (surface, radius included) [cm].
+        cost: the search's cost of the route.
+        corridor: ``"learned path"`` or ``"whole tank"``: where the guide field came from.
+        seconds: planning time [s].
+        expanded: candidate sections evaluated.
+
+    """
+
+    route: Route
+    n_sections: int
+    clearance_cm: float
+    cost: float
+    corridor: str
+    seconds: float
+    expanded: int = 0
+    notes: list[str] = field(default_factory=list)
+
+
+def _changes(max_change: float) -> NDArray[np.float64]:
+    """The set of ``Δκ`` moves: none, and 3 sizes in 8 directions (25 moves)."""
+    out = [(0.0, 0.0)]
+    for r in (max_change / 3, 2 * max_change / 3, max_change):
+        for a in np.arange(8) * math.pi / 4:
+            out.append((r * math.cos(a), r * math.sin(a)))
+    return np.array(out)
+
+
+def _section_samples(
+    rot: NDArray[np.float64], pos: NDArray[np.float64], kappa: NDArray[np.float64], l: float, k: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Samples ``(B, k, 3)`` of one new section per state, and its end frame ``(B,3,3), (B,3)``."""
+    theta, phi = kappa_to_angles(kappa)
+    frac = np.arange(1, k + 1) / k
+    local = section_transforms(theta[:, None] * frac, phi[:, None], l * frac)  # (B, k, 4, 4)
+    pts = np.einsum("bij,bkj->bki", rot, local[..., :3, 3]) + pos[:, None, :]
+    end_rot = rot @ local[:, -1, :3, :3]
+    return pts, end_rot, pts[:, -1, :]
+
+
+def plan_route(
+    tank: Tank,
+    target: ArrayLike,
+    cells: Sequence[Sequence[int]] | None = None,
+    settings: RouteSettings | None = None,
+    arm: ArmSpec | None = None,
+) -> RouteResult:
+    """Plan a follow-the-leader route from the panel to ``target`` [cm].
+
+    Args:
+        tank: the tank.
+        target: the exact end point of the route [cm].
+        cells: the learned cell path (start first), or None to search the whole free raster.
+        settings: search knobs; default :class:`RouteSettings`.
+        arm: the arm; default the tank's.
+
+    Raises:
+        PlanningError: no route keeps the margin (the message says why).
+
+    """
+    settings = settings or RouteSettings()
+    arm = arm or tank.arm
+    target = np.asarray(target, dtype=np.float64)
+    start = time.perf_counter()
+    need = arm.radius + settings.margin
+    tip_clear = float(point_clearance(tank, target[None])[0])
+    if tip_clear < need:
+        raise PlanningError(
+            f"Cannot reach the target: it lies {tip_clear:.2f} cm from the tank, closer than "
+            f"the arm's radius {arm.radius:g} cm plus the margin {settings.margin:g} cm"
+        )
+    attempts: list[tuple[str, NDArray[np.bool_] | None]] = []
+    if cells is not None and tank.cell_size is not None:
+        attempts.append(("learned path", corridor(tank, cells, settings.corridor)))
+    attempts.append(("whole tank", None))
+    notes: list[str] = []
+    for name, allowed in attempts:
+        guide = GuideField(tank, target, allowed)
+        result = _beam(tank, arm, target, guide, settings, start)
+        if result is not None:
+            result.corridor = name
+            result.notes = notes
+            result.seconds = time.perf_counter() - start
+            return result
+        notes.append(f"no route in the {name} corridor")
+    raise PlanningError(
+        "Cannot reach the target: no follow-the-leader route keeps the margin of "
+        f"{settings.margin:g} cm ({'; '.join(notes)})"
+    )
+
+
+def _beam(
+    tank: Tank,
+    arm: ArmSpec,
+    target: NDArray[np.float64],
+    guide: GuideField,
+    settings: RouteSettings,
+    start: float,
+) -> RouteResult | None:
+    l, k = arm.section_length, settings.samples
+    need = arm.radius + settings.margin + settings.slack
+    changes = _changes(settings.max_change)
+    leads = np.array([v for v in settings.leads if v < l * arm.max_sections])
+    # states
+    n0 = len(leads)
+    rot = np.repeat(np.eye(3)[None], n0, axis=0)
+    pos = np.stack([np.zeros(n0), np.zeros(n0), leads], axis=1)
+    kap_hist = np.zeros((n0, 0, 2))
+    lead = leads.copy()
+    cost = leads.copy()
+    best: tuple[float, Route, float] | None = None
+    expanded = 0
+    max_depth = arm.max_sections
+
+    def _keep(
+        best: tuple[float, Route, float] | None,
+        kap: NDArray[np.float64],
+        lead: float,
+        cost: float,
+        extra: int,
+    ) -> tuple[float, Route, float] | None:
+        """The better of ``best`` and a closed route (``best`` if it misses the margin)."""
+        route = Route(lead, kap, l)
+        if route.min_sections() > arm.max_sections:
+            return best
+        rc = route_clearance(tank, arm, route)
+        need = settings.margin + 0.5 * settings.slack
+        if need - 3.0 < rc < need:
+            # a near miss: move the body away from the tank, the tip staying on the target
+            route = push_away(tank, arm, route, target, need)
+            rc = route_clearance(tank, arm, route)
+            kap, lead = route.kappa, route.lead
+        if rc < need:
+            return best
+        dk_all = np.diff(np.vstack([np.zeros((1, 2)), kap]), axis=0)
+        change = np.hypot(dk_all[:, 0], dk_all[:, 1])
+        total = (
+            cost
+            + extra * l
+            + settings.clearance_weight * extra * l / max(rc - settings.margin, 0.25)
+            + settings.change_weight * l * float(np.sum(change[-extra - 1 :] ** 2)) / 10
+        )
+        return (total, route, rc) if best is None or total < best[0] else best
+
+    # near targets: one to three sections from the panel, closed directly from a few shapes
+    # (bent towards the target, or an S), since the straight arm is a saddle of the tip distance
+    toward = np.array(
+        [math.cos(math.atan2(target[1], target[0])), math.sin(math.atan2(target[1], target[0]))]
+    )
+    for extra in (1, 2, 3):
+        shapes = [np.outer(np.ones(extra), toward) * a for a in (0.3, 0.8)]
+        shapes += [np.outer((-1.0) ** np.arange(extra), toward) * a for a in (0.5, 1.0)]
+        starts = np.array([shape for shape in shapes for _ in leads])
+        seeds = np.tile(leads, len(shapes))
+        closed = close_batch(seeds, starts, target, l, arm.theta_max, extra)
+        for out in closed:
+            if out is not None:
+                best = _keep(best, out[1], out[0], max(out[0], 0.0), extra)
+    for depth in range(max_depth):
+        if time.perf_counter() - start > settings.max_seconds or len(cost) == 0:
+            break
+        last = kap_hist[:, -1, :] if depth else np.zeros((len(cost), 2))
+        b, c = len(cost), len(changes)
+        new_k = clip_kappa(last[:, None, :] + changes[None, :, :], arm.theta_max).reshape(-1, 2)
+        rep = np.repeat(np.arange(b), c)
+        pts, end_rot, end_pos = _section_samples(rot[rep], pos[rep], new_k, l, k)
+        expanded += len(rep)
+        # sections needed so far: bent + straight below the floor must fit in the arm
+        n_needed = depth + 1 + np.ceil(lead[rep] / l - 1e-9)
+        # the cheap bounded test first, exact distances (for the cost) only for the survivors
+        ok = (n_needed <= arm.max_sections) & points_clear(tank, pts, need)
+        if not np.any(ok):
+            break
+        idx = np.flatnonzero(ok)
+        rep, new_k, pts, end_rot, end_pos = (
+            rep[idx],
+            new_k[idx],
+            pts[idx],
+            end_rot[idx],
+            end_pos[idx],
+        )
+        clear = point_clearance(tank, pts) - arm.radius  # surface clearance (B*C, k)
+        dk = new_k - (kap_hist[rep, -1, :] if depth else 0.0)
+        g = (
+            cost[rep]
+            + l
+            + settings.clearance_weight
+            * (l / k)
+            * np.sum(1.0 / np.maximum(clear - settings.margin, 0.25), axis=1)
+            + settings.change_weight * l * np.einsum("ij,ij->i", dk, dk) / 10.0
+        )
+        h = guide(end_pos)
+        hist = np.concatenate([kap_hist[rep], new_k[:, None, :]], axis=1)
+        if best is not None and depth >= 1 and np.min(g + h) > best[0]:
+            break
+        # prune: finite guide, then best per (position, heading) bin, then the beam width
+        f = g + h
+        keep = np.flatnonzero(np.isfinite(f))
+        if len(keep) == 0:
+            break
+        heading = end_rot[keep, :, 2]
+        key = np.concatenate(
+            [np.floor(end_pos[keep] / settings.bin_cm), np.round(heading / settings.bin_heading)],
+            axis=1,
+        ).astype(np.int64)
+        order = keep[np.argsort(f[keep])]
+        key = key[np.argsort(f[keep])]
+        _, first = np.unique(key, axis=0, return_index=True)
+        order = order[np.sort(first)][: settings.beam_width]
+        rot, pos, kap_hist = end_rot[order], end_pos[order], hist[order]
+        lead, cost = lead[rep[order]], g[order]
+        # closing: append one or two sections to the most promising states near the target
+        dist = np.linalg.norm(pos - target, axis=1)
+        togo = h[order]  # through free space: a wall between tip and target does not count as near
+        fits = depth + 1 + np.ceil(lead / l - 1e-9) <= arm.max_sections - 1
+        for extra, band in ((1, (0.3, 0.98)), (2, (0.6, 1.95))):
+            # states from which `extra` sections of length l can end on the target: not too
+            # near (a section cannot fold back on itself) and not too far; nearest to go first
+            near = np.flatnonzero(
+                (dist > band[0] * l)
+                & (dist < band[1] * l)
+                & (togo < 2.2 * l)
+                & fits
+                & (depth + 1 + extra + np.ceil(lead / l - 1e-9) <= arm.max_sections)
+            )
+            picks = list(near[np.argsort(togo[near])][: settings.closings])
+            if not picks:
+                continue
+            starts = np.concatenate(
+                [kap_hist[picks], np.repeat(kap_hist[picks][:, -1:], extra, axis=1)], axis=1
+            )
+            # the lead of a route the beam has threaded through the tank stays (moving it shifts
+            # the whole route along the panel's axis), unless lead_shift allows a little
+            window = (
+                (
+                    np.maximum(lead[picks] - settings.lead_shift, -25.0),
+                    lead[picks] + settings.lead_shift,
+                )
+                if settings.lead_shift > 0
+                else None
+            )
+            closed = close_batch(
+                lead[picks], starts, target, l, arm.theta_max, free=extra + 1, lead_range=window
+            )
+            for i, out in zip(picks, closed):
+                if out is not None:
+                    best = _keep(best, out[1], out[0], float(cost[i]), extra)
+    if best is None:
+        return None
+    total, route, rc = best
+    return RouteResult(
+        route=route,
+        n_sections=max(route.min_sections(), 1),
+        clearance_cm=rc,
+        cost=total,
+        corridor="",
+        seconds=time.perf_counter() - start,
+        expanded=expanded,
+    )

@@ -1,0 +1,72 @@
+"""Stable-Baselines3 baselines (PPO, SAC, TD3) on the arm envs, logged like the Q-table runs.
+
+One import for the SB3 side of the package, which lives in three modules:
+
+- :mod:`aftir_rl.rl.sb3.config`: ``configs/{ppo,sac,td3}.yaml`` load into :class:`SB3Config`;
+  ``hyperparameters`` go to the algorithm's constructor and are checked against its signature
+  (an unknown key is a :class:`~aftir_rl.core.errors.ConfigError` naming the file and the key), and
+  :func:`build_model` makes the model;
+- :mod:`aftir_rl.rl.sb3.evaluation`: :class:`ArmEvalCallback` runs the deterministic policy on a
+  fixed set of evaluation targets and logs ``eval/success_rate``, ``eval/tip_error_cm``,
+  ``eval/path_length_cm``, ``eval/collision_rate``, ``eval/min_clearance_cm`` and a picture of
+  the tip path and arm under ``paths/eval`` through the model's SB3 logger, so SB3 runs and
+  Q-learning runs overlay in one TensorBoard; checkpoints are written atomically (temporary
+  file, then rename: :class:`AtomicCheckpoint`, :func:`save_model`);
+- :mod:`aftir_rl.rl.sb3.loading`: a saved model is loaded without unpickling anything from the
+  file (:func:`load_model`, :func:`load_run`).
+"""
+
+from __future__ import annotations
+
+from aftir_rl.rl.sb3.config import (
+    ALGORITHMS,
+    ENV_KWARGS,
+    GOAL_ENV_IDS,
+    HER_KWARGS,
+    OBJECT_KEYS,
+    SB3Config,
+    build_model,
+    check_goal_settings,
+    check_sb3_config,
+    constructor_keys,
+    load_sb3_config,
+    sb3_config_from_run,
+)
+from aftir_rl.rl.sb3.evaluation import (
+    EVAL_SEED,
+    ArmEvalCallback,
+    AtomicCheckpoint,
+    Period,
+    evaluate_policy_on_targets,
+    evaluation_env_kwargs,
+    evaluation_targets,
+    save_model,
+)
+from aftir_rl.rl.sb3.loading import MAX_MODEL_BYTES, load_model, load_run, newest_model
+
+__all__ = [
+    "ALGORITHMS",
+    "ENV_KWARGS",
+    "EVAL_SEED",
+    "GOAL_ENV_IDS",
+    "HER_KWARGS",
+    "MAX_MODEL_BYTES",
+    "OBJECT_KEYS",
+    "SB3Config",
+    "ArmEvalCallback",
+    "AtomicCheckpoint",
+    "Period",
+    "build_model",
+    "check_goal_settings",
+    "check_sb3_config",
+    "constructor_keys",
+    "evaluate_policy_on_targets",
+    "evaluation_env_kwargs",
+    "evaluation_targets",
+    "load_model",
+    "load_run",
+    "load_sb3_config",
+    "newest_model",
+    "save_model",
+    "sb3_config_from_run",
+]

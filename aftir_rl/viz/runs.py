@@ -1,0 +1,261 @@
+"""Run directories for the view: :func:`read_run` reads their JSON files into a :class:`RunData`.
+
+- ``path.json`` (tabular runs): the greedy cell path (``points_cm`` or ``cells``) and the target;
+- ``trajectory.json``: the motion, ``{"complete", "margin_cm", "section_length", "method",
+  "motion": [{"dis", "theta", "phi"}, ...], "waypoint_index"}`` (cm, rad; design.md §1 for the
+  kinematics). The older form (``postures`` and ``moves``, as
+  :meth:`aftir_rl.planning.posture.trajectory.Trajectory.to_json` writes it) is read too, in the
+  same
+  order as ``Trajectory.motion()``. Postures with fewer sections than the longest are padded with
+  straight sections at the base and ``dis`` lowered by their length, which is the same arm;
+- ``config.json`` and ``summary.json``: the tank's name and a few facts.
+
+Only JSON is read (nothing is unpickled or imported). A directory that is missing, holds none of
+:data:`RUN_FILES`, or holds one that is not valid JSON of the expected shape raises
+:class:`~aftir_rl.core.errors.CheckpointError` with a one-line message naming the file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aftir_rl.core.errors import CheckpointError
+from aftir_rl.core.robot import body_points
+
+__all__ = ["RUN_FILES", "RunData", "read_run", "unique_names"]
+
+#: The files a run directory is recognised by.
+RUN_FILES = ("path.json", "trajectory.json", "summary.json", "config.json")
+_POINTS_PER_SECTION = 6
+
+
+@dataclass
+class RunData:
+    """What a run directory holds, read from its JSON files only.
+
+    Attributes:
+        name: the label in the legend (the directory name, made unique).
+        path: the run directory.
+        cells_cm: cell centres of the greedy path [cm], shape ``(P, 3)``, or None.
+        cells: the path's cells ``(a, b, c)`` when ``path.json`` has no ``points_cm``.
+        target: the target [cm], or None.
+        dis: the motion's ``dis`` [cm], shape ``(M,)``, or None without a motion.
+        theta: bending angles [rad], shape ``(M, N)``, or None.
+        phi: bending-plane angles [rad], shape ``(M, N)``, or None.
+        section_length: ``l`` [cm] of the motion.
+        waypoint_index: motion entries that are waypoints' postures.
+        facts: short ``key: value`` lines shown beside the plot (complete, margin, method...).
+        notes: what could not be shown, and why.
+        tank: the tank named by the run's files, if any.
+
+    """
+
+    name: str
+    path: Path
+    cells_cm: NDArray[np.float64] | None = None
+    cells: NDArray[np.int64] | None = None
+    target: NDArray[np.float64] | None = None
+    dis: NDArray[np.float64] | None = None
+    theta: NDArray[np.float64] | None = None
+    phi: NDArray[np.float64] | None = None
+    section_length: float = 0.0
+    waypoint_index: list[int] = field(default_factory=list)
+    facts: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    tank: str | None = None
+
+    @property
+    def n_motion(self) -> int:
+        """Number of postures in the motion (0 without one)."""
+        return 0 if self.dis is None else len(self.dis)
+
+    def backbones(self, index: Sequence[int] | NDArray[np.int64]) -> NDArray[np.float64]:
+        """Arm backbone points [cm] of the given motion entries, shape ``(len, N·K + 1, 3)``."""
+        idx = np.asarray(index, dtype=np.int64)
+        assert self.dis is not None and self.theta is not None and self.phi is not None
+        return body_points(
+            self.dis[idx], self.theta[idx], self.phi[idx], self.section_length, _POINTS_PER_SECTION
+        )
+
+    def tips(self) -> NDArray[np.float64]:
+        """Tip of every motion entry [cm], shape ``(M, 3)``."""
+        return self.backbones(np.arange(self.n_motion))[:, -1, :]
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return json.load(fh)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise CheckpointError(f"{path}: cannot read it as JSON: {why}") from None
+
+
+def _bad(path: Path, what: str) -> CheckpointError:
+    return CheckpointError(f"{path}: {what}")
+
+
+def _points(value: Any, path: Path, key: str) -> NDArray[np.float64]:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise _bad(path, f"{key}: expected a list of [x, y, z] in cm") from None
+    if arr.ndim == 1 and arr.size == 3:
+        return arr
+    if arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.isfinite(arr)):
+        raise _bad(path, f"{key}: expected a list of finite [x, y, z] in cm")
+    return arr
+
+
+def _posture(entry: Any, path: Path, where: str) -> tuple[float, list[float], list[float]]:
+    if not isinstance(entry, dict) or not {"dis", "theta", "phi"} <= set(entry):
+        raise _bad(path, f"{where}: expected {{'dis', 'theta', 'phi'}}, got {str(entry)[:60]}")
+    try:
+        dis = float(entry["dis"])
+        theta = [float(v) for v in entry["theta"]]
+        phi = [float(v) for v in entry["phi"]]
+    except (TypeError, ValueError):
+        raise _bad(path, f"{where}: dis, theta and phi must be numbers (cm, rad)") from None
+    if len(theta) != len(phi) or not theta:
+        raise _bad(path, f"{where}: theta and phi need one value per section, equal in number")
+    if not all(math.isfinite(v) for v in [dis, *theta, *phi]):
+        raise _bad(path, f"{where}: dis, theta and phi must be finite")
+    return dis, theta, phi
+
+
+def _section_length(data: dict[str, Any], path: Path) -> float:
+    value = data.get("section_length")
+    if value is None:
+        postures = [p for p in data.get("postures") or [] if isinstance(p, dict)]
+        value = postures[0].get("section_length") if postures else None
+    try:
+        length = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise _bad(path, "section_length: expected a positive length in cm") from None
+    if not length > 0 or not math.isfinite(length):
+        raise _bad(path, f"section_length: expected a positive length in cm, got {value!r}")
+    return length
+
+
+def _motion_entries(data: dict[str, Any], path: Path) -> tuple[list[Any], list[int]]:
+    """The motion's posture dicts and the waypoints' entries, from either form of the file."""
+    if "motion" in data:
+        motion = data["motion"]
+        if not isinstance(motion, list):
+            raise _bad(path, "motion: expected a list of {dis, theta, phi}")
+        wp = data.get("waypoint_index") or []
+        if not isinstance(wp, list) or not all(isinstance(i, int) for i in wp):
+            raise _bad(path, "waypoint_index: expected a list of integers")
+        return motion, [i for i in wp if 0 <= i < len(motion)]
+    postures = data.get("postures")
+    if not isinstance(postures, list):
+        raise _bad(path, "expected a 'motion' list (or the older 'postures' and 'moves')")
+    vias: dict[int, list[Any]] = {}
+    for move in data.get("moves") or []:
+        if isinstance(move, dict) and isinstance(move.get("via"), list):
+            vias[int(move.get("from", -1))] = move["via"]
+    motion, waypoints = [], []
+    for i, posture in enumerate(postures):
+        if posture is not None:
+            waypoints.append(len(motion))
+            motion += [posture, *vias.get(i, [])]
+    return motion, waypoints
+
+
+def _read_trajectory(run: RunData, path: Path) -> None:
+    data = _read_json(path)
+    if not isinstance(data, dict):
+        raise _bad(path, "expected a JSON object")
+    for key in ("complete", "method", "margin_cm", "inserting"):
+        if key in data and not isinstance(data[key], (dict, list)):
+            run.facts[key] = str(data[key])
+    entries, waypoints = _motion_entries(data, path)
+    if not entries:
+        run.notes.append("trajectory.json has no postures: no arm to show")
+        return
+    parsed = [_posture(e, path, f"motion[{i}]") for i, e in enumerate(entries)]
+    l = _section_length(data, path)
+    n = max(len(t) for _, t, _ in parsed)
+    dis = np.empty(len(parsed))
+    theta = np.zeros((len(parsed), n))
+    phi = np.zeros((len(parsed), n))
+    for i, (d, t, p) in enumerate(parsed):
+        pad = n - len(t)  # straight sections at the base: the same arm (see the docstring)
+        dis[i] = d - pad * l
+        theta[i, pad:], phi[i, pad:] = t, p
+    run.dis, run.theta, run.phi, run.section_length = dis, theta, phi, l
+    run.waypoint_index = waypoints
+    run.facts["motion"] = f"{len(parsed)} postures, {n} sections of {l:g} cm"
+
+
+def read_run(run_dir: str | Path) -> RunData:
+    """Read a run directory's JSON files (``path.json``, ``trajectory.json``, ``summary.json``...).
+
+    Raises:
+        CheckpointError: the directory is missing, holds none of :data:`RUN_FILES`, or one of
+            them is not valid JSON of the expected shape.
+
+    """
+    path = Path(run_dir)
+    if not path.is_dir():
+        raise CheckpointError(f"{path}: not a run directory (no such directory)")
+    present = [name for name in RUN_FILES if (path / name).is_file()]
+    if not present:
+        raise CheckpointError(
+            f"{path}: not a run directory: none of {', '.join(RUN_FILES)} is in it"
+        )
+    run = RunData(name=path.name or str(path), path=path)
+    for name in ("config.json", "summary.json"):
+        if name in present:
+            data = _read_json(path / name)
+            if not isinstance(data, dict):
+                raise _bad(path / name, "expected a JSON object")
+            if isinstance(data.get("tank"), str):
+                run.tank = data["tank"]
+            for key in ("algo", "env_id", "timesteps", "success_rate", "tip_error_cm"):
+                if key in data and isinstance(data[key], (str, int, float)):
+                    run.facts[key] = (
+                        f"{data[key]:.4g}" if isinstance(data[key], float) else str(data[key])
+                    )
+    if "path.json" in present:
+        file = path / "path.json"
+        data = _read_json(file)
+        if not isinstance(data, dict):
+            raise _bad(file, "expected a JSON object")
+        if isinstance(data.get("tank"), str):
+            run.tank = data["tank"]
+        if data.get("points_cm") is not None:
+            run.cells_cm = _points(data["points_cm"], file, "points_cm").reshape(-1, 3)
+        elif data.get("cells") is not None:
+            run.cells = _points(data["cells"], file, "cells").reshape(-1, 3).astype(np.int64)
+        if data.get("target") is not None:
+            run.target = _points(data["target"], file, "target").reshape(3)
+        if "length_steps" in data:
+            run.facts["path"] = f"{data['length_steps']} steps"
+    if "trajectory.json" in present:
+        _read_trajectory(run, path / "trajectory.json")
+    if run.cells_cm is None and run.cells is None and run.dis is None:
+        run.notes.append(
+            f"no path.json or trajectory.json (found {', '.join(present)}): no path to draw"
+        )
+    return run
+
+
+def unique_names(runs: Sequence[RunData]) -> None:
+    """Make the runs' legend names unique: a repeated name gets `` (2)``, `` (3)``..."""
+    seen: dict[str, int] = {}
+    for run in runs:
+        base = run.name
+        if base in seen:
+            seen[base] += 1
+            run.name = f"{base} ({seen[base]})"
+        else:
+            seen[base] = 1
