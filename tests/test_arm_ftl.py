@@ -11,14 +11,11 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.errors import AftirError, ConfigError, InvalidActionError, TargetError
 from aftir_rl.core.robot import body_points
-from aftir_rl.envs.ftl.env import (
-    ArmFTLEnv,
-    TankDistance,
-    ftl_kappa_batch,
-    raster_detour_table,
-)
+from aftir_rl.core.tank import TankDistance
+from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.envs.ftl.kernel import CONTACT_PENALTY
-from aftir_rl.envs.ftl.setup import MAX_STEP_COST
+from aftir_rl.envs.ftl.spec import MAX_STEP_COST
+from aftir_rl.envs.ftl.state import ftl_kappa_batch, raster_detour_table
 from aftir_rl.planning.ftl.model import Route, ftl_postures, kappa_to_angles, route_points
 
 ENV_ID = "AFTIR-ArmFTL-v0"
@@ -320,7 +317,7 @@ def test_detour_bias_draws_more_targets_behind_obstacles():
 
 def test_corner_bias_draws_targets_in_the_regions_corners():
     """corner_bias draws that fraction in the eight corner cubes; 0 leaves the draws unchanged."""
-    from aftir_rl.envs.ftl.fields import CORNER_DEPTH, bay_region
+    from aftir_rl.envs.ftl.targets import CORNER_DEPTH, bay_region
     from aftir_rl.rl.sb3.evaluation import evaluation_targets
 
     def targets(n=200, **kwargs):

@@ -12,12 +12,8 @@ from aftir_rl.core.collision import CollisionScene, point_clearance
 from aftir_rl.core.robot import Posture, body_points, forward_kinematics
 from aftir_rl.core.tank import load_tank
 from aftir_rl.envs.ftl.env import ArmFTLEnv, ArmFTLVectorEnv
-from aftir_rl.envs.ftl.fields import (
-    clearance_grid,
-    draw_targets,
-    field_guide,
-    raster_distance_table,
-)
+from aftir_rl.envs.ftl.fields import clearance_grid, field_guide, raster_distance_table
+from aftir_rl.envs.ftl.targets import draw_targets
 from aftir_rl.planning.ftl.model import kappa_to_angles
 from tests.helpers import random_ftl_batch
 
@@ -235,7 +231,7 @@ def test_draw_targets_are_free_and_reproducible():
 @pytest.mark.parametrize("corners", [0.0, 0.5])
 def test_draw_targets_are_the_first_free_candidates(corners):
     """Each target is its generator's first candidate free by the exact distance (a numpy loop)."""
-    from aftir_rl.envs.ftl.fields import _corner_candidates
+    from aftir_rl.envs.ftl.targets import corner_candidates
 
     env = ArmFTLEnv(bay=2)
     lo, hi = env.region
@@ -244,7 +240,7 @@ def test_draw_targets_are_the_first_free_candidates(corners):
         corner = corners > 0 and rng.random() < corners
         for _ in range(200):
             cand = (
-                _corner_candidates(rng, lo, hi, clearance)
+                corner_candidates(rng, lo, hi, clearance)
                 if corner
                 else rng.uniform(lo, hi, (64, 3))
             )

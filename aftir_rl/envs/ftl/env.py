@@ -1,78 +1,18 @@
 """``AFTIR-ArmFTL-v0``: the whole arm deployed by follow-the-leader, goal-conditioned, batched.
 
-The agent drives the follow-the-leader (FTL) model of :mod:`aftir_rl.planning.ftl.model`: it steers
-the
-bending vector ``κ = (θ cos φ, θ sin φ)`` [rad] of the route section the tip is tracing and pushes
-or pulls the linear module; the body follows the traced route. The env state is a route as that
-module defines it (:class:`~aftir_rl.planning.ftl.model.Route` with ``lead = 0``: bending starts at
-the
-floor), i.e. a ``κ`` history, plus the tip's arc length ``s`` [cm] along it:
-
-- route sections ``0..k−1`` are frozen, section ``k = min(⌊s / l⌋, N − 1)`` is the one being
-  traced and the only one the agent steers;
-- when a push carries ``s`` past ``(k + 1)·l`` the steered ``κ`` is frozen and the new leading
-  section starts as a copy of it (shift-and-copy); a pull below ``k·l`` retracts along the route
-  and the previous section becomes the steered one again;
-- the posture is :func:`~aftir_rl.planning.ftl.model.ftl_postures` of that route at ``s``
-  (:func:`ftl_kappa_batch` is the same formula over a batch of routes; the tests compare the
-  two), so at whole-section stages the body lies exactly on the route.
-
-**Collision** is the numpy signed distance of :func:`~aftir_rl.core.collision.point_clearance` on
-``samples_per_section`` backbone samples per section (5 cm apart at the default 10), batched over
-envs; no python-fcl in the step. *Contact* is a sample whose surface clearance (distance minus the
-arm's radius) is below ``margin`` (1 cm; the panel guide below the floor counts as a wall). Between
-two samples ``δ`` apart the backbone can come closer than the samples by at most ``δ/2`` (2.5 cm at
-the default sampling); the check is on the samples, as stated. The tests cross-check it with
-python-fcl's capsules on 16,000 random postures in three tanks: a contact of the env is always
-one of python-fcl's, and the verdicts differ only where python-fcl's clearance lies within
-:meth:`~aftir_rl.core.collision.CollisionScene.sample_margin` (2.7 cm at 50 cm sections) below the
-margin.
-
-**Goal-conditioned** (Gymnasium-Robotics / panda-gym): observations are
-``Dict(observation, achieved_goal, desired_goal)``; ``achieved_goal`` is the tip and
-``desired_goal`` the target, both in cm. ``observation`` holds no goal (HER relabels goals), only
-the arm and what it senses: see :class:`ArmFTLEnv`. :meth:`ArmFTLEnv.compute_reward` is
-vectorised and the step reward *is* its value on the step's own goal, so SB3's
-``HerReplayBuffer`` relabels with the same function. It needs the step's ``info`` (the previous tip
-and the contact flag): give HER ``replay_buffer_kwargs={"copy_info_dict": True}``; without infos
-it raises :class:`~aftir_rl.core.errors.AftirError` rather than returning a different reward.
-
-**Reward** (per step, ``d`` = distance from tip to target [cm])::
-
-    r = (d_prev − d) / 10  +  shaping · (Φ(tip) − Φ(tip_prev))  +  10·success  −  10·contact
-        − step_cost
-
-The progress term is itself potential-based (``Φ = −d/10``, γ = 1). The switchable shaping term
-(Ng, Harada & Russell 1999, with γ = 1 as for the progress term; the optimal policy of the
-undiscounted episodic task is unchanged) is grounded in the grid world: ``Φ(p) = −cell · e(p, g)
-/ 10``, where ``e`` is the *detour* of the shortest 6-connected path through the tank's raster
-(the BFS that Q-learning is checked against, :meth:`aftir_rl.core.tank.Raster.bfs_distances`) from
-the tip's cell to the target's cell beyond the Manhattan distance of the two cells. ``e`` is 0
-wherever nothing blocks the straight way, so ``(d_prev − d)/10 + ΔΦ`` is the progress along
-``d + cell·e``, a distance-to-go through the hatch: for a bay-2 target a tip in bay 1 is paid for
-moving towards the hatch and up to its height, which the Euclidean term alone punishes. The
-all-pairs raster distances are computed once per tank (numpy relaxation, < 0.5 s) and looked up,
-so the term costs nothing per step and HER can relabel it. Measured with and without: see
-``benchmarks/bench_arm_ftl.py`` and the README.
-
-``shaping="field"`` takes the potential from the guide's free-space field instead
-(:class:`~aftir_rl.envs.ftl.fields.FieldGuide`, the motion planner's field on a grid of half the
-raster's cell with clearance as a cost): ``Φ(p) = −(P(p, g) − d)/10``, ``P`` the field's
-cost-to-go, so ``(d_prev − d)/10 + ΔΦ`` is the progress along ``P`` itself: through the hatch's
-middle, not along its edge, and without the 20 cm raster's steps. ``P`` of a relabelled goal
-needs that goal's field (built once per 10 cm cell, about 28 ms), so it suits PPO better than
-HER.
-
-**Batched.** :class:`ArmFTLVectorEnv` (``gym.make_vec(..., vectorization_mode=
-"vector_entry_point")``) steps ``num_envs`` arms in one numpy pass; both classes share
-:class:`FTLBatch`, so a vector env seeded ``seed`` gives row ``i`` exactly the transitions of a
-single env seeded ``seed + i`` under the same actions.
+:class:`ArmFTLEnv` (one arm) and :class:`ArmFTLVectorEnv` (``num_envs`` arms in one numpy pass,
+``gym.make_vec(..., vectorization_mode="vector_entry_point")``) share :class:`FTLTask` and
+:class:`~aftir_rl.envs.ftl.state.FTLBatch`, so row ``i`` of a vector env seeded ``seed`` has
+exactly the transitions of a single env seeded ``seed + i``. The agent steers the route
+section the tip is tracing and pushes or pulls the linear module; the body follows the traced
+route (:mod:`aftir_rl.planning.ftl.model`). Options: :mod:`aftir_rl.envs.ftl.spec`; state and
+contact: :mod:`~aftir_rl.envs.ftl.state`; reward: :mod:`~aftir_rl.envs.ftl.reward`. The
+model, the collision check and the reward are described in docs/envs/armftl.md.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -84,21 +24,13 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.robot import Posture, body_points
-from aftir_rl.core.tank import Tank, TankDistance
-from aftir_rl.envs.ftl.setup import _check_options, _GoalReward, _Setup
-from aftir_rl.envs.ftl.state import FTLBatch, ftl_kappa_batch, raster_detour_table
+from aftir_rl.envs.ftl.spec import FTLSpec
+from aftir_rl.envs.ftl.task import FTLTask, check_options
 
-__all__ = [
-    "ArmFTLEnv",
-    "ArmFTLVectorEnv",
-    "FTLBatch",
-    "ftl_kappa_batch",
-    "raster_detour_table",
-    "TankDistance",
-]
+__all__ = ["ArmFTLEnv", "ArmFTLVectorEnv"]
 
 
-class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
+class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
     """The whole arm, deployed through the panel by follow-the-leader, reaching targets.
 
     ## Description
@@ -170,7 +102,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
       sides. A curriculum knob for training, like ``detour_bias`` (not both at once).
     - ``failure_bias`` (0): the fraction of drawn targets whose density is weighted by the
       running failure rate of the episodes aimed at their raster cell
-      (:class:`~aftir_rl.envs.ftl.setup.FailureRates`, kept by the env from its own episodes;
+      (:class:`~aftir_rl.envs.ftl.targets.FailureRates`, kept by the env from its own episodes;
       cells never aimed at count as hard): training comes back to where the policy still fails,
       wherever that is. With ``corner_bias`` the corner targets are weighted too; not with
       ``detour_bias``. Training-only, like ``detour_bias``; the rates start again with each
@@ -198,56 +130,11 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(
-        self,
-        tank: str | Path | Tank = "b737_center",
-        n_sections: int | None = None,
-        target: Sequence[float] | None = None,
-        bay: int | None = None,
-        target_clearance: float = 10.0,
-        success_tolerance: float = 2.0,
-        margin: float = 1.0,
-        kappa_step: float = 0.1,
-        push_step: float = 5.0,
-        start_height: float = 10.0,
-        samples_per_section: int = 10,
-        shaping: bool | str = False,
-        guide: bool = False,
-        detour_bias: float = 0.0,
-        steer: str = "increment",
-        step_cost: float = 0.0,
-        corner_bias: float = 0.0,
-        slack: float = 0.0,
-        failure_bias: float = 0.0,
-        near_goal: bool = False,
-        render_mode: str | None = None,
-    ) -> None:
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         self.render_mode = render_mode
-        self._setup(
-            tank,
-            n_sections,
-            1,
-            target,
-            bay,
-            target_clearance,
-            success_tolerance,
-            margin,
-            kappa_step,
-            push_step,
-            start_height,
-            samples_per_section,
-            shaping,
-            guide,
-            detour_bias,
-            steer,
-            step_cost,
-            corner_bias,
-            slack,
-            failure_bias,
-            near_goal,
-        )
+        self._configure(FTLSpec.from_kwargs(**kwargs), 1)
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
         self.action_space, self.observation_space = self._spaces()  # type: ignore[assignment]
@@ -293,7 +180,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
     ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
         """Straighten the arm just inside the panel and set a target."""
         super().reset(seed=seed)
-        options = _check_options(options)
+        options = check_options(options)
         if self._open:  # the last episode ended without success (truncated or left)
             self._record_outcomes(self.batch.target, [False])
         self._open = False
@@ -355,9 +242,7 @@ class ArmFTLEnv(_Setup, _GoalReward, gym.Env[dict[str, NDArray[np.float32]], NDA
         return self._renderer.render(np.array(self._tips), self.target, arms=[self.body()])
 
 
-class ArmFTLVectorEnv(
-    _Setup, _GoalReward, VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], Any]
-):
+class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], Any]):
     """``num_envs`` :class:`ArmFTLEnv` s stepped together in numpy (autoreset: next step).
 
     Same arguments as :class:`ArmFTLEnv` plus ``num_envs`` and ``max_episode_steps``
@@ -379,28 +264,9 @@ class ArmFTLVectorEnv(
         self,
         num_envs: int = 1,
         max_episode_steps: int = 300,
-        tank: str | Path | Tank = "b737_center",
-        n_sections: int | None = None,
-        target: Sequence[float] | None = None,
-        bay: int | None = None,
-        target_clearance: float = 10.0,
-        success_tolerance: float = 2.0,
-        margin: float = 1.0,
-        kappa_step: float = 0.1,
-        push_step: float = 5.0,
-        start_height: float = 10.0,
-        samples_per_section: int = 10,
-        shaping: bool | str = False,
-        guide: bool = False,
-        detour_bias: float = 0.0,
-        steer: str = "increment",
-        step_cost: float = 0.0,
-        corner_bias: float = 0.0,
-        slack: float = 0.0,
-        failure_bias: float = 0.0,
-        near_goal: bool = False,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
+        **kwargs: Any,
     ) -> None:
         if render_mode is not None:
             raise ConfigError("ArmFTLVectorEnv does not render; use ArmFTLEnv for pictures")
@@ -409,29 +275,7 @@ class ArmFTLVectorEnv(
         self.num_envs = int(num_envs)
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = None
-        self._setup(
-            tank,
-            n_sections,
-            self.num_envs,
-            target,
-            bay,
-            target_clearance,
-            success_tolerance,
-            margin,
-            kappa_step,
-            push_step,
-            start_height,
-            samples_per_section,
-            shaping,
-            guide,
-            detour_bias,
-            steer,
-            step_cost,
-            corner_bias,
-            slack,
-            failure_bias,
-            near_goal,
-        )
+        self._configure(FTLSpec.from_kwargs(**kwargs), self.num_envs)
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -469,7 +313,7 @@ class ArmFTLVectorEnv(
                 raise ConfigError(f"reset got {len(seeds)} seeds for {self.num_envs} envs")
             self._rngs = [seeding.np_random(int(s))[0] for s in seeds]
             self._np_random, self._np_random_seed = seeding.np_random(seeds[0])
-        options = _check_options(options)
+        options = check_options(options)
         self._targets_option = None
         if options.get("target") is not None:
             t = np.asarray(options["target"], dtype=np.float64)

@@ -28,19 +28,17 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.tank import Tank
 from aftir_rl.envs.ftl import kernel
-from aftir_rl.envs.ftl.kernel import KernelTank, kernel_tank
+from aftir_rl.envs.ftl.kernel import KernelTank
 
 __all__ = [
     "ClearanceGrid",
     "FieldGuide",
-    "bay_region",
     "clearance_grid",
     "kernel_grid",
+    "kernel_tank",
     "field_guide",
-    "draw_targets",
     "raster_distance_table",
 ]
 
@@ -165,121 +163,55 @@ def clearance_grid(tank: Tank) -> ClearanceGrid:
     return grid
 
 
+def kernel_tank(tank: Tank, grid: ClearanceGrid) -> KernelTank:
+    """The :class:`KernelTank` of a tank and its clearance grid."""
+    groups: dict[str, list[tuple[float, ...]]] = {"box": [], "cylinder": [], "sphere": []}
+    for solid in tank.solids:
+        params = tuple(float(v) for v in solid.distance_params)
+        if solid.kind == "cylinder":
+            params += (float(solid.stack_key),)
+        groups[solid.kind].append(params)
+
+    def stack(rows: list[tuple[float, ...]], width: int) -> NDArray[np.float64]:
+        return np.array(rows, dtype=np.float64).reshape(-1, width)
+
+    lowest = min((float(s.aabb()[0][2]) for s in tank.solids), default=math.inf)
+    c, r = tank.panel.center, float(tank.panel.radius)
+    walls = np.array(
+        [float(tank.walls), *tank.box_min, *tank.box_max, c[0], c[1], r,
+         min(float(tank.box_min[2]), lowest) - r],
+        dtype=np.float64,
+    )  # fmt: skip
+    offsets, total = [], 0
+    for _, _, _, values in grid.grids:
+        offsets.append(total)
+        total += len(values)
+    return KernelTank(
+        stack(groups["box"], 6),
+        stack(groups["cylinder"], 6),
+        stack(groups["sphere"], 4),
+        walls,
+        np.array([lo for lo, _, _, _ in grid.grids], dtype=np.float64).reshape(-1, 3),
+        np.array([g for _, g, _, _ in grid.grids], dtype=np.float64),
+        np.array([shape for _, _, shape, _ in grid.grids], dtype=np.int64).reshape(-1, 3),
+        np.array(offsets, dtype=np.int64),
+        np.concatenate([values for _, _, _, values in grid.grids]).astype(np.float64),
+        float(grid.slack),
+    )
+
+
 _KERNEL_TANKS: weakref.WeakKeyDictionary[Tank, KernelTank] = weakref.WeakKeyDictionary()
 
 
 def kernel_grid(tank: Tank) -> KernelTank:
     """The tank's signed distance and :func:`clearance_grid` as the compiled kernels read them.
 
-    Built once per tank (:func:`aftir_rl.envs.ftl.kernel.kernel_tank`).
+    Built once per tank (:func:`kernel_tank`).
     """
     packed = _KERNEL_TANKS.get(tank)
     if packed is None:
         packed = _KERNEL_TANKS[tank] = kernel_tank(tank, clearance_grid(tank))
     return packed
-
-
-def bay_region(tank: Tank, bay: int | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Corners [cm] of the tank's box, or of bay 1 / 2 (either side of the baffle)."""
-    lo, hi = np.array(tank.box_min, float), np.array(tank.box_max, float)
-    if bay is None:
-        return lo, hi
-    baffle = tank.baffle
-    if baffle is None or bay not in (1, 2):
-        raise ConfigError(
-            f"bay must be None, 1 or 2 (and the tank must have a baffle), got {bay!r}"
-        )
-    i, half = baffle.index, baffle.thickness / 2
-    if bay == 1:
-        hi[i] = baffle.position - half
-    else:
-        lo[i] = baffle.position + half
-    return lo, hi
-
-
-def draw_targets(
-    rngs: Sequence[np.random.Generator],
-    tank: Tank,
-    region: tuple[NDArray[np.float64], NDArray[np.float64]],
-    clearance: float,
-    start: NDArray[np.float64],
-    biased: float = 0.0,
-    weight: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
-    corners: float = 0.0,
-) -> NDArray[np.float64]:
-    """One target per generator: uniform in ``region``, ``clearance`` [cm] from every surface.
-
-    Each generator draws batches of 64 uniform candidates until one is at least ``clearance``
-    from every surface and 20 cm from ``start``; its first such candidate is its target (the
-    tank's :func:`clearance_grid` settles most candidates, the rest are computed exactly, so the
-    verdicts are the exact ones: :func:`aftir_rl.envs.ftl.kernel.usable`). Shape
-    ``(len(rngs), 3)``.
-
-    With ``biased > 0`` each generator first draws whether its target is biased (probability
-    ``biased``); a biased one keeps each free candidate with probability ``weight(candidate)``
-    (points ``(..., 3)`` → values in ``[0, 1]``), so targets are drawn with density proportional to
-    ``weight``. ``biased = 0`` draws nothing more: the targets are the same as without it.
-
-    With ``corners > 0`` each generator then draws whether its target lies in a corner of
-    ``region`` (probability ``corners``): then its candidates are uniform in the cubes of side
-    :data:`CORNER_DEPTH` that start ``clearance`` inward from the region's eight corners (a
-    corner drawn per candidate), where an arm must bend most with walls on three sides. The
-    same checks apply (and a biased generator's weighting, in a corner too).
-    """
-    lo, hi = region
-    start = np.ascontiguousarray(start, dtype=np.float64)
-    packed = kernel_grid(tank)
-    out = np.empty((len(rngs), 3))
-    todo = np.arange(len(rngs))
-    if biased > 0 and weight is None:
-        raise ConfigError("draw_targets: biased > 0 needs a weight function")
-    want = np.array([biased > 0 and rng.random() < biased for rng in rngs], dtype=bool)
-    corner = np.zeros(len(rngs), dtype=bool)
-    if corners > 0:
-        corner[:] = [rng.random() < corners for rng in rngs]
-    for _ in range(200):
-        if not len(todo):
-            return out
-        cand = np.stack(
-            [
-                _corner_candidates(rngs[int(i)], lo, hi, clearance)
-                if corner[i]
-                else rngs[int(i)].uniform(lo, hi, (64, 3))
-                for i in todo
-            ]
-        )
-        # clear of the surfaces and 20 cm from the start: up to each row's first such candidate
-        ok = kernel.usable(cand, float(clearance), start, 20.0, packed, True)
-        if want[todo].any():  # biased rows: every candidate's verdict, then the weights
-            assert weight is not None
-            rows = np.flatnonzero(want[todo])
-            keep = np.stack([rngs[int(todo[r])].random(64) for r in rows]) < weight(cand[rows])
-            ok[rows] = kernel.usable(cand[rows], float(clearance), start, 20.0, packed) & keep
-        found = ok.any(1)
-        rows = np.flatnonzero(found)
-        out[todo[rows]] = cand[rows, ok[rows].argmax(1)]
-        todo = todo[~found]
-    if len(todo):
-        raise TargetError(f"no free point {clearance:g} cm from every surface in the target region")
-    return out
-
-
-#: Side [cm] of the cubes in the corners of a target region that ``corners`` draws from
-#: (:func:`draw_targets`).
-CORNER_DEPTH = 15.0
-
-
-def _corner_candidates(
-    rng: np.random.Generator, lo: NDArray[np.float64], hi: NDArray[np.float64], clearance: float
-) -> NDArray[np.float64]:
-    """64 points ``(64, 3)``, each in the cube ``clearance`` inward from a random corner.
-
-    Kept inside the region (a region narrower than the cubes gets points on its faces, which the
-    clearance check rejects).
-    """
-    high = rng.integers(0, 2, (64, 3)).astype(bool)
-    depth = clearance + rng.uniform(0.0, CORNER_DEPTH, (64, 3))
-    return np.minimum(np.maximum(np.where(high, hi - depth, lo + depth), lo), hi)
 
 
 def raster_distance_table(tank: Tank) -> NDArray[np.int32]:

@@ -1,0 +1,162 @@
+"""The guide field's queries, compiled: the way to a target, its lookahead, its columns."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from aftir_rl.envs.ftl.kernel.observation import OBS_LIMIT
+
+__all__ = ["cell_of", "guide_query", "lookahead", "guide_columns"]
+
+
+@njit(cache=True)
+def cell_of(
+    px: float,
+    py: float,
+    pz: float,
+    origin: NDArray[np.float64],
+    size: float,
+    shape: NDArray[np.int64],
+) -> tuple[int, int, int]:
+    """The grid cell of point ``(px, py, pz)`` [cm], clamped to the grid."""
+    c0 = min(max(int(math.floor((px - origin[0]) / size)), 0), shape[0] - 1)
+    c1 = min(max(int(math.floor((py - origin[1]) / size)), 0), shape[1] - 1)
+    c2 = min(max(int(math.floor((pz - origin[2]) / size)), 0), shape[2] - 1)
+    return c0, c1, c2
+
+
+@njit(cache=True)
+def guide_query(
+    p: NDArray[np.float64],
+    g: NDArray[np.float64],
+    ids: NDArray[np.int64],
+    table: NDArray[np.float32],
+    edges: NDArray[np.bool_],
+    neighbours: NDArray[np.int64],
+    origin: NDArray[np.float64],
+    size: float,
+    shape: NDArray[np.int64],
+    to_go: NDArray[np.float64],
+    way: NDArray[np.float64],
+) -> None:
+    """:meth:`FieldGuide.__call__ <aftir_rl.envs.ftl.fields.FieldGuide.__call__>`, in place."""
+    s1, s2 = shape[1], shape[2]
+    for b in range(p.shape[0]):
+        px, py, pz = p[b, 0], p[b, 1], p[b, 2]
+        c0, c1, c2 = cell_of(px, py, pz, origin, size, shape)
+        flat = (c0 * s1 + c1) * s2 + c2
+        row = ids[b]
+        dx = px - (origin[0] + (c0 + 0.5) * size)
+        dy = py - (origin[1] + (c1 + 0.5) * size)
+        dz = pz - (origin[2] + (c2 + 0.5) * size)
+        value = float(table[row, flat]) + math.sqrt(dx * dx + dy * dy + dz * dz)
+        best, wx, wy, wz = math.inf, 0.0, 0.0, 0.0
+        first = True
+        for e in range(neighbours.shape[0]):
+            n0, n1, n2 = c0 + neighbours[e, 0], c1 + neighbours[e, 1], c2 + neighbours[e, 2]
+            ok = 0 <= n0 < shape[0] and 0 <= n1 < shape[1] and 0 <= n2 < s2
+            if not ok:
+                n0, n1, n2 = 0, 0, 0
+            ok = ok and edges[e, flat]
+            sx = origin[0] + (n0 + 0.5) * size - px
+            sy = origin[1] + (n1 + 0.5) * size - py
+            sz = origin[2] + (n2 + 0.5) * size - pz
+            v = math.inf
+            if ok:
+                v = float(table[row, (n0 * s1 + n1) * s2 + n2]) + math.sqrt(
+                    sx * sx + sy * sy + sz * sz
+                )
+            if first or v < best:  # argmin: the first of equals
+                best, wx, wy, wz = v, sx, sy, sz
+                first = False
+        value = min(value, best)
+        g0, g1, g2 = cell_of(g[b, 0], g[b, 1], g[b, 2], origin, size, shape)
+        if (c0 == g0 and c1 == g1 and c2 == g2) or not math.isfinite(best):
+            wx, wy, wz = g[b, 0] - px, g[b, 1] - py, g[b, 2] - pz
+            value = math.sqrt(wx * wx + wy * wy + wz * wz)
+        to_go[b] = value
+        norm = math.sqrt(wx * wx + wy * wy + wz * wz)
+        if norm > 1e-9:
+            way[b, 0], way[b, 1], way[b, 2] = wx / norm, wy / norm, wz / norm
+        else:
+            way[b, 0], way[b, 1], way[b, 2] = 0.0, 0.0, 0.0
+
+
+@njit(cache=True)
+def lookahead(
+    p: NDArray[np.float64],
+    g: NDArray[np.float64],
+    ids: NDArray[np.int64],
+    nxt: NDArray[np.int32],
+    hops: NDArray[np.int64],
+    origin: NDArray[np.float64],
+    size: float,
+    shape: NDArray[np.int64],
+    out: NDArray[np.float64],
+) -> None:
+    """:meth:`FieldGuide.lookahead <aftir_rl.envs.ftl.fields.FieldGuide.lookahead>`, in place."""
+    s1, s2 = shape[1], shape[2]
+    for b in range(p.shape[0]):
+        c0, c1, c2 = cell_of(p[b, 0], p[b, 1], p[b, 2], origin, size, shape)
+        cell = (c0 * s1 + c1) * s2 + c2
+        g0, g1, g2 = cell_of(g[b, 0], g[b, 1], g[b, 2], origin, size, shape)
+        home = (g0 * s1 + g1) * s2 + g2
+        done = 0
+        for j in range(hops.shape[0]):
+            for _ in range(hops[j] - done):
+                cell = int(nxt[ids[b], cell])
+            done = hops[j]
+            if cell == home:
+                out[b, j, 0], out[b, j, 1], out[b, j, 2] = g[b, 0], g[b, 1], g[b, 2]
+            else:
+                a0, rem = cell // (s1 * s2), cell % (s1 * s2)
+                out[b, j, 0] = origin[0] + (a0 + 0.5) * size
+                out[b, j, 1] = origin[1] + (rem // s2 + 0.5) * size
+                out[b, j, 2] = origin[2] + (rem % s2 + 0.5) * size
+
+
+@njit(cache=True)
+def guide_columns(
+    frames: NDArray[np.float64],
+    to_go: NDArray[np.float64],
+    way: NDArray[np.float64],
+    target: NDArray[np.float64],
+    tip: NDArray[np.float64],
+    heading: NDArray[np.float64],
+    ahead: NDArray[np.float64],
+    out: NDArray[np.float32],
+    start: int,
+) -> None:
+    """The guide's columns of the observation from column ``start``, in place.
+
+    ``min(to_go, 1000)/100``, then in the steering frame (``Fᵀ v``): the way, ``(target −
+    tip)/100``, the heading and the unit directions to the ``ahead`` points ``(B, H, 3)``.
+    """
+    for b in range(to_go.shape[0]):
+        o = out[b]
+        f = frames[b]
+        o[start] = min(to_go[b], 1000.0) / 100.0
+        c = start + 1
+        for v in range(3 + ahead.shape[1]):
+            if v == 0:
+                x, y, z = way[b, 0], way[b, 1], way[b, 2]
+            elif v == 1:
+                x = (target[b, 0] - tip[b, 0]) / 100.0
+                y = (target[b, 1] - tip[b, 1]) / 100.0
+                z = (target[b, 2] - tip[b, 2]) / 100.0
+            elif v == 2:
+                x, y, z = heading[b, 0], heading[b, 1], heading[b, 2]
+            else:
+                h = v - 3
+                x = ahead[b, h, 0] - tip[b, 0]
+                y = ahead[b, h, 1] - tip[b, 1]
+                z = ahead[b, h, 2] - tip[b, 2]
+                norm = max(math.sqrt(x * x + y * y + z * z), 1e-9)
+                x, y, z = x / norm, y / norm, z / norm
+            for i in range(3):
+                o[c + i] = min(max(f[0, i] * x + f[1, i] * y + f[2, i] * z, -OBS_LIMIT), OBS_LIMIT)
+            c += 3
