@@ -31,8 +31,9 @@ from __future__ import annotations
 import gc
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -255,102 +256,137 @@ def rrt_connect(
     from ompl import util as ou
 
     began = time.perf_counter()
-    n, l, tmax = start.n_sections, scene.arm.section_length, scene.arm.theta_max
     goal = align(goal, start)
     for name, p in (("start", start), ("goal", goal)):
         if first_collision(scene, [p]) is not None:
             return MotionPlan(
                 seconds=time.perf_counter() - began, reason=f"the {name} posture collides"
             )
-    ou.setLogLevel(ou.LOG_WARN)
-    global _SEEDED
-    if not _SEEDED:
-        ou.RNG.setSeed(int(seed) + 1)  # OMPL takes 0 for "pick one"
-        _SEEDED = True
-    ends = [start, goal]
-    x0, x1 = start.to_vector(), goal.to_vector()
-    if plane is not None:
-        # OMPL's state: dis and the signed in-plane bends (ValueError off the plane).
-        x0, x1 = (in_plane(p, plane).to_vector()[: n + 1] for p in (start, goal))
-        # One representation for the whole path: straight sections get phi = plane (the arm
-        # does not move), the goal is aligned to that, and each section keeps its phi (plane or
-        # plane + pi) with theta signed to match. An edge between two states then interpolates
-        # theta and dis only: exactly the in-plane edge OMPL checked.
-        bent = np.abs(start.theta) > 1e-9
-        ends[0] = Posture(start.dis, start.theta, np.where(bent, start.phi, plane))
-        ends[1] = align(goal, ends[0])
-        family = np.array(ends[0].phi)
-        sign = np.sign(np.cos(family - plane))
-    low = np.concatenate(
-        [
-            [min(x0[0], x1[0], -n * l) / l],
-            np.full(n, -tmax),
-            np.minimum(x0[n + 1 :], x1[n + 1 :]) - math.pi,
-        ]
-    )
-    high = np.concatenate(
-        [
-            [max(x0[0], x1[0], 0.0) / l],
-            np.full(n, tmax),
-            np.maximum(x0[n + 1 :], x1[n + 1 :]) + math.pi,
-        ]
-    )
-    dims = 1 + (n if plane is not None else 2 * n)
-    low, high, x0, x1 = low[:dims], high[:dims], x0[:dims], x1[:dims]
-    space = ob.RealVectorStateSpace(dims)
-    bounds = ob.RealVectorBounds(dims)
-    for i, (lo, hi) in enumerate(zip(low, high)):
-        bounds.setLow(i, float(lo))
-        bounds.setHigh(i, float(hi))
-    space.setBounds(bounds)
-    setup = og.SimpleSetup(space)
+    _seed_once(ou, seed)
+    frame = _JointFrame.make(scene, start, goal, plane)
     checks = [0]
-
-    def to_posture(state: object) -> Posture:
-        x = np.array([state[i] for i in range(dims)])  # type: ignore[index]
-        x[0] *= l
-        if plane is not None:
-            return Posture(x[0], x[1:] * sign, family)
-        return Posture.from_vector(x)
 
     def valid(state: object) -> bool:
         checks[0] += 1
-        return not scene.collides_fast(to_posture(state))
+        return not scene.collides_fast(frame.posture(state))
 
-    setup.setStateValidityChecker(valid)
-    states = []
-    for x in (x0, x1):
-        state = space.allocState()
-        for i, v in enumerate(x):
-            state[i] = float(v / l if i == 0 else v)
-        states.append(state)
-    setup.setStartAndGoalStates(states[0], states[1])
-    setup.getSpaceInformation().setStateValidityCheckingResolution(resolution)
-    setup.setPlanner(og.RRTConnect(setup.getSpaceInformation()))
-    status = setup.solve(float(time_limit))
-    plan = MotionPlan(checks=0)
-    if setup.haveExactSolutionPath():
-        if simplify:
-            setup.simplifySolution(max(0.1, time_limit / 10))
-        path = setup.getSolutionPath()
-        # OMPL's own states, written as checked: no re-alignment, which would change the edges.
-        inner = [to_posture(path.getState(i)) for i in range(1, path.getStateCount() - 1)]
-        if plane is not None:  # the start and goal in the path's representation, same arms
-            inner = [ends[0], *inner, ends[1]]
-        postures = [start, *inner, goal]
-        hit = first_collision(scene, densify(postures))
-        if hit is None:
-            plan.postures, plan.solved = postures, True
-        else:
-            plan.reason = "OMPL's path collides between its edge checks"
-    else:
-        plan.reason = f"RRT-Connect found no path in {time_limit:g} s ({status})"
+    space, bounds, setup, states = _simple_setup(ob, og, frame, valid, resolution)
+    plan = _solve(setup, frame, simplify, time_limit)
     plan.checks = checks[0]
     # Drop OMPL's objects (and the callback's reference cycle) now, not at interpreter exit.
     del setup, states, space, bounds, valid
     gc.collect()
     plan.seconds = time.perf_counter() - began
     return plan
+
+
+def _seed_once(ou: Any, seed: int) -> None:
+    """Quiet OMPL's log and seed its generator, at the first call of the process only."""
+    ou.setLogLevel(ou.LOG_WARN)
+    global _SEEDED
+    if not _SEEDED:
+        ou.RNG.setSeed(int(seed) + 1)  # OMPL takes 0 for "pick one"
+        _SEEDED = True
+
+
+@dataclass
+class _JointFrame:
+    """OMPL's joint space of one motion: its ends and bounds, and its states as postures."""
+
+    scene: CollisionScene
+    start: Posture
+    goal: Posture  # aligned to start
+    dims: int
+    x0: NDArray[np.float64]  # the start's and goal's states (dis in cm)
+    x1: NDArray[np.float64]
+    low: NDArray[np.float64]  # the bounds (dis in section lengths)
+    high: NDArray[np.float64]
+    ends: list[Posture]  # the start and goal written as the path's postures
+    plane: float | None = None
+    family: NDArray[np.float64] | None = None  # in a plane: each section's phi and theta's sign
+    sign: NDArray[np.float64] | None = None
+
+    @classmethod
+    def make(
+        cls, scene: CollisionScene, start: Posture, goal: Posture, plane: float | None
+    ) -> _JointFrame:
+        """The joint space from ``start`` to ``goal`` (aligned to it), in ``plane`` if given."""
+        n, l, tmax = start.n_sections, scene.arm.section_length, scene.arm.theta_max
+        ends = [start, goal]
+        x0, x1 = start.to_vector(), goal.to_vector()
+        family = sign = None
+        if plane is not None:
+            # OMPL's state: dis and the signed in-plane bends (ValueError off the plane).
+            x0, x1 = (in_plane(p, plane).to_vector()[: n + 1] for p in (start, goal))
+            # One representation for the whole path: straight sections get phi = plane (the arm
+            # does not move), the goal is aligned to that, and each section keeps its phi (plane
+            # or plane + pi) with theta signed to match. An edge between two states then
+            # interpolates theta and dis only: exactly the in-plane edge OMPL checked.
+            bent = np.abs(start.theta) > 1e-9
+            ends[0] = Posture(start.dis, start.theta, np.where(bent, start.phi, plane))
+            ends[1] = align(goal, ends[0])
+            family = np.array(ends[0].phi)
+            sign = np.sign(np.cos(family - plane))
+        lo_dis, hi_dis = min(x0[0], x1[0], -n * l) / l, max(x0[0], x1[0], 0.0) / l
+        phi0, phi1 = x0[n + 1 :], x1[n + 1 :]
+        low = np.concatenate([[lo_dis], np.full(n, -tmax), np.minimum(phi0, phi1) - math.pi])
+        high = np.concatenate([[hi_dis], np.full(n, tmax), np.maximum(phi0, phi1) + math.pi])
+        dims = 1 + (n if plane is not None else 2 * n)
+        x0, x1, low, high = x0[:dims], x1[:dims], low[:dims], high[:dims]
+        return cls(scene, start, goal, dims, x0, x1, low, high, ends, plane, family, sign)
+
+    def posture(self, state: object) -> Posture:
+        """The posture of an OMPL state."""
+        x = np.array([state[i] for i in range(self.dims)])  # type: ignore[index]
+        x[0] *= self.scene.arm.section_length
+        if self.plane is not None:
+            assert self.sign is not None and self.family is not None
+            return Posture(x[0], x[1:] * self.sign, self.family)
+        return Posture.from_vector(x)
+
+
+def _simple_setup(
+    ob: Any, og: Any, frame: _JointFrame, valid: Callable[[object], bool], resolution: float
+) -> tuple[Any, Any, Any, list[Any]]:
+    """OMPL's RRT-Connect in the frame's space: the space, its bounds, the setup, start and goal."""
+    space = ob.RealVectorStateSpace(frame.dims)
+    bounds = ob.RealVectorBounds(frame.dims)
+    for i, (lo, hi) in enumerate(zip(frame.low, frame.high)):
+        bounds.setLow(i, float(lo))
+        bounds.setHigh(i, float(hi))
+    space.setBounds(bounds)
+    setup = og.SimpleSetup(space)
+    setup.setStateValidityChecker(valid)
+    states = []
+    for x in (frame.x0, frame.x1):
+        state = space.allocState()
+        for i, v in enumerate(x):
+            state[i] = float(v / frame.scene.arm.section_length if i == 0 else v)
+        states.append(state)
+    setup.setStartAndGoalStates(states[0], states[1])
+    setup.getSpaceInformation().setStateValidityCheckingResolution(resolution)
+    setup.setPlanner(og.RRTConnect(setup.getSpaceInformation()))
+    return space, bounds, setup, states
+
+
+def _solve(setup: Any, frame: _JointFrame, simplify: bool, time_limit: float) -> MotionPlan:
+    """Run the planner; keep its (simplified) exact path if our dense check agrees with it."""
+    status = setup.solve(float(time_limit))
+    if not setup.haveExactSolutionPath():
+        return MotionPlan(
+            checks=0, reason=f"RRT-Connect found no path in {time_limit:g} s ({status})"
+        )
+    if simplify:
+        setup.simplifySolution(max(0.1, time_limit / 10))
+    path = setup.getSolutionPath()
+    # OMPL's own states, written as checked: no re-alignment, which would change the edges.
+    inner = [frame.posture(path.getState(i)) for i in range(1, path.getStateCount() - 1)]
+    if frame.plane is not None:  # the start and goal in the path's representation, same arms
+        inner = [frame.ends[0], *inner, frame.ends[1]]
+    postures = [frame.start, *inner, frame.goal]
+    if first_collision(frame.scene, densify(postures)) is None:
+        return MotionPlan(postures=postures, solved=True, checks=0)
+    return MotionPlan(checks=0, reason="OMPL's path collides between its edge checks")
 
 
 def bridge(

@@ -140,15 +140,7 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
             f"{src}: unknown key {brief(unknown[0])}; allowed keys are "
             f"{', '.join(sorted(_TOP_KEYS))}"
         )
-    _require(data, ["box"], src)
-    box = _section(data, "box", {"min", "max"}, src)
-    _require(box, ["min", "max"], f"{src}: box")
-    lo, hi = (
-        cast(Vec3, to_vector(box["min"], f"{src}: box.min", limit=MAX_COORD)),
-        cast(Vec3, to_vector(box["max"], f"{src}: box.max", limit=MAX_COORD)),
-    )
-    if any(h <= lo_ for lo_, h in zip(lo, hi)):
-        raise ConfigError(f"{src}: box: max must exceed min on every axis, got {lo} and {hi}")
+    lo, hi = _parse_box(data, src)
     kwargs: dict[str, Any] = {"box_min": lo, "box_max": hi, "source": src}
     kwargs["name"] = str(data.get("name", Path(src).stem))
     kwargs["description"] = str(data.get("description", ""))
@@ -157,21 +149,7 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
         raise ConfigError(f"{src}: walls: expected true or false, got {brief(walls)}")
     kwargs["walls"] = walls
     if data.get("cell_size") is not None:
-        cell = _positive(data["cell_size"], f"{src}: cell_size")
-        for axis, (a, b) in enumerate(zip(lo, hi)):
-            n = (b - a) / cell
-            if abs(n - round(n)) > 1e-9:
-                raise ConfigError(
-                    f"{src}: cell_size: {cell:g} does not divide the box extent {b - a:g} along "
-                    f"{'xyz'[axis]}"
-                )
-        cells = math.prod(round((b - a) / cell) for a, b in zip(lo, hi))
-        if cells > MAX_CELLS:
-            raise ConfigError(
-                f"{src}: cell_size: {cell:g} cm splits the box into {cells:,} cells, more than the "
-                f"{MAX_CELLS:,} allowed; use a larger cell_size"
-            )
-        kwargs["cell_size"] = cell
+        kwargs["cell_size"] = _parse_cell_size(data["cell_size"], lo, hi, src)
     if "panel" in data:
         panel = _section(data, "panel", {"center", "radius"}, src)
         centre = to_vector(panel.get("center", (0, 0, 0)), f"{src}: panel.center", limit=MAX_COORD)
@@ -187,33 +165,77 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
     elif data.get("hatch") is not None:
         raise ConfigError(f"{src}: hatch: a hatch needs a baffle")
     if "arm" in data:
-        arm = _section(data, "arm", {"section_length", "max_sections", "radius", "theta_max"}, src)
-        try:
-            kwargs["arm"] = ArmSpec(
-                section_length=to_float(
-                    arm.get("section_length", 50), f"{src}: arm.section_length", limit=MAX_COORD
-                ),
-                max_sections=to_int(
-                    arm.get("max_sections", 12), f"{src}: arm.max_sections", limit=MAX_SECTIONS
-                ),
-                radius=to_float(arm.get("radius", 2.5), f"{src}: arm.radius", limit=MAX_COORD),
-                theta_max=to_float(arm.get("theta_max", math.pi / 2), f"{src}: arm.theta_max"),
+        kwargs["arm"] = _parse_arm(data, src)
+    kwargs["targets"] = _parse_targets(data, src)
+    tank = Tank(**kwargs)
+    _check_points(tank, src)
+    return tank
+
+
+def _parse_box(data: Mapping[str, Any], src: str) -> tuple[Vec3, Vec3]:
+    """The box's corners ``(min, max)`` [cm], each larger on every axis for ``max``."""
+    _require(data, ["box"], src)
+    box = _section(data, "box", {"min", "max"}, src)
+    _require(box, ["min", "max"], f"{src}: box")
+    lo, hi = (
+        cast(Vec3, to_vector(box["min"], f"{src}: box.min", limit=MAX_COORD)),
+        cast(Vec3, to_vector(box["max"], f"{src}: box.max", limit=MAX_COORD)),
+    )
+    if any(h <= lo_ for lo_, h in zip(lo, hi)):
+        raise ConfigError(f"{src}: box: max must exceed min on every axis, got {lo} and {hi}")
+    return lo, hi
+
+
+def _parse_cell_size(value: Any, lo: Vec3, hi: Vec3, src: str) -> float:
+    """The raster's cell size [cm]: it divides the box on every axis into few enough cells."""
+    cell = _positive(value, f"{src}: cell_size")
+    for axis, (a, b) in enumerate(zip(lo, hi)):
+        n = (b - a) / cell
+        if abs(n - round(n)) > 1e-9:
+            raise ConfigError(
+                f"{src}: cell_size: {cell:g} does not divide the box extent {b - a:g} along "
+                f"{'xyz'[axis]}"
             )
-        except ValueError as exc:
-            if isinstance(exc, ConfigError):
-                raise
-            raise ConfigError(f"{src}: arm: {exc}") from None
+    cells = math.prod(round((b - a) / cell) for a, b in zip(lo, hi))
+    if cells > MAX_CELLS:
+        raise ConfigError(
+            f"{src}: cell_size: {cell:g} cm splits the box into {cells:,} cells, more than the "
+            f"{MAX_CELLS:,} allowed; use a larger cell_size"
+        )
+    return cell
+
+
+def _parse_arm(data: Mapping[str, Any], src: str) -> ArmSpec:
+    """The ``arm`` section (defaults for the keys it leaves out)."""
+    arm = _section(data, "arm", {"section_length", "max_sections", "radius", "theta_max"}, src)
+    try:
+        return ArmSpec(
+            section_length=to_float(
+                arm.get("section_length", 50), f"{src}: arm.section_length", limit=MAX_COORD
+            ),
+            max_sections=to_int(
+                arm.get("max_sections", 12), f"{src}: arm.max_sections", limit=MAX_SECTIONS
+            ),
+            radius=to_float(arm.get("radius", 2.5), f"{src}: arm.radius", limit=MAX_COORD),
+            theta_max=to_float(arm.get("theta_max", math.pi / 2), f"{src}: arm.theta_max"),
+        )
+    except ValueError as exc:
+        if isinstance(exc, ConfigError):
+            raise
+        raise ConfigError(f"{src}: arm: {exc}") from None
+
+
+def _parse_targets(data: Mapping[str, Any], src: str) -> tuple[Vec3, ...]:
+    """The reference targets (none when the key is missing or empty)."""
     targets = data.get("targets") or []
     if not isinstance(targets, list):
         raise ConfigError(f"{src}: targets: expected a list of [x, y, z], got {brief(targets)}")
     if len(targets) > MAX_TARGETS:
         raise ConfigError(f"{src}: targets: {len(targets)} targets, at most {MAX_TARGETS}")
-    kwargs["targets"] = tuple(
-        to_vector(t, f"{src}: targets[{i}]", limit=MAX_COORD) for i, t in enumerate(targets)
+    return tuple(
+        cast(Vec3, to_vector(t, f"{src}: targets[{i}]", limit=MAX_COORD))
+        for i, t in enumerate(targets)
     )
-    tank = Tank(**kwargs)
-    _check_points(tank, src)
-    return tank
 
 
 def _parse_obstacles(data: Mapping[str, Any], lo: Vec3, hi: Vec3, src: str) -> tuple[Solid, ...]:

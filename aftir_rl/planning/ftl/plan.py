@@ -25,7 +25,7 @@ from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.model import FTLMotion, ftl_deviation, ftl_motion
-from aftir_rl.planning.ftl.route import RouteSettings, plan_route
+from aftir_rl.planning.ftl.route import RouteResult, RouteSettings, plan_route
 
 __all__ = ["MotionPlan", "plan_motion", "motion_summary", "DEFAULT_MARGIN", "SEARCH_VARIANTS"]
 
@@ -163,44 +163,86 @@ def plan_motion(
             if "closer than" in str(exc):
                 break
             continue
-        motion = ftl_motion(found.route, found.n_sections, h0, theta_max=arm.theta_max)
-        clearance = motion_clearance(tank, motion)
-        if clearance < margin:
-            reasons.append(f"a deployment kept only {clearance:.2f} cm")
+        deployed = _deploy(tank, target, cells, margin, found, h0)
+        if isinstance(deployed, str):
+            reasons.append(deployed)
             continue
-        tips = motion.tips()
-        deviation = ftl_deviation(motion)
-        plan = MotionPlan(
-            target=target,
-            margin_cm=margin,
-            section_length=arm.section_length,
-            complete=True,
-            seconds=0.0,
-            motion=motion,
-            min_clearance_cm=clearance,
-            ftl_deviation_cm=deviation,
-            tip_error_cm=float(np.linalg.norm(tips[-1] - target)),
-            tip_path_length_cm=float(np.linalg.norm(np.diff(tips, axis=0), axis=1).sum()),
-            corridor=found.corridor,
-        )
-        if cells is not None and tank.cell_size is not None:
-            plan.waypoint_index, plan.route_departure_cm = _waypoints(tank, cells, tips)
-        if best is None or deviation[0] < best_deviation:
-            best, best_deviation = plan, deviation[0]
+        plan, deviation = deployed
+        if best is None or deviation < best_deviation:
+            best, best_deviation = plan, deviation
         if best_deviation <= DEVIATION_GOAL:
             break
     if best is not None:
         best.seconds = time.perf_counter() - start
         return best
+    return _unreachable(target, margin, arm.section_length, start, reasons)
+
+
+def _unreachable(
+    target: NDArray[np.float64],
+    margin: float,
+    section_length: float,
+    start: float,
+    reasons: list[str],
+) -> MotionPlan:
+    """The incomplete plan that gives the (distinct) reasons no search setting reached."""
     return MotionPlan(
         target=target,
         margin_cm=margin,
-        section_length=arm.section_length,
+        section_length=section_length,
         complete=False,
         seconds=time.perf_counter() - start,
         reason="Cannot reach the target with a margin of "
         f"{margin:g} cm: " + "; ".join(dict.fromkeys(reasons)),
     )
+
+
+def _deploy(
+    tank: Tank,
+    target: NDArray[np.float64],
+    cells: Sequence[Sequence[int]] | None,
+    margin: float,
+    found: RouteResult,
+    h0: float,
+) -> tuple[MotionPlan, float] | str:
+    """Deploy a planned route by follow-the-leader and check its whole motion.
+
+    Args:
+        tank: the tank.
+        target: the target [cm].
+        cells: the learned cell path, or None.
+        margin: clearance [cm] the arm's surface keeps along the whole motion.
+        found: the planned route.
+        h0: the tip's height above the floor at the start [cm].
+
+    Returns:
+        The complete plan and its largest FTL deviation [cm], or why the motion misses the
+        margin.
+
+    """
+    arm = tank.arm
+    motion = ftl_motion(found.route, found.n_sections, h0, theta_max=arm.theta_max)
+    clearance = motion_clearance(tank, motion)
+    if clearance < margin:
+        return f"a deployment kept only {clearance:.2f} cm"
+    tips = motion.tips()
+    deviation = ftl_deviation(motion)
+    plan = MotionPlan(
+        target=target,
+        margin_cm=margin,
+        section_length=arm.section_length,
+        complete=True,
+        seconds=0.0,
+        motion=motion,
+        min_clearance_cm=clearance,
+        ftl_deviation_cm=deviation,
+        tip_error_cm=float(np.linalg.norm(tips[-1] - target)),
+        tip_path_length_cm=float(np.linalg.norm(np.diff(tips, axis=0), axis=1).sum()),
+        corridor=found.corridor,
+    )
+    if cells is not None and tank.cell_size is not None:
+        plan.waypoint_index, plan.route_departure_cm = _waypoints(tank, cells, tips)
+    return plan, deviation[0]
 
 
 def _waypoints(

@@ -186,6 +186,45 @@ def plan_route(
     )
 
 
+@dataclass(frozen=True)
+class _Search:
+    """What every step of one beam search shares: the problem and the search's knobs."""
+
+    tank: Tank
+    arm: ArmSpec
+    target: NDArray[np.float64]
+    guide: GuideField
+    settings: RouteSettings
+    start: float
+
+
+@dataclass
+class _Beam:
+    """The states kept at one depth: end frames, bending vectors so far, leads and costs."""
+
+    rot: NDArray[np.float64]
+    pos: NDArray[np.float64]
+    kap_hist: NDArray[np.float64]
+    lead: NDArray[np.float64]
+    cost: NDArray[np.float64]
+
+
+@dataclass
+class _Candidates:
+    """The clear one-section extensions of a beam (``rep``: the state each extends)."""
+
+    rep: NDArray[np.int64]
+    end_rot: NDArray[np.float64]
+    end_pos: NDArray[np.float64]
+    g: NDArray[np.float64]
+    h: NDArray[np.float64]
+    hist: NDArray[np.float64]
+
+
+#: The best closed route so far: ``(cost, route, clearance)``.
+_Best = tuple[float, Route, float]
+
+
 def _beam(
     tank: Tank,
     arm: ArmSpec,
@@ -194,154 +233,22 @@ def _beam(
     settings: RouteSettings,
     start: float,
 ) -> RouteResult | None:
-    l, k = arm.section_length, settings.samples
-    need = arm.radius + settings.margin + settings.slack
-    changes = _changes(settings.max_change)
-    leads = np.array([v for v in settings.leads if v < l * arm.max_sections])
-    # states
-    n0 = len(leads)
-    rot = np.repeat(np.eye(3)[None], n0, axis=0)
-    pos = np.stack([np.zeros(n0), np.zeros(n0), leads], axis=1)
-    kap_hist = np.zeros((n0, 0, 2))
-    lead = leads.copy()
-    cost = leads.copy()
-    best: tuple[float, Route, float] | None = None
-    expanded = 0
-    max_depth = arm.max_sections
+    """Beam search over the sections' bending vectors, ranked by ``guide``; ``start``: the clock.
 
-    def _keep(
-        best: tuple[float, Route, float] | None,
-        kap: NDArray[np.float64],
-        lead: float,
-        cost: float,
-        extra: int,
-    ) -> tuple[float, Route, float] | None:
-        """The better of ``best`` and a closed route (``best`` if it misses the margin)."""
-        route = Route(lead, kap, l)
-        if route.min_sections() > arm.max_sections:
-            return best
-        rc = route_clearance(tank, arm, route)
-        need = settings.margin + 0.5 * settings.slack
-        if need - 3.0 < rc < need:
-            # a near miss: move the body away from the tank, the tip staying on the target
-            route = push_away(tank, arm, route, target, need)
-            rc = route_clearance(tank, arm, route)
-            kap, lead = route.kappa, route.lead
-        if rc < need:
-            return best
-        dk_all = np.diff(np.vstack([np.zeros((1, 2)), kap]), axis=0)
-        change = np.hypot(dk_all[:, 0], dk_all[:, 1])
-        total = (
-            cost
-            + extra * l
-            + settings.clearance_weight * extra * l / max(rc - settings.margin, 0.25)
-            + settings.change_weight * l * float(np.sum(change[-extra - 1 :] ** 2)) / 10
-        )
-        return (total, route, rc) if best is None or total < best[0] else best
-
-    # near targets: one to three sections from the panel, closed directly from a few shapes
-    # (bent towards the target, or an S), since the straight arm is a saddle of the tip distance
-    toward = np.array(
-        [math.cos(math.atan2(target[1], target[0])), math.sin(math.atan2(target[1], target[0]))]
+    Returns the cheapest closed route that keeps the clearance (``corridor`` left empty), or None.
+    """
+    search = _Search(tank, arm, target, guide, settings, start)
+    leads = np.array([v for v in settings.leads if v < arm.section_length * arm.max_sections])
+    best = _close_near(search, leads)
+    n0 = len(leads)  # the states before the first section: straight up the axis to each lead
+    beam = _Beam(
+        rot=np.repeat(np.eye(3)[None], n0, axis=0),
+        pos=np.stack([np.zeros(n0), np.zeros(n0), leads], axis=1),
+        kap_hist=np.zeros((n0, 0, 2)),
+        lead=leads.copy(),
+        cost=leads.copy(),
     )
-    for extra in (1, 2, 3):
-        shapes = [np.outer(np.ones(extra), toward) * a for a in (0.3, 0.8)]
-        shapes += [np.outer((-1.0) ** np.arange(extra), toward) * a for a in (0.5, 1.0)]
-        starts = np.array([shape for shape in shapes for _ in leads])
-        seeds = np.tile(leads, len(shapes))
-        closed = close_batch(seeds, starts, target, l, arm.theta_max, extra)
-        for out in closed:
-            if out is not None:
-                best = _keep(best, out[1], out[0], max(out[0], 0.0), extra)
-    for depth in range(max_depth):
-        if time.perf_counter() - start > settings.max_seconds or len(cost) == 0:
-            break
-        last = kap_hist[:, -1, :] if depth else np.zeros((len(cost), 2))
-        b, c = len(cost), len(changes)
-        new_k = clip_kappa(last[:, None, :] + changes[None, :, :], arm.theta_max).reshape(-1, 2)
-        rep = np.repeat(np.arange(b), c)
-        pts, end_rot, end_pos = _section_samples(rot[rep], pos[rep], new_k, l, k)
-        expanded += len(rep)
-        # sections needed so far: bent + straight below the floor must fit in the arm
-        n_needed = depth + 1 + np.ceil(lead[rep] / l - 1e-9)
-        # the cheap bounded test first, exact distances (for the cost) only for the survivors
-        ok = (n_needed <= arm.max_sections) & points_clear(tank, pts, need)
-        if not np.any(ok):
-            break
-        idx = np.flatnonzero(ok)
-        rep, new_k, pts, end_rot, end_pos = (
-            rep[idx],
-            new_k[idx],
-            pts[idx],
-            end_rot[idx],
-            end_pos[idx],
-        )
-        clear = point_clearance(tank, pts) - arm.radius  # surface clearance (B*C, k)
-        dk = new_k - (kap_hist[rep, -1, :] if depth else 0.0)
-        g = (
-            cost[rep]
-            + l
-            + settings.clearance_weight
-            * (l / k)
-            * np.sum(1.0 / np.maximum(clear - settings.margin, 0.25), axis=1)
-            + settings.change_weight * l * np.einsum("ij,ij->i", dk, dk) / 10.0
-        )
-        h = guide(end_pos)
-        hist = np.concatenate([kap_hist[rep], new_k[:, None, :]], axis=1)
-        if best is not None and depth >= 1 and np.min(g + h) > best[0]:
-            break
-        # prune: finite guide, then best per (position, heading) bin, then the beam width
-        f = g + h
-        keep = np.flatnonzero(np.isfinite(f))
-        if len(keep) == 0:
-            break
-        heading = end_rot[keep, :, 2]
-        key = np.concatenate(
-            [np.floor(end_pos[keep] / settings.bin_cm), np.round(heading / settings.bin_heading)],
-            axis=1,
-        ).astype(np.int64)
-        order = keep[np.argsort(f[keep])]
-        key = key[np.argsort(f[keep])]
-        _, first = np.unique(key, axis=0, return_index=True)
-        order = order[np.sort(first)][: settings.beam_width]
-        rot, pos, kap_hist = end_rot[order], end_pos[order], hist[order]
-        lead, cost = lead[rep[order]], g[order]
-        # closing: append one or two sections to the most promising states near the target
-        dist = np.linalg.norm(pos - target, axis=1)
-        togo = h[order]  # through free space: a wall between tip and target does not count as near
-        fits = depth + 1 + np.ceil(lead / l - 1e-9) <= arm.max_sections - 1
-        for extra, band in ((1, (0.3, 0.98)), (2, (0.6, 1.95))):
-            # states from which `extra` sections of length l can end on the target: not too
-            # near (a section cannot fold back on itself) and not too far; nearest to go first
-            near = np.flatnonzero(
-                (dist > band[0] * l)
-                & (dist < band[1] * l)
-                & (togo < 2.2 * l)
-                & fits
-                & (depth + 1 + extra + np.ceil(lead / l - 1e-9) <= arm.max_sections)
-            )
-            picks = list(near[np.argsort(togo[near])][: settings.closings])
-            if not picks:
-                continue
-            starts = np.concatenate(
-                [kap_hist[picks], np.repeat(kap_hist[picks][:, -1:], extra, axis=1)], axis=1
-            )
-            # the lead of a route the beam has threaded through the tank stays (moving it shifts
-            # the whole route along the panel's axis), unless lead_shift allows a little
-            window = (
-                (
-                    np.maximum(lead[picks] - settings.lead_shift, -25.0),
-                    lead[picks] + settings.lead_shift,
-                )
-                if settings.lead_shift > 0
-                else None
-            )
-            closed = close_batch(
-                lead[picks], starts, target, l, arm.theta_max, free=extra + 1, lead_range=window
-            )
-            for i, out in zip(picks, closed):
-                if out is not None:
-                    best = _keep(best, out[1], out[0], float(cost[i]), extra)
+    best, expanded = _search_depths(search, beam, best)
     if best is None:
         return None
     total, route, rc = best
@@ -354,3 +261,182 @@ def _beam(
         seconds=time.perf_counter() - start,
         expanded=expanded,
     )
+
+
+def _keep(
+    search: _Search,
+    best: _Best | None,
+    kap: NDArray[np.float64],
+    lead: float,
+    cost: float,
+    extra: int,
+) -> _Best | None:
+    """The better of ``best`` and a route closed by ``extra`` sections (``best`` if it misses)."""
+    arm, settings, l = search.arm, search.settings, search.arm.section_length
+    route = Route(lead, kap, l)
+    if route.min_sections() > arm.max_sections:
+        return best
+    rc = route_clearance(search.tank, arm, route)
+    need = settings.margin + 0.5 * settings.slack
+    if need - 3.0 < rc < need:
+        # a near miss: move the body away from the tank, the tip staying on the target
+        route = push_away(search.tank, arm, route, search.target, need)
+        rc = route_clearance(search.tank, arm, route)
+        kap, lead = route.kappa, route.lead
+    if rc < need:
+        return best
+    dk_all = np.diff(np.vstack([np.zeros((1, 2)), kap]), axis=0)
+    change = np.hypot(dk_all[:, 0], dk_all[:, 1])
+    total = (
+        cost
+        + extra * l
+        + settings.clearance_weight * extra * l / max(rc - settings.margin, 0.25)
+        + settings.change_weight * l * float(np.sum(change[-extra - 1 :] ** 2)) / 10
+    )
+    return (total, route, rc) if best is None or total < best[0] else best
+
+
+def _close_near(search: _Search, leads: NDArray[np.float64]) -> _Best | None:
+    """Near targets: one to three sections from the panel, closed directly from a few shapes.
+
+    Bent towards the target, or an S: the straight arm is a saddle of the tip distance.
+    """
+    arm, target, l = search.arm, search.target, search.arm.section_length
+    best: _Best | None = None
+    toward = np.array(
+        [math.cos(math.atan2(target[1], target[0])), math.sin(math.atan2(target[1], target[0]))]
+    )
+    for extra in (1, 2, 3):
+        shapes = [np.outer(np.ones(extra), toward) * a for a in (0.3, 0.8)]
+        shapes += [np.outer((-1.0) ** np.arange(extra), toward) * a for a in (0.5, 1.0)]
+        starts = np.array([shape for shape in shapes for _ in leads])
+        seeds = np.tile(leads, len(shapes))
+        closed = close_batch(seeds, starts, target, l, arm.theta_max, extra)
+        for out in closed:
+            if out is not None:
+                best = _keep(search, best, out[1], out[0], max(out[0], 0.0), extra)
+    return best
+
+
+def _search_depths(search: _Search, beam: _Beam, best: _Best | None) -> tuple[_Best | None, int]:
+    """Grow the beam a section a depth, closing promising states: the best, sections evaluated."""
+    settings, expanded = search.settings, 0
+    changes = _changes(settings.max_change)
+    for depth in range(search.arm.max_sections):
+        if time.perf_counter() - search.start > settings.max_seconds or len(beam.cost) == 0:
+            break
+        count, cand = _expand(search, beam, changes, depth)
+        expanded += count
+        if cand is None:
+            break
+        if best is not None and depth >= 1 and np.min(cand.g + cand.h) > best[0]:
+            break
+        pruned = _prune(search, beam, cand)
+        if pruned is None:
+            break
+        beam, togo = pruned
+        best = _close_beam(search, beam, togo, depth, best)
+    return best, expanded
+
+
+def _expand(
+    search: _Search, beam: _Beam, changes: NDArray[np.float64], depth: int
+) -> tuple[int, _Candidates | None]:
+    """Every move of every state: how many were evaluated, and the clear ones (or None)."""
+    arm, settings = search.arm, search.settings
+    l, k = arm.section_length, settings.samples
+    need = arm.radius + settings.margin + settings.slack
+    last = beam.kap_hist[:, -1, :] if depth else np.zeros((len(beam.cost), 2))
+    b, c = len(beam.cost), len(changes)
+    new_k = clip_kappa(last[:, None, :] + changes[None, :, :], arm.theta_max).reshape(-1, 2)
+    rep = np.repeat(np.arange(b), c)
+    pts, end_rot, end_pos = _section_samples(beam.rot[rep], beam.pos[rep], new_k, l, k)
+    count = len(rep)
+    # sections needed so far: bent + straight below the floor must fit in the arm
+    n_needed = depth + 1 + np.ceil(beam.lead[rep] / l - 1e-9)
+    # the cheap bounded test first, exact distances (for the cost) only for the survivors
+    ok = (n_needed <= arm.max_sections) & points_clear(search.tank, pts, need)
+    if not np.any(ok):
+        return count, None
+    idx = np.flatnonzero(ok)
+    rep, new_k, pts, end_rot, end_pos = rep[idx], new_k[idx], pts[idx], end_rot[idx], end_pos[idx]
+    clear = point_clearance(search.tank, pts) - arm.radius  # surface clearance (B*C, k)
+    dk = new_k - (beam.kap_hist[rep, -1, :] if depth else 0.0)
+    g = (
+        beam.cost[rep]
+        + l
+        + settings.clearance_weight
+        * (l / k)
+        * np.sum(1.0 / np.maximum(clear - settings.margin, 0.25), axis=1)
+        + settings.change_weight * l * np.einsum("ij,ij->i", dk, dk) / 10.0
+    )
+    h = search.guide(end_pos)
+    hist = np.concatenate([beam.kap_hist[rep], new_k[:, None, :]], axis=1)
+    return count, _Candidates(rep, end_rot, end_pos, g, h, hist)
+
+
+def _prune(
+    search: _Search, beam: _Beam, cand: _Candidates
+) -> tuple[_Beam, NDArray[np.float64]] | None:
+    """The next beam and its distance-to-go (None if none is finite): best per bin, then width."""
+    settings = search.settings
+    f = cand.g + cand.h
+    keep = np.flatnonzero(np.isfinite(f))
+    if len(keep) == 0:
+        return None
+    heading = cand.end_rot[keep, :, 2]
+    key = np.concatenate(
+        [np.floor(cand.end_pos[keep] / settings.bin_cm), np.round(heading / settings.bin_heading)],
+        axis=1,
+    ).astype(np.int64)
+    order = keep[np.argsort(f[keep])]
+    key = key[np.argsort(f[keep])]
+    _, first = np.unique(key, axis=0, return_index=True)
+    order = order[np.sort(first)][: settings.beam_width]
+    rot, pos, hist = cand.end_rot[order], cand.end_pos[order], cand.hist[order]
+    return _Beam(rot, pos, hist, beam.lead[cand.rep[order]], cand.g[order]), cand.h[order]
+
+
+def _close_beam(
+    search: _Search, beam: _Beam, togo: NDArray[np.float64], depth: int, best: _Best | None
+) -> _Best | None:
+    """Close the states nearest the target (``togo``: through free space) with 1 or 2 sections."""
+    l, max_sections = search.arm.section_length, search.arm.max_sections
+    dist = np.linalg.norm(beam.pos - search.target, axis=1)
+    in_guide = np.ceil(beam.lead / l - 1e-9)  # sections still straight below the floor
+    fits = depth + 1 + in_guide <= max_sections - 1
+    for extra, band in ((1, (0.3, 0.98)), (2, (0.6, 1.95))):
+        # states from which `extra` sections of length l can end on the target: not too
+        # near (a section cannot fold back on itself) and not too far; nearest to go first
+        near = np.flatnonzero(
+            (dist > band[0] * l)
+            & (dist < band[1] * l)
+            & (togo < 2.2 * l)
+            & fits
+            & (depth + 1 + extra + in_guide <= max_sections)
+        )
+        picks = list(near[np.argsort(togo[near])][: search.settings.closings])
+        if picks:
+            best = _close_picks(search, beam, picks, extra, best)
+    return best
+
+
+def _close_picks(
+    search: _Search, beam: _Beam, picks: list[int], extra: int, best: _Best | None
+) -> _Best | None:
+    """Close the states ``picks`` with ``extra`` more sections; the better of ``best`` and them."""
+    kap_hist, lead, shift = beam.kap_hist, beam.lead, search.settings.lead_shift
+    starts = np.concatenate(
+        [kap_hist[picks], np.repeat(kap_hist[picks][:, -1:], extra, axis=1)], axis=1
+    )
+    # the lead of a route the beam has threaded through the tank stays (moving it shifts
+    # the whole route along the panel's axis), unless lead_shift allows a little
+    window: tuple[ArrayLike, ArrayLike] | None = None
+    if shift > 0:
+        window = (np.maximum(lead[picks] - shift, -25.0), lead[picks] + shift)
+    target, l, tmax = search.target, search.arm.section_length, search.arm.theta_max
+    closed = close_batch(lead[picks], starts, target, l, tmax, free=extra + 1, lead_range=window)
+    for i, out in zip(picks, closed):
+        if out is not None:
+            best = _keep(search, best, out[1], out[0], float(beam.cost[i]), extra)
+    return best

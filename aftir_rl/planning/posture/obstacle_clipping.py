@@ -61,6 +61,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -216,24 +217,9 @@ def obstacle_clipping(
     """
     start = time.perf_counter()
     target = context.check_target(target)
-    arm, tank = context.arm, context.tank
-    spheres = [s for s in tank.obstacles if isinstance(s, Sphere)]
-    zones = np.array([s.center[:2] for s in spheres], dtype=np.float64).reshape(-1, 2)
-    r_oba = np.array([s.radius + arm.radius for s in spheres], dtype=np.float64)
-    others = tuple(s for s in tank.solids if not isinstance(s, Sphere))
-    check_tank = Tank(
-        tank.name, tank.box_min, tank.box_max, tank.panel, obstacles=others, walls=tank.walls
-    )
-    if len(zones):
-        near = np.hypot(zones[:, 0] - target[0], zones[:, 1] - target[1])
-        inside = np.flatnonzero(near <= r_oba)
-        if target[2] >= tank.panel.center[2] and len(inside):
-            i = int(inside[0])
-            raise PlanningError(
-                f"Cannot reach the target: it lies in the obstacle space zone of "
-                f"{spheres[i].name or 'an obstacle'} (the vertical cylinder of radius "
-                f"{r_oba[i]:g} cm around it), which the tip may not enter"
-            )
+    arm = context.arm
+    spheres, zones, r_oba, check_tank = _obstacle_zones(context.tank, arm.radius)
+    _check_outside_zones(context.tank, target, spheres, zones, r_oba)
     zone = min(r_target, context.tolerance) if refine else r_target
     tolerance = context.tolerance if refine else r_target + 1e-6
     n_min = context.min_sections(float(np.linalg.norm(target)))
@@ -247,23 +233,82 @@ def obstacle_clipping(
             continue
         refined = refine_obstacle(problem, result.posture) if refine else None
         posture = refined or result.posture
-        search_tip = result.posture.tip(arm.section_length)
-        details = {
-            "sections": n,
-            "loops": result.loops,
-            "evaluations": result.evaluations,
-            "mds": result.mds,
-            "r_oba": r_oba.tolist(),
-            "zone_clearance_cm": problem.zone_clearance(posture),
-            "search_error_cm": float(np.linalg.norm(search_tip - target)),
-        }
+        details = _details(problem, result, posture, target)
         try:
             return context.checked(posture, target, "obstacle_clipping", tolerance, details, start)
         except PlanningError:
             continue
+    raise _no_posture(target, n_min, n_max, r_oba)
+
+
+def _obstacle_zones(
+    tank: Tank, body_radius: float
+) -> tuple[list[Sphere], NDArray[np.float64], NDArray[np.float64], Tank]:
+    """The spheres, their zones' centres ``(K, 2)`` and radii ``r_oba`` [cm], and the rest.
+
+    Returns:
+        The tank's spherical obstacles, the ``(x, y)`` of their obstacle space zones, the zones'
+        radii ``r0 + r_b``, and the tank without the spheres (its other solids and walls are
+        checked on the backbone).
+
+    """
+    spheres = [s for s in tank.obstacles if isinstance(s, Sphere)]
+    zones = np.array([s.center[:2] for s in spheres], dtype=np.float64).reshape(-1, 2)
+    r_oba = np.array([s.radius + body_radius for s in spheres], dtype=np.float64)
+    others = tuple(s for s in tank.solids if not isinstance(s, Sphere))
+    check_tank = Tank(
+        tank.name, tank.box_min, tank.box_max, tank.panel, obstacles=others, walls=tank.walls
+    )
+    return spheres, zones, r_oba, check_tank
+
+
+def _check_outside_zones(
+    tank: Tank,
+    target: NDArray[np.float64],
+    spheres: list[Sphere],
+    zones: NDArray[np.float64],
+    r_oba: NDArray[np.float64],
+) -> None:
+    """Raise :class:`PlanningError` when the target (above the floor) is in an obstacle zone."""
+    if not len(zones):
+        return
+    near = np.hypot(zones[:, 0] - target[0], zones[:, 1] - target[1])
+    inside = np.flatnonzero(near <= r_oba)
+    if target[2] >= tank.panel.center[2] and len(inside):
+        i = int(inside[0])
+        raise PlanningError(
+            f"Cannot reach the target: it lies in the obstacle space zone of "
+            f"{spheres[i].name or 'an obstacle'} (the vertical cylinder of radius "
+            f"{r_oba[i]:g} cm around it), which the tip may not enter"
+        )
+
+
+def _details(
+    problem: ObstacleProblem,
+    result: ClippingResult,
+    posture: Posture,
+    target: NDArray[np.float64],
+) -> dict[str, Any]:
+    """What the result records of a search: its counters, MDS, zones and errors."""
+    search_tip = result.posture.tip(problem.section_length)
+    return {
+        "sections": problem.n_sections,
+        "loops": result.loops,
+        "evaluations": result.evaluations,
+        "mds": result.mds,
+        "r_oba": problem.r_oba.tolist(),
+        "zone_clearance_cm": problem.zone_clearance(posture),
+        "search_error_cm": float(np.linalg.norm(search_tip - target)),
+    }
+
+
+def _no_posture(
+    target: NDArray[np.float64], n_min: int, n_max: int, r_oba: NDArray[np.float64]
+) -> PlanningError:
+    """The error when no section count from ``n_min`` to ``n_max`` gives a checked posture."""
     where = fmt_point(target)
     if n_min > _MAX_SECTIONS:
-        raise PlanningError(
+        return PlanningError(
             f"Cannot reach the target: {where} cm needs {n_min} sections; region clipping over "
             f"every θ and φ searches at most {_MAX_SECTIONS} sections (with more, even its "
             f"coarsest grid, 3^{2 * (_MAX_SECTIONS + 1)} combinations a loop, is too large)"
@@ -271,7 +316,7 @@ def obstacle_clipping(
     keeps_out = ""
     if len(r_oba):
         keeps_out = f" that keeps out of the obstacle zones (r_oba = {_radii(r_oba)} cm) and"
-    raise PlanningError(
+    return PlanningError(
         f"Cannot reach the target: region clipping found no posture of {n_min} to {n_max} "
         f"sections{keeps_out} reaches {where} cm"
     )

@@ -153,24 +153,52 @@ def search_sections(
         result = _search(context, problem, search)
         if result is None:
             continue
-        dis: float | None
-        for theta in [result.theta, *result.candidates]:
-            if refine_tip:
-                fixed = refine(problem, theta)
-                if fixed is None:
-                    continue
-                theta, dis = fixed
-                if not feasible(theta[None], np.array([dis]))[0]:
-                    continue
-            else:
-                dis = result.dis if theta is result.theta else None
-                if dis is None:
-                    continue
-            if frame.rotation is None and context.scene.collides(
-                Posture(dis, theta, (frame.psi,) * n)
-            ):
+        found = _first_valid(context, problem, result, frame, feasible, refine_tip)
+        if found is not None:
+            return found
+    return None
+
+
+def _first_valid(
+    context: PlanningContext,
+    problem: PlanarProblem,
+    result: SearchResult,
+    frame: Frame,
+    feasible: Feasible,
+    refine_tip: bool,
+) -> tuple[NDArray[np.float64], float, SearchResult] | None:
+    """The first of a search's best and runners-up that refines and passes the exact check.
+
+    Args:
+        context: the planning context.
+        problem: the searched problem.
+        result: its search result.
+        frame: the planning frame.
+        feasible: the search's feasibility check (:func:`prefilter`).
+        refine_tip: refine so the tip error is below the context's tolerance (else only the
+            best, as searched, is tried).
+
+    Returns:
+        ``(theta, dis, result)``, or None.
+
+    """
+    n = problem.n_sections
+    dis: float | None
+    for theta in [result.theta, *result.candidates]:
+        if refine_tip:
+            fixed = refine(problem, theta)
+            if fixed is None:
                 continue
-            return np.asarray(theta), float(dis), result
+            theta, dis = fixed
+            if not feasible(theta[None], np.array([dis]))[0]:
+                continue
+        else:
+            dis = result.dis if theta is result.theta else None
+            if dis is None:
+                continue
+        if frame.rotation is None and context.scene.collides(Posture(dis, theta, (frame.psi,) * n)):
+            continue
+        return np.asarray(theta), float(dis), result
     return None
 
 

@@ -38,6 +38,7 @@ from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.robot import Posture, forward_kinematics, section_transforms
 from aftir_rl.planning.posture.context import Method, PlannedPosture, PlanningContext, fmt_point
+from aftir_rl.planning.posture.search import SearchResult
 from aftir_rl.planning.posture.tga import Frame, search_sections
 
 __all__ = ["hatch_frame", "tsm", "TSM"]
@@ -59,15 +60,8 @@ def tsm(context: PlanningContext, target: ArrayLike) -> PlannedPosture:
     """Three-segment posture through the hatch to a target beyond the baffle."""
     start = time.perf_counter()
     target = context.check_target(target)
-    tank, l = context.tank, context.arm.section_length
-    if tank.baffle is None or tank.hatch is None:
-        raise PlanningError("Cannot reach the target: TSM needs a tank with a baffle and hatch")
-    if not context.beyond_baffle(target):
-        raise PlanningError(
-            "Cannot reach the target: TSM is for targets beyond the baffle; use TGA"
-        )
+    _check_tsm_target(context, target)
     rot_m, o_m = hatch_frame(context, target)
-    n = rot_m[:, 2]
     g_m = rot_m.T @ (target - o_m)
     psi_m = math.atan2(g_m[1], g_m[0])
     frame_m = Frame(psi_m, rot_m, o_m, panel=False)
@@ -76,42 +70,11 @@ def tsm(context: PlanningContext, target: ArrayLike) -> PlannedPosture:
     n3_min = max(1, context.min_sections(float(np.linalg.norm(g_m))) - 1)
     rho_m = math.hypot(g_m[0], g_m[1])
     for n3 in range(n3_min, min(n3_min + context.extra_sections, context.arm.max_sections - 2) + 1):
-        # P3's base A: within half a section before the hatch first (room for P2 in bay 1),
-        # then past the hatch (near targets), then deeper in bay 1.
-        for dis_range in ((-0.5 * l, 0.0), (0.0, 0.5 * l), (-1.5 * l, -0.5 * l)):
-            limits = (dis_range[0] - l / 2, dis_range[1] + l / 2)
-            p3 = search_sections(
-                context,
-                rho_m,
-                float(g_m[2]),
-                frame_m,
-                [n3],
-                None,
-                "region_clipping",
-                True,
-                dis_range=dis_range,
-                dis_limits=limits,
-            )
-            if p3 is not None:
-                break
+        p3 = _p3(context, rho_m, float(g_m[2]), frame_m, n3)
         if p3 is None:
             reasons.append(f"no P3 posture of {n3} sections from the hatch")
             continue
-        theta3, dis3, res3 = p3
-        a_point = o_m + dis3 * n
-        # Guided angles nearest the straight line from the panel to A first; the first that
-        # gives a checked posture wins.
-        alpha0 = math.atan2(math.hypot(a_point[0], a_point[1]), a_point[2])
-        alphas = np.radians(np.arange(5.0, 90.1, 5.0))
-        for alpha in alphas[np.argsort(np.abs(alphas - alpha0), kind="stable")]:
-            out = _p1(context, a_point, n, alpha, theta3, psi_m, rot_m)
-            if isinstance(out, str):
-                reasons.append(out)
-                continue
-            posture, details = out
-            details.update(loops_p3=res3.loops, evaluations_p3=res3.evaluations)
-            best = (posture, details)
-            break
+        best = _through_hatch(context, p3, o_m, rot_m, psi_m, reasons)
         if best is not None:
             break
     if best is None:
@@ -121,6 +84,75 @@ def tsm(context: PlanningContext, target: ArrayLike) -> PlannedPosture:
             f"Cannot reach the target: TSM found no posture to {fmt_point(target)} cm ({why})"
         )
     return context.checked(best[0], target, "tsm", context.tolerance, best[1], start)
+
+
+def _check_tsm_target(context: PlanningContext, target: NDArray[np.float64]) -> None:
+    """Raise :class:`PlanningError` unless the tank has a hatch and the target lies beyond it."""
+    tank = context.tank
+    if tank.baffle is None or tank.hatch is None:
+        raise PlanningError("Cannot reach the target: TSM needs a tank with a baffle and hatch")
+    if not context.beyond_baffle(target):
+        raise PlanningError(
+            "Cannot reach the target: TSM is for targets beyond the baffle; use TGA"
+        )
+
+
+def _p3(
+    context: PlanningContext, rho_m: float, z_m: float, frame_m: Frame, n3: int
+) -> tuple[NDArray[np.float64], float, SearchResult] | None:
+    """P3: a TGA posture of ``n3`` sections in the hatch frame M to the target ``(rho_m, z_m)``.
+
+    P3's base A is searched within half a section before the hatch first (room for P2 in bay 1),
+    then past the hatch (near targets), then deeper in bay 1.
+    """
+    l = context.arm.section_length
+    p3 = None
+    for dis_range in ((-0.5 * l, 0.0), (0.0, 0.5 * l), (-1.5 * l, -0.5 * l)):
+        limits = (dis_range[0] - l / 2, dis_range[1] + l / 2)
+        p3 = search_sections(
+            context,
+            rho_m,
+            z_m,
+            frame_m,
+            [n3],
+            None,
+            "region_clipping",
+            True,
+            dis_range=dis_range,
+            dis_limits=limits,
+        )
+        if p3 is not None:
+            break
+    return p3
+
+
+def _through_hatch(
+    context: PlanningContext,
+    p3: tuple[NDArray[np.float64], float, SearchResult],
+    o_m: NDArray[np.float64],
+    rot_m: NDArray[np.float64],
+    psi_m: float,
+    reasons: list[str],
+) -> tuple[Posture, dict[str, Any]] | None:
+    """P1 and P2 in front of a P3: the first guided angle that gives a checked posture.
+
+    Guided angles nearest the straight line from the panel to A are tried first; the reasons
+    the others fail are appended to ``reasons``.
+    """
+    theta3, dis3, res3 = p3
+    n = rot_m[:, 2]
+    a_point = o_m + dis3 * n
+    alpha0 = math.atan2(math.hypot(a_point[0], a_point[1]), a_point[2])
+    alphas = np.radians(np.arange(5.0, 90.1, 5.0))
+    for alpha in alphas[np.argsort(np.abs(alphas - alpha0), kind="stable")]:
+        out = _p1(context, a_point, n, alpha, theta3, psi_m, rot_m)
+        if isinstance(out, str):
+            reasons.append(out)
+            continue
+        posture, details = out
+        details.update(loops_p3=res3.loops, evaluations_p3=res3.evaluations)
+        return posture, details
+    return None
 
 
 def _p1(
@@ -134,18 +166,7 @@ def _p1(
 ) -> tuple[Posture, dict[str, Any]] | str:
     """P1 and P2 for one guided angle ``alpha``; a reason string when impossible."""
     l, n3 = context.arm.section_length, len(theta3)
-    d = l / 2
-    for _ in range(100):
-        b_point = a_point - d * n
-        delta = math.atan2(b_point[1], b_point[0])
-        u3 = np.array(
-            [math.sin(alpha) * math.cos(delta), math.sin(alpha) * math.sin(delta), math.cos(alpha)]
-        )
-        theta_m = math.acos(float(np.clip(u3 @ n, -1.0, 1.0)))
-        d_new = l / 2 if theta_m < 1e-9 else (l / theta_m) * math.tan(theta_m / 2)
-        if abs(d_new - d) < 1e-12:
-            break
-        d = d_new
+    d, delta, u3, theta_m = _corner(a_point, n, alpha, l)
     if theta_m > context.arm.theta_max:
         bend = math.degrees(theta_m)
         return f"alpha {math.degrees(alpha):.0f} deg needs P2 to bend {bend:.0f} deg"
@@ -165,14 +186,7 @@ def _p1(
         return f"alpha {math.degrees(alpha):.0f} deg: no P1 posture reaches C"
     theta1, dis1, res1 = p1
     n1 = len(theta1)
-    frames = forward_kinematics(dis1, theta1, [delta] * n1, l)
-    r_c = frames[-1, :3, :3]
-    n_local = r_c.T @ n
-    phi_m = math.atan2(n_local[1], n_local[0])
-    bend_m = math.acos(float(np.clip(n_local[2], -1, 1)))
-    r_a = r_c @ section_transforms(bend_m, phi_m, l)[:3, :3]
-    beta = math.atan2(r_a[:, 0] @ rot_m[:, 1], r_a[:, 0] @ rot_m[:, 0])
-    phi3 = psi_m - beta
+    bend_m, phi_m, phi3 = _p2_turn(dis1, theta1, delta, n, l, rot_m, psi_m)
     posture = Posture(
         dis1,
         tuple(theta1) + (bend_m,) + tuple(theta3),
@@ -192,6 +206,54 @@ def _p1(
         "evaluations_p1": res1.evaluations,
     }
     return posture, details
+
+
+def _corner(
+    a_point: NDArray[np.float64], n: NDArray[np.float64], alpha: float, l: float
+) -> tuple[float, float, NDArray[np.float64], float]:
+    """The corner B's tangent length ``d``, bearing ``δ``, P1's end direction ``u3`` and ``θ_m``.
+
+    ``d``, ``δ`` and ``θ_m`` depend on each other: fixed-point iteration (at most 100 steps).
+    """
+    d = l / 2
+    for _ in range(100):
+        b_point = a_point - d * n
+        delta = math.atan2(b_point[1], b_point[0])
+        u3 = np.array(
+            [math.sin(alpha) * math.cos(delta), math.sin(alpha) * math.sin(delta), math.cos(alpha)]
+        )
+        theta_m = math.acos(float(np.clip(u3 @ n, -1.0, 1.0)))
+        d_new = l / 2 if theta_m < 1e-9 else (l / theta_m) * math.tan(theta_m / 2)
+        if abs(d_new - d) < 1e-12:
+            break
+        d = d_new
+    return d, delta, u3, theta_m
+
+
+def _p2_turn(
+    dis1: float,
+    theta1: NDArray[np.float64],
+    delta: float,
+    n: NDArray[np.float64],
+    l: float,
+    rot_m: NDArray[np.float64],
+    psi_m: float,
+) -> tuple[float, float, float]:
+    """P2's bend and rotation angle onto the hatch axis ``n``, and P3's rotation angle after it.
+
+    Returns:
+        ``(θ_m, φ_m, φ_3)``: P2 bends by ``θ_m`` at ``φ_m`` in the end frame of P1 (eq. 13); P3's
+        angles, planned in M, turn by the twist between M and P2's end frame about ``n``.
+
+    """
+    frames = forward_kinematics(dis1, theta1, [delta] * len(theta1), l)
+    r_c = frames[-1, :3, :3]
+    n_local = r_c.T @ n
+    phi_m = math.atan2(n_local[1], n_local[0])
+    bend_m = math.acos(float(np.clip(n_local[2], -1, 1)))
+    r_a = r_c @ section_transforms(bend_m, phi_m, l)[:3, :3]
+    beta = math.atan2(r_a[:, 0] @ rot_m[:, 1], r_a[:, 0] @ rot_m[:, 0])
+    return bend_m, phi_m, psi_m - beta
 
 
 TSM = Method(
