@@ -7,13 +7,28 @@ import numpy as np
 from aftir_rl.envs.ftl.state import FTLBatch
 
 
+def ftl_batch(tank, b, **kwargs):
+    """An FTL batch of ``b`` arms with the env's defaults; any keyword overrides one of them."""
+    options = dict(
+        n_sections=tank.arm.max_sections,
+        samples_per_section=10,
+        kappa_step=0.1,
+        push_step=5.0,
+        start_height=10.0,
+        margin=1.0,
+        success_tolerance=2.0,
+        shaping="",
+    )
+    return FTLBatch(tank, batch=b, **{**options, **kwargs})
+
+
 def random_ftl_batch(tank, rng, b, margin=1.0, **kwargs):
     """An FTL batch of ``b`` arms in random states, not yet refreshed.
 
     Routes from straight to sharply bent (each section's bend up to θ_max, most of them mild),
     in any direction, and tips anywhere along them (any deployment).
     """
-    batch = FTLBatch(tank, tank.arm.max_sections, b, 10, 0.1, 5.0, 10.0, margin, 2.0, "", **kwargs)
+    batch = ftl_batch(tank, b, margin=margin, **kwargs)
     n = batch.n
     r = rng.uniform(0, 1, (b, n)) ** 2 * tank.arm.theta_max * rng.uniform(0, 1, (b, 1))
     a = rng.uniform(-np.pi, np.pi, (b, n))

@@ -16,20 +16,43 @@ import gymnasium as gym
 from aftir_rl.core.config import shorten
 from aftir_rl.core.errors import ConfigError
 
-__all__ = ["ENV_IDS", "REACH_REGION", "register_envs", "registered_env_id"]
-
-#: Every environment id registered by :func:`register_envs`.
-ENV_IDS: tuple[str, ...] = (
-    "AFTIR-Tank-v0",
-    "AFTIR-TankGoal-v0",
-    "AFTIR-Arm-v0",
-    "AFTIR-ArmReach-v0",
-    "AFTIR-ArmFull-v0",
-    "AFTIR-ArmFTL-v0",
-)
+__all__ = ["ENV_IDS", "REACH_REGION", "REGISTRATIONS", "register_envs", "registered_env_id"]
 
 #: Bay-1 reach task: targets in front of the panel that 2 sections reach, drawn per episode.
 REACH_REGION = ((-40.0, -40.0, 20.0), (60.0, 40.0, 90.0))
+
+_ARM = "aftir_rl.envs.arm:ArmEnv"
+_FTL = "aftir_rl.envs.ftl.env"
+#: id -> :func:`gymnasium.register`'s arguments (string entry points: nothing imported here).
+REGISTRATIONS: dict[str, dict[str, Any]] = {
+    "AFTIR-Tank-v0": {
+        "entry_point": "aftir_rl.envs.tank_grid:TankGridEnv",
+        "max_episode_steps": 500,
+    },
+    "AFTIR-TankGoal-v0": {
+        "entry_point": "aftir_rl.envs.tank_goal:TankGoalEnv",
+        "max_episode_steps": 100,
+    },
+    "AFTIR-Arm-v0": {"entry_point": _ARM, "max_episode_steps": 300, "kwargs": {"n_sections": 4}},
+    "AFTIR-ArmReach-v0": {
+        "entry_point": _ARM,
+        "max_episode_steps": 100,
+        "kwargs": {"n_sections": 2, "target_region": REACH_REGION},
+    },
+    "AFTIR-ArmFull-v0": {
+        "entry_point": _ARM,
+        "max_episode_steps": 300,
+        "kwargs": {"n_sections": 12, "free_targets": True},
+    },
+    "AFTIR-ArmFTL-v0": {
+        "entry_point": f"{_FTL}:ArmFTLEnv",
+        "vector_entry_point": f"{_FTL}:ArmFTLVectorEnv",
+        "max_episode_steps": 300,
+    },
+}
+
+#: Every environment id registered by :func:`register_envs`.
+ENV_IDS: tuple[str, ...] = tuple(REGISTRATIONS)
 
 
 def register_envs() -> None:
@@ -39,46 +62,9 @@ def register_envs() -> None:
     ``gym.make("aftir_rl:AFTIR-Tank-v0")`` imports ``aftir_rl`` first, which is what subprocess
     vector envs rely on.
     """
-    if "AFTIR-Tank-v0" not in gym.registry:
-        gym.register(
-            id="AFTIR-Tank-v0",
-            entry_point="aftir_rl.envs.tank_grid:TankGridEnv",
-            max_episode_steps=500,
-        )
-    if "AFTIR-TankGoal-v0" not in gym.registry:
-        gym.register(
-            id="AFTIR-TankGoal-v0",
-            entry_point="aftir_rl.envs.tank_goal:TankGoalEnv",
-            max_episode_steps=100,
-        )
-    if "AFTIR-Arm-v0" not in gym.registry:
-        gym.register(
-            id="AFTIR-Arm-v0",
-            entry_point="aftir_rl.envs.arm:ArmEnv",
-            max_episode_steps=300,
-            kwargs={"n_sections": 4},
-        )
-    if "AFTIR-ArmReach-v0" not in gym.registry:
-        gym.register(
-            id="AFTIR-ArmReach-v0",
-            entry_point="aftir_rl.envs.arm:ArmEnv",
-            max_episode_steps=100,
-            kwargs={"n_sections": 2, "target_region": REACH_REGION},
-        )
-    if "AFTIR-ArmFull-v0" not in gym.registry:
-        gym.register(
-            id="AFTIR-ArmFull-v0",
-            entry_point="aftir_rl.envs.arm:ArmEnv",
-            max_episode_steps=300,
-            kwargs={"n_sections": 12, "free_targets": True},
-        )
-    if "AFTIR-ArmFTL-v0" not in gym.registry:
-        gym.register(
-            id="AFTIR-ArmFTL-v0",
-            entry_point="aftir_rl.envs.ftl.env:ArmFTLEnv",
-            vector_entry_point="aftir_rl.envs.ftl.env:ArmFTLVectorEnv",
-            max_episode_steps=300,
-        )
+    for env_id, arguments in REGISTRATIONS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, **arguments)
 
 
 def registered_env_id(value: Any, where: str, allowed: Iterable[str] | None = None) -> str:
