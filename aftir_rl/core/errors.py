@@ -30,3 +30,7 @@ class InvalidActionError(AftirError, ValueError):
 
 class PlanningError(AftirError, ValueError):
     """A planner found no valid posture; the message starts "Cannot reach the target: "."""
+
+
+class MissingExtraError(AftirError, ImportError):
+    """An optional dependency is not installed; the message names the extra that brings it."""

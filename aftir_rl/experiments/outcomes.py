@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 
 from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, PlanningError
+from aftir_rl.core.extras import require
 from aftir_rl.experiments.runs import load_q_table_config, load_sb3_run
 from aftir_rl.planning.posture.registry import get_method
 from aftir_rl.rl.tabular.paths import learn_cells
@@ -301,8 +302,7 @@ def method_outcome(
 
 def _reseed_ompl(seed: int) -> None:
     """Restart OMPL's seed generator: the RNGs an item's planners create draw the same seeds."""
-    from ompl import util as ou
-
+    ou = require("ompl.util", "ompl")
     ou.setLogLevel(ou.LOG_NONE)  # OMPL says seeds were drawn already; rrt_connect resets the level
     ou.RNG.setSeed(int(seed) + 1)  # OMPL takes 0 for "pick one"; rrt_connect's first seed too
 

@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.extras import require
 from aftir_rl.core.robot import Posture, tip_position
 
 __all__ = [
@@ -251,9 +252,8 @@ def rrt_connect(
         check of the path disagrees with OMPL's.
 
     """
-    from ompl import base as ob
-    from ompl import geometric as og
-    from ompl import util as ou
+    ob = require("ompl.base", "ompl")
+    og, ou = require("ompl.geometric", "ompl"), require("ompl.util", "ompl")
 
     began = time.perf_counter()
     goal = align(goal, start)

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from aftir_rl.core.errors import CheckpointError
+from aftir_rl.core.extras import require
 from aftir_rl.core.files import atomic_open
 from aftir_rl.core.tank import Tank, load_tank
 from aftir_rl.viz.figure import DEFAULT_MAX_FRAMES, build_figure, tank_traces
@@ -98,8 +99,10 @@ def write_view(
     Raises:
         CheckpointError: a run directory cannot be read (see :func:`read_run`).
         ConfigError: the tank is unknown or malformed.
+        MissingExtraError: plotly is not installed (the ``view`` extra).
 
     """
+    require("plotly.graph_objects", "view")
     if not run_dirs:
         raise CheckpointError("no run directory given: name at least one")
     runs = [read_run(d) for d in run_dirs]
