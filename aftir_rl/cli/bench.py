@@ -21,14 +21,20 @@ from aftir_rl.cli.guard import cli
 from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import write_json
-from aftir_rl.experiments.bench import OLD_SET_NAMES, SETS, format_table, run_benchmark, target_sets
+from aftir_rl.experiments.bench import (
+    OLD_SET_NAMES,
+    SETS,
+    Row,
+    format_table,
+    run_benchmark,
+    target_sets,
+)
 
 __all__ = ["main"]
 
 
-@cli
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m aftir_rl.bench``."""
+def _parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m aftir_rl.bench``."""
     parser = argparse.ArgumentParser(
         prog="python -m aftir_rl.bench",
         description="Measure every planner, Q-learning + postures, RRT-Connect and trained SB3 "
@@ -76,7 +82,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser, f"clearance the q_table+ftl motions keep (default {DEFAULT_MARGIN:g} cm)"
     )
     add_ray_options(parser, "run the items")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _check_numbers(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Exit through ``parser.error`` (status 2) when a number of the command line is refused."""
     if args.n_random < 1 or not 0 < args.rrt_seconds < math.inf:
         parser.error("--n-random must be at least 1 and --rrt-seconds positive and finite")
     if not 0 <= args.bridge_seconds < math.inf:
@@ -85,6 +95,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--margin must be between 0 and 20 cm")
     if not 0 <= args.seed < 2**32:
         parser.error("--seed must be from 0 to 2**32 - 1")
+
+
+def _run_benchmark(args: argparse.Namespace) -> list[Row]:
+    """The benchmark's rows for the chosen sets, models and options.
+
+    Raises:
+        AftirError: a target, model or Ray option is refused.
+
+    """
+    sets = {k: v for k, v in target_sets(args.n_random, args.seed).items() if k in args.sets}
+    progress = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
+    options = ("rrt_seconds", "bridge_seconds", "margin", "ray", "workers")
+    chosen = {name: getattr(args, name) for name in options}
+    return run_benchmark(sets, models=args.model, progress=progress, **chosen)
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m aftir_rl.bench``."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    _check_numbers(parser, args)
     problem = _check_inputs(args.model, args.json)
     if args.ray is not None or args.workers is not None:
         from aftir_rl.experiments.distributed import check_ray_options
@@ -95,11 +127,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     start = time.perf_counter()
     try:
-        sets = {k: v for k, v in target_sets(args.n_random, args.seed).items() if k in args.sets}
-        progress = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
-        options = ("rrt_seconds", "bridge_seconds", "margin", "ray", "workers")
-        chosen = {name: getattr(args, name) for name in options}
-        rows = run_benchmark(sets, models=args.model, progress=progress, **chosen)
+        rows = _run_benchmark(args)
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

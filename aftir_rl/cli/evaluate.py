@@ -1,21 +1,11 @@
 """``python -m aftir_rl.evaluate RUN_DIR [RUN_DIR ...]``: compare trained agents in one table.
 
-Each run directory is loaded and measured by :func:`aftir_rl.experiments.runs.evaluate_run`. A
-Q-learning run
-(``q_table.npz``) is evaluated on the target it was trained for: its greedy cell
-path is replayed in ``AFTIR-Tank-v0`` and turned into arm postures
-(:func:`aftir_rl.planning.posture.trajectory.plan_trajectory`); success means every waypoint got a
-posture,
-the last reaches the target and every move between them is collision-free. An SB3 run
-(``model.zip``) is evaluated on its env's fixed evaluation targets (or ``--target``, or
-``--random N --seed S``: ``N`` targets its env draws with seeds ``S .. S + N − 1``, which its
-training never measured it on unless they overlap its evaluation seeds
-``12345 .. 12345 + eval_targets − 1``), one deterministic episode each. A training run's
-``best/`` (the best model its evaluations saw) is itself a run directory. For both the table gives
-success rate, tip error, tip path length, the smallest clearance to the tank along the motion
-(for a Q-learning run: its postures and about 50 sampled along the motion, an upper bound) and
-seconds per target; the same numbers go to TensorBoard under ``compare/<run>/...`` in a new
-``evaluate__<time>`` directory of ``--logdir``.
+Each run directory is loaded and measured by :func:`aftir_rl.experiments.runs.evaluate_run`: a
+Q-learning run on the target it was trained for (its greedy cells made into a motion), an SB3 run
+on its env's evaluation targets, ``--target`` or ``--random N --seed S``. One row per run:
+success rate, tip error, tip path length, least clearance and seconds per target, also logged to
+TensorBoard under ``compare/<run>/...``. What success and each column mean: docs/reference.md,
+"Evaluating runs".
 """
 
 from __future__ import annotations
@@ -25,6 +15,7 @@ import sys
 from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -73,9 +64,8 @@ def _row_name(run: str) -> str:
     return f"{path.parent.name}/best" if path.name == "best" else path.name
 
 
-@cli
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m aftir_rl.evaluate``."""
+def _parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m aftir_rl.evaluate``."""
     parser = argparse.ArgumentParser(
         prog="python -m aftir_rl.evaluate",
         description="Evaluate trained runs (Q-table or SB3) and print one comparison table.",
@@ -105,31 +95,36 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     add_margin_option(parser, f"clearance the arm keeps ({DEFAULT_MARGIN:g} cm)")
     add_ray_options(parser, "evaluate the runs")
-    args = parser.parse_args(argv)
-    targets = [np.array(t) for t in args.target] if args.target else None
-    try:
-        draw = _check_draw(args.random, args.seed, targets)
-        check_margin(args.margin)
-        check_writable_dir(args.logdir)
-        if args.ray is not None or args.workers is not None:
-            from aftir_rl.experiments.distributed import (
-                check_ray_options,
-                evaluate_on_ray,
-                ray_session,
-            )
+    return parser
 
-            check_ray_options(args.ray, args.workers)
-            with ray_session(args.ray, args.workers):
-                rows = evaluate_on_ray(args.runs, targets, args.motion, args.margin, draw=draw)
-            results = {_row_name(r): row for r, row in zip(args.runs, rows)}
-        else:
-            results = {
-                _row_name(r): evaluate_run(r, targets, args.motion, args.margin, draw)
-                for r in args.runs
-            }
-    except AftirError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+
+def _evaluate_runs(
+    args: argparse.Namespace, targets: list[np.ndarray] | None, draw: tuple[int, int] | None
+) -> dict[str, dict[str, Any]]:
+    """Each run's row by its name in the table, on Ray with ``--ray``/``--workers``.
+
+    Raises:
+        AftirError: a run or the Ray options are refused.
+
+    """
+    if args.ray is not None or args.workers is not None:
+        from aftir_rl.experiments.distributed import (
+            check_ray_options,
+            evaluate_on_ray,
+            ray_session,
+        )
+
+        check_ray_options(args.ray, args.workers)
+        with ray_session(args.ray, args.workers):
+            rows = evaluate_on_ray(args.runs, targets, args.motion, args.margin, draw=draw)
+        return {_row_name(r): row for r, row in zip(args.runs, rows)}
+    return {
+        _row_name(r): evaluate_run(r, targets, args.motion, args.margin, draw) for r in args.runs
+    }
+
+
+def _print_table(results: dict[str, dict[str, Any]]) -> None:
+    """Print the comparison table, one row per run."""
     print(
         "| run | agent | targets | success | tip error (cm) | path (cm) | min clearance (cm) | "
         "s / target | note |"
@@ -140,9 +135,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         body = f"{r['tip_error_cm']:.3g} | {r['path_length_cm']:.0f} | "
         tail = f"{r['min_clearance_cm']:.2f} | {r['seconds_per_target']:.2f} | {r['note']} |"
         print(head + body + tail)
+
+
+def _log_results(logdir: str, results: dict[str, dict[str, Any]]) -> Path:
+    """Log every run's metrics under ``compare/<run>/...`` to ``logdir/evaluate__<time>/``.
+
+    Returns:
+        The folder logged to.
+
+    """
     from stable_baselines3.common.logger import configure
 
-    out = Path(args.logdir) / f"evaluate__{datetime.now().strftime('%Y%m%d-%H%M%S-%f')}"
+    out = Path(logdir) / f"evaluate__{datetime.now().strftime('%Y%m%d-%H%M%S-%f')}"
     logger = configure(str(out), ["tensorboard", "csv"])
     for name, r in results.items():
         for key in (
@@ -155,6 +159,24 @@ def main(argv: Sequence[str] | None = None) -> int:
             logger.record(f"compare/{name}/{key}", float(r[key]))
     logger.dump(0)
     logger.close()
+    return out
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m aftir_rl.evaluate``."""
+    args = _parser().parse_args(argv)
+    targets = [np.array(t) for t in args.target] if args.target else None
+    try:
+        draw = _check_draw(args.random, args.seed, targets)
+        check_margin(args.margin)
+        check_writable_dir(args.logdir)
+        results = _evaluate_runs(args, targets, draw)
+    except AftirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    _print_table(results)
+    out = _log_results(args.logdir, results)
     print(f"logged to {out}")
     return 0
 

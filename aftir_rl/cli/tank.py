@@ -2,8 +2,9 @@
 
 A thin command line over :func:`~aftir_rl.core.tank.loading.load_tank`: it prints
 :meth:`Tank.ascii() <aftir_rl.core.tank.geometry.Tank.ascii>` (z-slices of the raster), or with
-``--json`` :meth:`Tank.scene_dict() <aftir_rl.core.tank.geometry.Tank.scene_dict>` (the scene export
-of design.md §2). A tank that cannot be read prints "error: <why>" and exits with status 2.
+``--json`` :meth:`Tank.scene_dict() <aftir_rl.core.tank.geometry.Tank.scene_dict>` (the scene
+export, docs/design.md §5). A tank that cannot be read prints "error: <why>" and exits with
+status 2.
 """
 
 from __future__ import annotations

@@ -1,20 +1,11 @@
-"""Training command line: ``python -m aftir_rl.train q_table``.
+"""Training command line: ``python -m aftir_rl.train q_table|ppo|sac|td3``.
 
-One run directory per target under ``--logdir``, named
-``{algo}__{env}__{target}__{seed}__{time}`` (design.md §8), holding:
-
-- ``q_table.npz``: the table and its metadata (resume with ``--resume``);
-- ``trajectory.json``: a checked arm posture for every cell of that path and the exact target
-  (:mod:`aftir_rl.planning.posture.trajectory`), unless ``--no-postures``;
-- ``path.json``: the greedy tip path, ``{"target", "target_cell", "cells", "points_cm", ...}``,
-  start cell first, target cell last;
-- ``progress.csv`` and a TensorBoard event file with ``rollout/ep_rew_mean``,
-  ``rollout/ep_len_mean``, ``eval/success_rate``, ``eval/tip_error_cm``, ``eval/path_length_cm``,
-  the picture ``paths/<target>`` and the hyperparameters as text.
-
-The directory is built under a hidden ``.partial`` name and renamed when the run is complete, so a
-failed or interrupted run leaves no directory that looks finished. User errors (a bad target, a
-malformed config, a corrupt checkpoint) print one line and exit with status 2.
+One run directory per target (Q-learning) or per run (SB3) under ``--logdir``, named
+``{algo}__{env}__{target}__{seed}__{time}`` and built under a hidden ``.partial`` name until it is
+complete; its files (``q_table.npz``, ``path.json``, ``trajectory.json``, ``config.json``,
+``summary.json``, ``model.zip``...) are described in docs/design.md §9, its TensorBoard tags in
+§10. User errors (a bad target, a malformed config, a corrupt checkpoint) print one line and exit
+with status 2.
 
 This module is the command line only: the runs are :mod:`aftir_rl.rl`'s, the replay and
 the measures :mod:`aftir_rl.experiments.runs`'s.
@@ -87,11 +78,20 @@ def _print_summary(s: dict[str, Any]) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m aftir_rl.train``: one subcommand per algorithm."""
     parser = argparse.ArgumentParser(
         prog="python -m aftir_rl.train",
         description="Train an agent on an aftir_rl environment and log the run to TensorBoard.",
     )
     sub = parser.add_subparsers(dest="algo", required=True, metavar="ALGO")
+    _add_q_table_parser(sub)
+    for algo in ("ppo", "sac", "td3"):
+        _add_sb3_parser(sub, algo)
+    return parser
+
+
+def _add_q_table_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add the ``q_table`` subcommand to the subparsers ``sub``."""
     q = sub.add_parser(
         "q_table",
         help="tabular Q-learning on AFTIR-Tank-v0 (filomat2018)",
@@ -138,25 +138,27 @@ def _parser() -> argparse.ArgumentParser:
         help="RRT-Connect's budget for each colliding move of the postures, 0 for none "
         f"(default {DEFAULT_BRIDGE_SECONDS:g})",
     )
-    for algo in ("ppo", "sac", "td3"):
-        p = sub.add_parser(
-            algo,
-            help=f"{algo.upper()} (Stable-Baselines3) on an arm env",
-            description=f"{algo.upper()} on a continuous AFTIR arm env, one run directory.",
-        )
-        p.add_argument(
-            "--config",
-            default=str(CONFIG_DIR / f"{algo}.yaml"),
-            help=f"YAML of SB3Config fields (default: configs/{algo}.yaml)",
-        )
-        p.add_argument("--env", help="environment id (overrides config), e.g. AFTIR-ArmReach-v0")
-        p.add_argument("--total-timesteps", type=int, help="training steps (overrides config)")
-        p.add_argument("--n-envs", type=int, help="parallel subprocess envs (overrides config)")
-        p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-        p.add_argument("--logdir", default="runs", help="parent of the run directory")
-        p.add_argument("--resume", help="model.zip or run directory to continue training from")
-        p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    return parser
+
+
+def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], algo: str) -> None:
+    """Add the subcommand of the SB3 algorithm ``algo`` to the subparsers ``sub``."""
+    p = sub.add_parser(
+        algo,
+        help=f"{algo.upper()} (Stable-Baselines3) on an arm env",
+        description=f"{algo.upper()} on a continuous AFTIR arm env, one run directory.",
+    )
+    p.add_argument(
+        "--config",
+        default=str(CONFIG_DIR / f"{algo}.yaml"),
+        help=f"YAML of SB3Config fields (default: configs/{algo}.yaml)",
+    )
+    p.add_argument("--env", help="environment id (overrides config), e.g. AFTIR-ArmReach-v0")
+    p.add_argument("--total-timesteps", type=int, help="training steps (overrides config)")
+    p.add_argument("--n-envs", type=int, help="parallel subprocess envs (overrides config)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--logdir", default="runs", help="parent of the run directory")
+    p.add_argument("--resume", help="model.zip or run directory to continue training from")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
 def _main_sb3(args: argparse.Namespace) -> int:
@@ -186,6 +188,67 @@ def _main_sb3(args: argparse.Namespace) -> int:
     return 0
 
 
+def _q_table_config(args: argparse.Namespace) -> Any:
+    """The ``QLearningConfig`` of ``--config`` with ``--episodes``; the other numbers checked.
+
+    Raises:
+        AftirError: the config or a number of the command line is refused.
+
+    """
+    config = load_q_table_config(args.config)
+    if args.episodes is not None:
+        if args.episodes < 1:
+            raise ConfigError(f"--episodes must be at least 1, got {args.episodes}")
+        config = dataclasses.replace(config, episodes=args.episodes)
+    check_margin(args.margin)
+    if not 0 <= args.bridge_seconds < math.inf:
+        raise ConfigError(f"--bridge-seconds must be a finite 0 or more, got {args.bridge_seconds}")
+    return config
+
+
+def _main_all_targets(args: argparse.Namespace, config: Any) -> int:
+    """``q_table --all-targets``: one goal-conditioned run; print its summary."""
+    if args.target or args.resume:
+        raise ConfigError("--all-targets learns every cell: drop --target and --resume")
+    s = train_q_table_all_targets(
+        config, seed=args.seed, logdir=args.logdir, progress_bar=not args.no_progress
+    )
+    print(
+        f"every target of {s['tank']}: {s['n_goals']} goals, {s['episodes']} episodes "
+        f"each in {s['seconds']:.1f} s; greedy paths reach {s['n_reached']} and are "
+        f"BFS-optimal for {s['n_optimal']}"
+    )
+    print(f"  run dir: {s['run_dir']}")
+    return 0
+
+
+def _main_q_table(args: argparse.Namespace) -> int:
+    """``q_table``: one run per target (the tank's reference targets by default), summarised."""
+    config = _q_table_config(args)
+    if args.all_targets:
+        return _main_all_targets(args, config)
+    targets = args.target
+    if targets is None:
+        from aftir_rl.core.tank import load_tank
+
+        targets = [list(t) for t in load_tank(config.tank).targets]
+    summaries = train_q_table(
+        config,
+        targets,
+        seed=args.seed,
+        logdir=args.logdir,
+        resume=args.resume,
+        progress_bar=not args.no_progress,
+        postures=not args.no_postures,
+        bridge_seconds=args.bridge_seconds,
+        motion=args.motion,
+        margin=args.margin,
+    )
+    for s in summaries:
+        _print_summary(s)
+    return 0
+
+
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.train``."""
@@ -193,59 +256,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not 0 <= args.seed < 2**32:
         print(f"error: --seed must be from 0 to 2**32 - 1, got {args.seed}", file=sys.stderr)
         return 2
-    if args.algo != "q_table":
-        try:
-            return _main_sb3(args)
-        except AftirError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
     try:
-        config = load_q_table_config(args.config)
-        if args.episodes is not None:
-            if args.episodes < 1:
-                raise ConfigError(f"--episodes must be at least 1, got {args.episodes}")
-            config = dataclasses.replace(config, episodes=args.episodes)
-        check_margin(args.margin)
-        if not 0 <= args.bridge_seconds < math.inf:
-            raise ConfigError(
-                f"--bridge-seconds must be a finite 0 or more, got {args.bridge_seconds}"
-            )
-        if args.all_targets:
-            if args.target or args.resume:
-                raise ConfigError("--all-targets learns every cell: drop --target and --resume")
-            s = train_q_table_all_targets(
-                config, seed=args.seed, logdir=args.logdir, progress_bar=not args.no_progress
-            )
-            print(
-                f"every target of {s['tank']}: {s['n_goals']} goals, {s['episodes']} episodes "
-                f"each in {s['seconds']:.1f} s; greedy paths reach {s['n_reached']} and are "
-                f"BFS-optimal for {s['n_optimal']}"
-            )
-            print(f"  run dir: {s['run_dir']}")
-            return 0
-        targets = args.target
-        if targets is None:
-            from aftir_rl.core.tank import load_tank
-
-            targets = [list(t) for t in load_tank(config.tank).targets]
-        summaries = train_q_table(
-            config,
-            targets,
-            seed=args.seed,
-            logdir=args.logdir,
-            resume=args.resume,
-            progress_bar=not args.no_progress,
-            postures=not args.no_postures,
-            bridge_seconds=args.bridge_seconds,
-            motion=args.motion,
-            margin=args.margin,
-        )
+        return _main_q_table(args) if args.algo == "q_table" else _main_sb3(args)
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    for s in summaries:
-        _print_summary(s)
-    return 0
 
 
 if __name__ == "__main__":

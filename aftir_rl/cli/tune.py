@@ -135,7 +135,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         seed=args.seed,
         verbose=0 if args.quiet else 1,
     )
-    keys = [d.key for d in space]
+    _print_trials(out, [d.key for d in space], args.algo)
+    return 0
+
+
+def _print_trials(out: dict[str, Any], keys: list[str], algo: str) -> None:
+    """Print the sweep's trials as a table, then where the sweep and its best config are."""
     print(f"| trial | {' | '.join(keys)} | success | tip error (cm) | steps | run |")
     print("|---:|" + "---:|" * len(keys) + "---:|---:|---:|---|")
     for i, r in enumerate(out["trials"]):
@@ -151,8 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{r['timesteps']} | {run}{note} |"
         )
     print(f"sweep: {out['sweep_dir']}")
-    print(f"best config: {out['best_yaml']} (aftir train {args.algo} --config {out['best_yaml']})")
-    return 0
+    print(f"best config: {out['best_yaml']} (aftir train {algo} --config {out['best_yaml']})")
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 """The core layer: the robot, the tank, collision, configuration, files and errors.
 
 Nothing here imports another layer of the package; everything else builds on it
-(see ``docs/design.md``).
+(the layers: docs/design.md §1).
 """

@@ -1,28 +1,13 @@
 """Collision checking of the arm against a tank with python-fcl, and a fast point pre-filter.
 
-:class:`CollisionScene` builds the tank's solids once as python-fcl *solid* primitives (Box,
-Cylinder, Sphere; BVH meshes are hollow surfaces and would miss an arm buried in a wall) in one
-broad-phase manager. The walls of the tank box are thick slabs around it; the floor slab has a
-square opening of half-size ``panel.radius`` around the access panel. The arm is a chain of
-capsules of the arm's body radius, ``links_per_section`` per section, each spanning the chord
-between two consecutive backbone points with the section's arc length ``l/K`` (never shorter than
-the chord). The capsules are built once per number of sections and moved with ``setTransform``
-(rebuilding fcl objects per query is the classic slowdown, moveit_core#295). The arc bows out of a
-chord by at most its sagitta, ``(l/θ)(1 − cos(θ/2K))``: 0.10 cm for ``l = 50``, ``θ = π/2`` and
-the default ``K = 10``; that is the precision of the check.
-
-Only arm-against-tank pairs are tested: links of the same arm are never tested against each other
-(adjacent ones always touch), so self-collision is not checked. The planners' postures are
-piecewise planar and turn by less than a full circle, where it cannot occur.
-
-The access-panel rule (design.md §1): every backbone point below the floor (``z < 0``) must lie
-within the panel radius of the ``z`` axis, i.e. inside the linear module's guide.
-
-:func:`point_clearance` is the vectorised numpy counterpart on backbone points (signed distance to
-the nearest solid or wall, :class:`~aftir_rl.core.tank.distance.TankDistance`), used by the planners
-to
-pre-filter thousands of candidate postures at once before the exact fcl check of the one they
-return.
+:class:`CollisionScene` builds the tank's solids once as python-fcl *solid* primitives (BVH meshes
+are hollow) and checks the arm as a chain of capsules of its body radius, built once and moved
+with ``setTransform``; only arm-against-tank pairs are tested. The access-panel rule
+(docs/design.md §2) holds for every posture. :func:`point_clearance` is the vectorised numpy
+counterpart on backbone points (:class:`~aftir_rl.core.tank.distance.TankDistance`), which the
+planners use to pre-filter candidate postures before the exact fcl check of the one they return.
+The walls, the capsules, the precision of the check and why self-collision is not checked:
+docs/design.md §3.
 """
 
 from __future__ import annotations

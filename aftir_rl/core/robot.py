@@ -1,27 +1,15 @@
 """The AFTIR arm: specification, posture and batched forward kinematics.
 
 The arm is a linear module that pushes a chain of ``N`` constant-curvature sections of equal length
-``l`` through the access panel (design.md §1). A configuration is ``q = (dis, θ_1, φ_1, …, θ_N,
-φ_N)``: ``dis`` [cm] is the module's travel along the panel normal, ``θ_i`` [rad] the bending angle
-and ``φ_i`` [rad] the bending-plane angle of section ``i``.
-
-Frame S has its origin at the centre of the access panel, ``z`` along the panel normal into the
-tank. The base of section 1 sits at ``(0, 0, dis)`` pointing ``+z``. Each section transform is
-jace eq. 7, expressed in the end frame of the previous section and chained
-``T = T_1 · T_2 ⋯ T_N``::
-
-    T_i = [[c²φ cθ + s²φ,  cφ sφ (cθ−1),   cφ sθ,  (l/θ)(1−cθ) cφ],
-           [cφ sφ (cθ−1),  s²φ cθ + c²φ,   sφ sθ,  (l/θ)(1−cθ) sφ],
-           [−cφ sθ,        −sφ sθ,          cθ,     (l/θ) sθ      ],
-           [0, 0, 0, 1]]
-
-``(1−cθ)/θ`` is computed as ``2 sin²(θ/2)/θ`` (no cancellation) and both it and ``sθ/θ`` switch to
-their Taylor series below ``|θ| = 1e-4``, where the two agree to far below float precision, so the
-kinematics is smooth through the straight arm. A point at arc length ``s`` of a section is the same
-transform with ``θ·s/l`` and ``s`` in place of ``θ`` and ``l``.
+``l`` through the access panel. A configuration is ``q = (dis, θ_1, φ_1, …, θ_N, φ_N)``: ``dis``
+[cm] is the module's travel along the panel normal, ``θ_i`` [rad] the bending angle and ``φ_i``
+[rad] the bending-plane angle of section ``i``. Frame S has its origin at the centre of the access
+panel, ``z`` into the tank; the base of section 1 sits at ``(0, 0, dis)`` pointing ``+z``. Each
+section transform is jace eq. 7 in the end frame of the previous section, chained
+``T = T_1 · T_2 ⋯ T_N``, smooth through the straight arm (Taylor series below ``|θ| = 1e-4``).
 
 Everything is batched: angles of shape ``(..., N)`` give results of shape ``(..., ·, 3)`` with no
-Python loop over the batch (only over the N ≤ 12 sections). Units: cm and rad.
+Python loop over the batch. The frame, the transform and its numerics: docs/design.md §2.
 """
 
 from __future__ import annotations

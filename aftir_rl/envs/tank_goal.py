@@ -1,39 +1,14 @@
 """``AFTIR-TankGoal-v0``: the tank grid world as a goal-conditioned env (targets drawn per episode).
 
-The dynamics, rewards and rendering are :class:`~aftir_rl.envs.tank_grid.TankGridEnv`'s: this
-class subclasses it and, at every reset, points the base env's model at the episode's goal (the
-base env's own target validation and model tabulation, about 0.4 ms per reset). What changes is
-the interface, which follows the goal-conditioned convention of Gymnasium-Robotics that
-Stable-Baselines3's ``HerReplayBuffer`` relies on:
-
-- a :class:`gymnasium.spaces.Dict` observation ``{"observation", "achieved_goal",
-  "desired_goal"}``, each a ``MultiDiscrete(raster shape)`` (``int64``) cell ``(a, b, c)``:
-  ``observation`` and ``achieved_goal`` are the tip's cell, ``desired_goal`` the target cell.
-  ``MultiDiscrete`` rather than an integer ``Box``: SB3's ``MultiInputPolicy`` one-hot encodes
-  each coordinate (15 + 10 + 5 inputs per key for the reference tank), where a ``Box`` would be
-  fed raw cell numbers; ``HerReplayBuffer`` stores and relabels both kinds alike;
-- :meth:`TankGoalEnv.compute_reward`, :meth:`TankGoalEnv.compute_terminated` and
-  :meth:`TankGoalEnv.compute_truncated`, vectorised over leading batch axes.
-
-**How hits are represented.** filomat2018's −100 is for entering an obstructed cell or leaving the
-box; the tip then stays where it was, so the cells alone cannot tell a hit from a free move. Every
-``step`` therefore puts ``info["hit"]`` (a bool) in the info dict, and ``compute_reward`` reads it:
-the reward is −100 where ``hit``, else +100 where ``achieved_goal == desired_goal``, else
-``-step_penalty`` (0 by default). A hit keeps its −100 under any relabelled goal. ``info`` may be
-one dict (its ``"hit"`` a bool or an array broadcastable to the batch), a list or object array of
-dicts (what ``HerReplayBuffer`` passes), or ``None`` (no hits). SB3's ``HerReplayBuffer`` only
-keeps infos with ``copy_info_dict=True``; with its default (``False``) it passes empty dicts, so
-relabelled hit transitions get 0 (or +100) instead of −100: pass
-``replay_buffer_kwargs={"copy_info_dict": True}`` to keep the penalty.
-
-**Goals.** Per episode the goal is drawn uniformly, with the env's ``np_random``, among the
-*reachable free cells other than the start cell* (:attr:`TankGoalEnv.goal_cells`; 586 for the
-reference tank). ``reset(options={"target": (x, y, z)})`` (cm) or ``{"target_cell": (a, b, c)}``
-sets the goal of that one episode; the ``target=``/``target_cell=`` keywords fix it for every
-episode (for evaluation). Goals are checked as in the base env (free, reachable, inside the box).
-
-Registered with ``max_episode_steps=100`` (the farthest reference cell is 22 moves from the start;
-shorter episodes than the base env's 500 give HER denser relabelled successes).
+The dynamics, rewards and rendering are :class:`~aftir_rl.envs.tank_grid.TankGridEnv`'s (a
+subclass that points the base env's model at each episode's goal); the interface follows the
+goal-conditioned convention of Gymnasium-Robotics that SB3's ``HerReplayBuffer`` relies on: a
+``Dict`` observation ``{"observation", "achieved_goal", "desired_goal"}`` of ``MultiDiscrete``
+cells, and vectorised :meth:`TankGoalEnv.compute_reward`, :meth:`TankGoalEnv.compute_terminated`
+and :meth:`TankGoalEnv.compute_truncated`. A hit is ``info["hit"]``, so it keeps its −100 under
+any relabelled goal (pass ``replay_buffer_kwargs={"copy_info_dict": True}`` to HER). Goals are
+drawn among :attr:`TankGoalEnv.goal_cells` or set by ``reset(options=...)``; registered with
+``max_episode_steps=100``. Why each choice: docs/design.md §8.
 """
 
 from __future__ import annotations

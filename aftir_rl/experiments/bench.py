@@ -1,50 +1,13 @@
 """``python -m aftir_rl.bench``: every method measured on the same fixed target sets in one run.
 
-The planners of the papers (:mod:`aftir_rl.core.papers`), the learning agents and RRT-Connect.
-
-Target sets (each target in its own tank), named after the papers:
-
-- ``jace``: jace Table II's three targets, open space, ``l = 25`` cm.
-- ``icra2014``: icra2014 Table II's target ``[30, 18, 51]`` with 0, 1, 2 and 3 of its spherical
-  obstacles (``configs/tanks/open_space*.yaml``).
-- ``st2014``: st2014 Tables 1 and 2 in the single cabin (Table 2's vertices 3 cm inside).
-- ``filomat2018``: the four bay-2 corner targets of the reference tank (filomat2018 Table 2
-  analogues).
-- ``bay1``, ``bay2``: random free targets at least 5 cm from any surface on each side of the
-  baffle of the reference tank, drawn with a fixed seed.
-
-The methods:
-
-- the posture planners of :data:`aftir_rl.planning.posture.registry.REGISTRY`, each on the sets it
-  names
-  (a set named after a paper lists that paper's methods first); success is a posture that
-  passes the planner's checks (forward kinematics within 0.01 cm, or within the search zone for
-  ``blind`` and ``region_clipping``, which stop at the search step as in the papers; python-fcl;
-  the panel rule). Blind search is not run where its grid would exceed
-  :data:`~aftir_rl.planning.posture.search.BLIND_LIMIT` (5·10⁷) combinations.
-- ``q_table+postures`` (filomat2018's pipeline): tabular Q-learning on ``AFTIR-Tank-v0``
-  (``configs/q_table.yaml``), its greedy cell path, and a posture for every cell
-  (:func:`~aftir_rl.planning.posture.trajectory.plan_trajectory`); success is a complete trajectory
-  (every waypoint a posture, every move collision-free when checked densely; a colliding move
-  gets ``--bridge-seconds`` of RRT-Connect, :func:`~aftir_rl.planning.jointspace.bridge`).
-- ``q_table+ftl``: the same greedy cell path turned into a follow-the-leader motion
-  (:func:`~aftir_rl.planning.ftl.plan.plan_motion`); success is a complete motion whose arm keeps
-  ``--margin`` (1 cm) along the whole, densely checked motion; the FTL deviation column is the
-  largest distance of the body from the tip's traced curve.
-- ``rrt_connect``: OMPL's RRT-Connect in joint space from the start posture (the arm straight,
-  its tip at the tank's start point) to the planner's posture for the target, with our forward
-  kinematics and python-fcl scene as its validity checker
-  (:func:`~aftir_rl.planning.jointspace.rrt_connect`); success is a path that passes our dense
-  check.
-- SB3 agents, when run directories are given (``--model``): their deterministic policy in their
-  own arm env, one episode per target of the reference tank's sets that lies in the region their
-  env draws targets from (``AFTIR-ArmReach-v0``: in front of the panel in bay 1).
-
-Columns: success rate, median tip error [cm], smallest clearance to the tank [cm] (for
-RRT-Connect over about 50 postures sampled along the path, for Q-learning + postures over the
-waypoints' postures and about 50 sampled along the whole motion, bridges included: upper
-bounds), median tip path length [cm] (for the motions: Q-learning's cell path through its
-postures, RRT-Connect's densified path, the SB3 episode), median seconds per target.
+The posture planners of the papers (:data:`aftir_rl.planning.posture.registry.REGISTRY`), the
+Q-learning pipelines (``q_table+postures``, ``q_table+ftl``), RRT-Connect (``rrt_connect``) and,
+with ``--model``, trained SB3 agents, on target sets named after the papers (``jace``,
+``icra2014``, ``st2014``, ``filomat2018``) and random targets on each side of the baffle
+(``bay1``, ``bay2``). One row per (set, method): success rate, median tip error, least clearance,
+median tip path length and seconds per target. The sets, what success means for each method and
+what each column measures: docs/reference.md, "The benchmark"; the latest table:
+docs/benchmarks.md, "Comparing every method".
 """
 
 from __future__ import annotations

@@ -2,22 +2,15 @@
 
 Ray is an optional extra (``pip install "aftir_rl[ray]"``); nothing here imports it before a
 function is called, so the serial paths never need it. ``--ray ADDRESS`` of the command lines
-names where the tasks run (:func:`ray_session`):
-
-- ``local``: an in-process Ray on this machine with ``--workers`` CPUs (default: all cores);
-- ``auto``: the cluster this machine joined with ``ray start``;
-- ``HOST:PORT`` (or ``ray://HOST:PORT``): the head node of a cluster started with
-  ``ray start --head``.
+names where the tasks run (:func:`ray_session`): ``local`` (an in-process Ray with ``--workers``
+CPUs), ``auto`` (the cluster this machine joined with ``ray start``) or ``HOST:PORT`` (or
+``ray://HOST:PORT``, a head node started with ``ray start --head``).
 
 :func:`run_tasks` runs calls as Ray tasks and returns their results in the order of the calls; a
 call that raises, or whose worker dies, comes back as a :class:`TaskFailure` holding its error,
 so one failure never loses the other results. :func:`benchmark_on_ray` and :func:`evaluate_on_ray`
-are what ``bench`` and ``evaluate`` run on it.
-
-Every machine of a cluster needs the same install of aftir_rl (and the ray extra); run
-directories and ``--logdir`` must be on a filesystem every node sees (NFS), or on one node.
-``ray start`` (Ray 2.60) turns on token authentication: a driver joining its cluster needs
-``RAY_AUTH_MODE=token`` and the cluster's token (``~/.ray/auth_token`` or ``RAY_AUTH_TOKEN``).
+are what ``bench`` and ``evaluate`` run on it. Clusters (installs, shared filesystems, tokens):
+docs/reference.md, "Past one machine: Ray".
 """
 
 from __future__ import annotations
@@ -302,7 +295,7 @@ def benchmark_on_ray(
         progress: called with a line as each task finishes.
 
     """
-    from aftir_rl.experiments.outcomes import Row, sb3_outcomes
+    from aftir_rl.experiments.outcomes import sb3_outcomes
 
     items = [
         (name, method, tank, target)
@@ -329,6 +322,21 @@ def benchmark_on_ray(
     results: list[Any] = [None] * len(items) + submitted[len(items) :]
     for k, i in enumerate(order):
         results[i] = submitted[k]
+    return _bench_rows(sets, methods, models, results)
+
+
+def _bench_rows(
+    sets: dict[str, list[tuple[str, np.ndarray]]],
+    methods: dict[str, Sequence[str]],
+    models: Sequence[str | Path],
+    results: list[Any],
+) -> list[Any]:
+    """The benchmark's rows from the tasks' results in the serial order (items, then models).
+
+    A failed task becomes an outcome (or, for a run directory, a row) whose note holds its error.
+    """
+    from aftir_rl.experiments.outcomes import Row
+
     rows: list[Any] = []
     k = 0
     for name, items_ in sets.items():
@@ -341,7 +349,7 @@ def benchmark_on_ray(
                 )
                 k += 1
             rows.append(row)
-    for run_dir, result in zip(models, results[len(items) :]):
+    for run_dir, result in zip(models, results[k:]):
         if isinstance(result, TaskFailure):
             rows.append(Row("-", Path(run_dir).name, [_failed_outcome(result)]))
         else:

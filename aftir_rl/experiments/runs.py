@@ -1,22 +1,16 @@
 """A run directory of any kind: load it, replay its greedy policy, measure what it does.
 
-The kinds (:func:`run_kind`), as ``python -m aftir_rl.train`` writes them:
-
-- ``q_table``: ``q_table.npz``, one target (:func:`load_q_table_run`);
-- ``q_table_goal``: ``q_table_goal.npz``, every reachable cell (``--all-targets``,
-  :func:`load_goal_run`);
-- ``sb3``: ``model.zip`` with ``config.json`` (``ppo | sac | td3``, :func:`load_sb3_run`:
-  ``config.json`` checked key by key, the model loaded without unpickling).
+The kinds (:func:`run_kind`; their files: docs/design.md §9): ``q_table`` (``q_table.npz``, one
+target, :func:`load_q_table_run`), ``q_table_goal`` (``q_table_goal.npz``, every reachable cell,
+:func:`load_goal_run`) and ``sb3`` (``model.zip`` with ``config.json``, :func:`load_sb3_run`:
+the config checked key by key, the model loaded without unpickling).
 
 The workflow shared by ``train``, ``evaluate`` and ``bench``: a tabular agent's greedy cells
 (:func:`greedy_cells`, :func:`learn_cells`) become a follow-the-leader motion
 (:func:`aftir_rl.planning.ftl.plan.plan_motion`, summarised by :func:`motion_summary`) or the
-papers'
-postures per cell (:func:`aftir_rl.planning.posture.trajectory.plan_trajectory`);
-:func:`evaluate_run`
-gives the measures of one run directory. Environment ids read from a file or a config are
-checked before anything is made (:func:`check_env_id`,
-:func:`aftir_rl.envs.registration.registered_env_id`): no other module is imported.
+papers' postures per cell (:func:`aftir_rl.planning.posture.trajectory.plan_trajectory`);
+:func:`evaluate_run` gives the measures of one run directory. Environment ids read from a file
+or a config are checked before anything is made (:func:`check_env_id`): no module is imported.
 """
 
 from __future__ import annotations

@@ -2,23 +2,16 @@
 
 Optuna (``OptunaSearch``) samples the algorithm's search space
 (``configs/search_spaces/<algo>.yaml``,
-:func:`aftir_rl.experiments.search_space.load_search_space`); ASHA
-stops the trials that trail on ``eval/success_rate`` at each evaluation. Every trial is a normal
-run of :func:`aftir_rl.cli.train.train_sb3` (its own run directory: ``model.zip``, ``config.json``,
-``summary.json``, ``progress.csv``, TensorBoard events), so ``evaluate``, ``bench --model`` and
-``view`` take it as they take any run. A sweep writes ``LOGDIR/tune__<algo>__<env>__<time>/``:
-
-- one run directory per trial (``tensorboard --logdir`` the sweep folder overlays them all);
-  a trial that ASHA stopped early keeps its model and logs of its last evaluation, and its
-  ``summary.json`` says ``"stopped_early": true``;
-- ``trials.csv``: every trial's hyperparameters, last evaluation and run directory;
-- ``best.yaml``: the best trial's config (highest success rate, then lowest tip error), which
-  ``aftir train ALGO --config best.yaml`` takes;
-- ``ray/``: Ray Tune's own experiment state.
+:func:`aftir_rl.experiments.search_space.load_search_space`); ASHA stops the trials that trail
+on ``eval/success_rate`` at each evaluation. Every trial is a normal SB3 run directory, so
+``evaluate``, ``bench --model`` and ``view`` take it as they take any run. A sweep writes
+``LOGDIR/tune__<algo>__<env>__<time>/``: one run directory per trial (one stopped early says
+``"stopped_early": true`` in its ``summary.json``), ``trials.csv``, ``best.yaml`` (the best
+trial's config, for ``aftir train ALGO --config``) and ``ray/`` (Ray Tune's state).
 
 With ``--ray local`` (the default) Ray starts on this machine; ``--ray auto`` or ``HOST:PORT``
-runs the trials on a cluster started with ``ray start`` (``--logdir`` then on a filesystem every
-node sees). Needs the ray extra: ``pip install "aftir_rl[ray]"``.
+runs the trials on a cluster. Needs the ray extra: ``pip install "aftir_rl[ray]"``. More:
+docs/reference.md, "Past one machine: Ray", and docs/design.md §9.
 """
 
 from __future__ import annotations
@@ -165,88 +158,128 @@ def run_sweep(
         TuneError: every trial failed.
 
     """
-    from aftir_rl.core.files import check_writable_dir
     from aftir_rl.experiments.distributed import ray_session, require_ray
 
     require_ray()
     env_id = base.env_id
-    stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
-    sweep = check_writable_dir(logdir).resolve() / f"tune__{algo}__{env_id}__{stamp}"
-    sweep.mkdir(parents=True)
+    sweep = _make_sweep_dir(logdir, algo, env_id)
     # Tune's own CSV/JSON/TensorBoard loggers off: the trials' run directories hold the logs.
     os.environ.setdefault("TUNE_DISABLE_AUTO_CALLBACK_LOGGERS", "1")
     os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
     with ray_session(ray, workers):
-        from ray import tune
-        from ray.tune.schedulers import ASHAScheduler
-        from ray.tune.search.optuna import OptunaSearch
-
-        trainable = tune.with_resources(
-            tune.with_parameters(_trial, algo=algo, base=base, logdir=str(sweep), seed=seed),
-            {"cpu": base.n_envs},
-        )
-        rungs = max(1, base.total_timesteps // base.eval_freq)
-        scheduler = ASHAScheduler(
-            time_attr="timesteps",
-            max_t=base.total_timesteps,
-            grace_period=min(base.eval_freq, base.total_timesteps),
-            reduction_factor=2 if rungs < 8 else 3,
-        )
-        tuner = tune.Tuner(
-            trainable,
-            param_space={d.key: d.to_tune() for d in space},
-            tune_config=tune.TuneConfig(
-                metric=METRIC,
-                mode="max",
-                num_samples=trials,
-                scheduler=scheduler,
-                search_alg=OptunaSearch(seed=seed),
-            ),
-            run_config=tune.RunConfig(
-                name="ray", storage_path=str(sweep), verbose=verbose, log_to_file=True
-            ),
-        )
+        tuner = _make_tuner(algo, base, space, trials, sweep, seed, verbose)
         grid = tuner.fit()
-        rows = []
-        for i in range(len(grid)):
-            result = grid[i]
-            metrics = dict(result.metrics or {})
-            params = {d.key: _plain((result.config or {}).get(d.key)) for d in space}
-            run_dir = Path(metrics["run_dir"]) if metrics.get("run_dir") else None
-            stopped = bool(run_dir) and not metrics.get("completed") and result.error is None
-            if run_dir is not None and stopped:
-                _finish_stopped(run_dir, metrics, algo, env_id)
-            error = ""
-            if result.error is not None:
-                cause = getattr(result.error, "cause", None) or result.error
-                text = " ".join(str(cause).split()[-40:])
-                error = f"{type(cause).__name__}: {text}"[-200:]
-            rows.append(
-                {
-                    **params,
-                    "success_rate": metrics.get(METRIC, math.nan),
-                    "tip_error_cm": metrics.get("eval/tip_error_cm", math.nan),
-                    "timesteps": metrics.get("timesteps", 0),
-                    "stopped_early": stopped,
-                    "run_dir": str(run_dir) if run_dir else "",
-                    "error": error,
-                }
-            )
-    with open(sweep / "trials.csv", "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["error"])
-        writer.writeheader()
-        writer.writerows(rows)
-    done = [r for r in rows if not r["error"] and not math.isnan(r["success_rate"])]
-    if not done:
-        first = next((r["error"] for r in rows if r["error"]), "no trial reported")
-        raise TuneError(f"every trial of the sweep failed ({first}); see {sweep}/ray")
-    best = max(done, key=lambda r: (r["success_rate"], -_or_inf(r["tip_error_cm"])))
+        rows = [_trial_row(grid[i], space, algo, env_id) for i in range(len(grid))]
+    _write_trials_csv(sweep / "trials.csv", rows)
+    best = _best_trial(rows, sweep)
     best_config = dataclasses.replace(
         base, hyperparameters={**base.hyperparameters, **{d.key: best[d.key] for d in space}}
     )
     best_yaml = sweep / "best.yaml"
     write_config_yaml(best_yaml, best_config, algo, best)
     return {"sweep_dir": str(sweep), "best_yaml": str(best_yaml), "best": best, "trials": rows}
+
+
+def _make_sweep_dir(logdir: str | Path, algo: str, env_id: str) -> Path:
+    """Create ``logdir/tune__<algo>__<env>__<time>/``.
+
+    Raises:
+        ConfigError: ``logdir`` cannot be written.
+
+    """
+    from aftir_rl.core.files import check_writable_dir
+
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
+    sweep = check_writable_dir(logdir).resolve() / f"tune__{algo}__{env_id}__{stamp}"
+    sweep.mkdir(parents=True)
+    return sweep
+
+
+def _make_tuner(
+    algo: str,
+    base: Any,
+    space: Sequence[Dimension],
+    trials: int,
+    sweep: Path,
+    seed: int,
+    verbose: int,
+) -> Any:
+    """Ray Tune's tuner: Optuna samples ``space``, ASHA stops trailing trials at each rung."""
+    from ray import tune
+    from ray.tune.schedulers import ASHAScheduler
+    from ray.tune.search.optuna import OptunaSearch
+
+    trainable = tune.with_resources(
+        tune.with_parameters(_trial, algo=algo, base=base, logdir=str(sweep), seed=seed),
+        {"cpu": base.n_envs},
+    )
+    rungs = max(1, base.total_timesteps // base.eval_freq)
+    scheduler = ASHAScheduler(
+        time_attr="timesteps",
+        max_t=base.total_timesteps,
+        grace_period=min(base.eval_freq, base.total_timesteps),
+        reduction_factor=2 if rungs < 8 else 3,
+    )
+    return tune.Tuner(
+        trainable,
+        param_space={d.key: d.to_tune() for d in space},
+        tune_config=tune.TuneConfig(
+            metric=METRIC,
+            mode="max",
+            num_samples=trials,
+            scheduler=scheduler,
+            search_alg=OptunaSearch(seed=seed),
+        ),
+        run_config=tune.RunConfig(
+            name="ray", storage_path=str(sweep), verbose=verbose, log_to_file=True
+        ),
+    )
+
+
+def _trial_row(result: Any, space: Sequence[Dimension], algo: str, env_id: str) -> dict[str, Any]:
+    """One row of ``trials.csv``; finishes the run directory of a trial ASHA stopped."""
+    metrics = dict(result.metrics or {})
+    params = {d.key: _plain((result.config or {}).get(d.key)) for d in space}
+    run_dir = Path(metrics["run_dir"]) if metrics.get("run_dir") else None
+    stopped = bool(run_dir) and not metrics.get("completed") and result.error is None
+    if run_dir is not None and stopped:
+        _finish_stopped(run_dir, metrics, algo, env_id)
+    error = ""
+    if result.error is not None:
+        cause = getattr(result.error, "cause", None) or result.error
+        text = " ".join(str(cause).split()[-40:])
+        error = f"{type(cause).__name__}: {text}"[-200:]
+    return {
+        **params,
+        "success_rate": metrics.get(METRIC, math.nan),
+        "tip_error_cm": metrics.get("eval/tip_error_cm", math.nan),
+        "timesteps": metrics.get("timesteps", 0),
+        "stopped_early": stopped,
+        "run_dir": str(run_dir) if run_dir else "",
+        "error": error,
+    }
+
+
+def _write_trials_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    """Write the trials' rows as CSV (an ``error`` column alone when there is none)."""
+    with open(path, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["error"])
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def _best_trial(rows: list[dict[str, Any]], sweep: Path) -> dict[str, Any]:
+    """The highest success rate, ties broken by the lower tip error.
+
+    Raises:
+        TuneError: no trial finished without an error and reported a success rate.
+
+    """
+    done = [r for r in rows if not r["error"] and not math.isnan(r["success_rate"])]
+    if not done:
+        first = next((r["error"] for r in rows if r["error"]), "no trial reported")
+        raise TuneError(f"every trial of the sweep failed ({first}); see {sweep}/ray")
+    return max(done, key=lambda r: (r["success_rate"], -_or_inf(r["tip_error_cm"])))
 
 
 def _or_inf(value: float) -> float:

@@ -1,29 +1,17 @@
 """Joint-space motion between two postures: checked interpolation and OMPL's RRT-Connect.
 
 A posture is the joint vector ``x = (dis, θ_1..θ_N, φ_1..φ_N)`` of an arm with a fixed number of
-sections. Two facts shape how we move between postures:
+sections. :func:`align` picks, without changing the arm, the representation nearest a reference
+(``(θ, φ)`` or ``(−θ, φ + π)``), so interpolation never swings a section round by 180°.
+:func:`densify` interpolates postures so that no joint changes by more than ``max_angle`` [rad]
+and ``dis`` by no more than ``max_dis`` [cm] between neighbours, and :func:`first_collision`
+checks them all: a dense, discrete check, not a certified sweep.
 
-- A section's shape is the same for ``(θ, φ)`` and ``(−θ, φ + π)``, and a straight section's
-  ``φ`` is arbitrary. :func:`align` rewrites a posture, without changing the arm, into the
-  representation nearest to a reference, so that interpolating joint values does not swing a
-  section round by 180° when it could simply bend the other way.
-- A move is collision-free only if every posture along it is. :func:`densify` interpolates a
-  sequence of postures so that no joint changes by more than ``max_angle`` [rad] and ``dis`` by
-  no more than ``max_dis`` [cm] between neighbours, and :func:`first_collision` checks them all.
-  A joint change ``δ`` moves a body point by at most ``δ`` times its arc distance from that
-  joint, so between two checked postures of N sections of length l a point moves by at most
-  about ``N(N + 1)·l·max_angle + max_dis`` (2.2 cm for 4 sections of 50 cm at the defaults, far
-  less in practice): a dense, discrete check, not a certified sweep.
-
-:func:`rrt_connect` is the sampling-based baseline a robotics user would reach for: OMPL's
-RRT-Connect (the ``ompl`` wheel) in the joint space, with our forward kinematics and python-fcl
-scene as its validity checker. Its path is shortcut by OMPL's simplifier, then densified and
-checked by :func:`first_collision` independently of OMPL's own edge checks, so a path is only
-reported solved if our check agrees. ``dis`` enters OMPL's distance divided by ``l`` so that
-one section length of travel weighs about one radian. :func:`bridge` runs it in the smallest
-joint space two postures share (no sections straight in both; their common bending plane, when
-they have one), which is what the trajectories of
-:func:`~aftir_rl.planning.posture.trajectory.plan_trajectory` use for a move that collides.
+:func:`rrt_connect` is OMPL's RRT-Connect (the ``ompl`` wheel) in joint space, with our forward
+kinematics and python-fcl scene as its validity checker; a path counts as solved only if our own
+dense check agrees. :func:`bridge` runs it in the smallest joint space two postures share, for
+the moves of :func:`~aftir_rl.planning.posture.trajectory.plan_trajectory` that collide. How far
+a body point can move between checks, and the distance OMPL uses: docs/design.md §7.1.
 """
 
 from __future__ import annotations

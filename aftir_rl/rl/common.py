@@ -19,7 +19,7 @@ def target_tag(target: Sequence[float]) -> str:
 
 
 def run_name(algo: str, env_id: str, target: Sequence[float] | str, seed: int) -> str:
-    """``{algo}__{env}__{target}__{seed}__{time}`` (design.md §8)."""
+    """``{algo}__{env}__{target}__{seed}__{time}`` (docs/design.md §9)."""
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
     tag = target if isinstance(target, str) else target_tag(target)
     return f"{algo}__{env_id}__{tag}__{seed}__{stamp}"

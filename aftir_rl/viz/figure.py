@@ -227,6 +227,7 @@ def _frame_indices(run: RunData, max_frames: int) -> NDArray[np.int64]:
 
 
 def _add_frames(fig: Any, animated: list[tuple[int, RunData, NDArray[np.int64]]]) -> None:
+    """Animate the arms of ``animated`` (trace index, run, motion entries): frames and slider."""
     import plotly.graph_objects as go
 
     n_frames = max(len(idx) for _, _, idx in animated)
@@ -241,21 +242,29 @@ def _add_frames(fig: Any, animated: list[tuple[int, RunData, NDArray[np.int64]]]
             label.append(str(int(idx[j])))
         name = str(k)
         frames.append(go.Frame(data=data, traces=[i for i, _, _ in animated], name=name))
-        steps.append(
-            {
-                "method": "animate",
-                "label": "/".join(label),
-                "args": [
-                    [name],
-                    {
-                        "mode": "immediate",
-                        "frame": {"duration": 0, "redraw": True},
-                        "transition": {"duration": 0},
-                    },
-                ],
-            }
-        )
+        steps.append(_slider_step(name, "/".join(label)))
     fig.frames = frames
+    _add_animation_controls(fig, steps)
+
+
+def _slider_step(name: str, label: str) -> dict[str, Any]:
+    """The slider step that shows frame ``name``, labelled with the runs' motion entries."""
+    return {
+        "method": "animate",
+        "label": label,
+        "args": [
+            [name],
+            {
+                "mode": "immediate",
+                "frame": {"duration": 0, "redraw": True},
+                "transition": {"duration": 0},
+            },
+        ],
+    }
+
+
+def _add_animation_controls(fig: Any, steps: list[dict[str, Any]]) -> None:
+    """Add the play and pause buttons and the slider over ``steps`` to ``fig``'s layout."""
     play = {
         "frame": {"duration": 60, "redraw": True},
         "fromcurrent": True,

@@ -1,8 +1,7 @@
 """An interactive 3D view of run directories: one self-contained HTML page (plotly, offline).
 
-:func:`write_view` draws the tank (box outline, access panel, baffle pieces and boxes as solid
-blocks, pipes as cylinders, spheres) and, for each run directory, what it holds
-(:func:`~aftir_rl.viz.runs.read_run`):
+:func:`write_view` draws the tank (box outline, access panel, solid blocks, pipes, spheres) and,
+for each run directory, what it holds (:func:`~aftir_rl.viz.runs.read_run`):
 
 - ``path.json`` (tabular runs): the greedy cell path through the cell centres and the target;
 - ``trajectory.json``: the tip route and the arm moving along it, as plotly animation frames
@@ -10,12 +9,10 @@ blocks, pipes as cylinders, spheres) and, for each run directory, what it holds
 - anything else (an SB3 run with only ``config.json`` and ``summary.json``) is listed with a note
   saying there is no path to draw.
 
-Several runs are overlaid; the legend groups each run's traces under its directory name. Only
-JSON is read from a run directory (nothing is unpickled or imported); one that cannot be read
-raises :class:`~aftir_rl.core.errors.CheckpointError` (a saved training output cannot be read) with
-a
-one-line message naming the file. The page embeds plotly.js (about 4.7 MB), so it opens with no
-network; it is written atomically.
+Several runs are overlaid, grouped in the legend by directory name. Only JSON is read from a run
+directory (docs/design.md §9); one that cannot be read raises
+:class:`~aftir_rl.core.errors.CheckpointError` naming the file. The page embeds plotly.js, so it
+opens with no network; it is written atomically.
 """
 
 from __future__ import annotations

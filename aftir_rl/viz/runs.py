@@ -2,12 +2,11 @@
 
 - ``path.json`` (tabular runs): the greedy cell path (``points_cm`` or ``cells``) and the target;
 - ``trajectory.json``: the motion, ``{"complete", "margin_cm", "section_length", "method",
-  "motion": [{"dis", "theta", "phi"}, ...], "waypoint_index"}`` (cm, rad; design.md §1 for the
-  kinematics). The older form (``postures`` and ``moves``, as
+  "motion": [{"dis", "theta", "phi"}, ...], "waypoint_index"}`` (cm, rad; docs/design.md §2 for
+  the kinematics, §9 for the files). The older form (``postures`` and ``moves``, as
   :meth:`aftir_rl.planning.posture.trajectory.Trajectory.to_json` writes it) is read too, in the
-  same
-  order as ``Trajectory.motion()``. Postures with fewer sections than the longest are padded with
-  straight sections at the base and ``dis`` lowered by their length, which is the same arm;
+  same order as ``Trajectory.motion()``. Postures with fewer sections than the longest are padded
+  with straight sections at the base and ``dis`` lowered by their length, which is the same arm;
 - ``config.json`` and ``summary.json``: the tank's name and a few facts.
 
 Only JSON is read (nothing is unpickled or imported). A directory that is missing, holds none of
@@ -215,31 +214,9 @@ def read_run(run_dir: str | Path) -> RunData:
     run = RunData(name=path.name or str(path), path=path)
     for name in ("config.json", "summary.json"):
         if name in present:
-            data = _read_json(path / name)
-            if not isinstance(data, dict):
-                raise _bad(path / name, "expected a JSON object")
-            if isinstance(data.get("tank"), str):
-                run.tank = data["tank"]
-            for key in ("algo", "env_id", "timesteps", "success_rate", "tip_error_cm"):
-                if key in data and isinstance(data[key], (str, int, float)):
-                    run.facts[key] = (
-                        f"{data[key]:.4g}" if isinstance(data[key], float) else str(data[key])
-                    )
+            _read_facts(run, path / name)
     if "path.json" in present:
-        file = path / "path.json"
-        data = _read_json(file)
-        if not isinstance(data, dict):
-            raise _bad(file, "expected a JSON object")
-        if isinstance(data.get("tank"), str):
-            run.tank = data["tank"]
-        if data.get("points_cm") is not None:
-            run.cells_cm = _points(data["points_cm"], file, "points_cm").reshape(-1, 3)
-        elif data.get("cells") is not None:
-            run.cells = _points(data["cells"], file, "cells").reshape(-1, 3).astype(np.int64)
-        if data.get("target") is not None:
-            run.target = _points(data["target"], file, "target").reshape(3)
-        if "length_steps" in data:
-            run.facts["path"] = f"{data['length_steps']} steps"
+        _read_path(run, path / "path.json")
     if "trajectory.json" in present:
         _read_trajectory(run, path / "trajectory.json")
     if run.cells_cm is None and run.cells is None and run.dis is None:
@@ -247,6 +224,45 @@ def read_run(run_dir: str | Path) -> RunData:
             f"no path.json or trajectory.json (found {', '.join(present)}): no path to draw"
         )
     return run
+
+
+def _read_facts(run: RunData, file: Path) -> None:
+    """Read the tank and the facts shown beside the run from ``config.json`` or ``summary.json``.
+
+    Raises:
+        CheckpointError: the file is not a JSON object.
+
+    """
+    data = _read_json(file)
+    if not isinstance(data, dict):
+        raise _bad(file, "expected a JSON object")
+    if isinstance(data.get("tank"), str):
+        run.tank = data["tank"]
+    for key in ("algo", "env_id", "timesteps", "success_rate", "tip_error_cm"):
+        if key in data and isinstance(data[key], (str, int, float)):
+            run.facts[key] = f"{data[key]:.4g}" if isinstance(data[key], float) else str(data[key])
+
+
+def _read_path(run: RunData, file: Path) -> None:
+    """Read a Q-learning run's ``path.json``: tank, cell path (cm or cells), target and length.
+
+    Raises:
+        CheckpointError: the file is not a JSON object, or a point list is malformed.
+
+    """
+    data = _read_json(file)
+    if not isinstance(data, dict):
+        raise _bad(file, "expected a JSON object")
+    if isinstance(data.get("tank"), str):
+        run.tank = data["tank"]
+    if data.get("points_cm") is not None:
+        run.cells_cm = _points(data["points_cm"], file, "points_cm").reshape(-1, 3)
+    elif data.get("cells") is not None:
+        run.cells = _points(data["cells"], file, "cells").reshape(-1, 3).astype(np.int64)
+    if data.get("target") is not None:
+        run.target = _points(data["target"], file, "target").reshape(3)
+    if "length_steps" in data:
+        run.facts["path"] = f"{data['length_steps']} steps"
 
 
 def unique_names(runs: Sequence[RunData]) -> None:

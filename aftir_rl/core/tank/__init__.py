@@ -1,19 +1,17 @@
 """Tanks: geometry from YAML, the raster of cubic cells, the signed distance and the scene export.
 
 - :mod:`~aftir_rl.core.tank.solids`: boxes, axis-aligned cylinders and spheres, each with its
-  bounds,
-  signed distance, python-fcl object and drawing geometry;
+  bounds, signed distance, python-fcl object and drawing geometry;
 - :mod:`~aftir_rl.core.tank.geometry`: :class:`Tank` (box, access panel, baffle and hatch,
-  obstacles,
-  the arm) and its :class:`Enclosure` (the walls, the floor open at the panel, the guide below);
-- :mod:`~aftir_rl.core.tank.raster`: :class:`Raster`, the box split into cubes of ``cell_size``, BFS
-  through free cells and a z-slice text view;
-- :mod:`~aftir_rl.core.tank.distance`: :class:`TankDistance`, the signed distance to every solid and
-  wall, compiled once per tank;
-- :mod:`~aftir_rl.core.tank.loading`: :func:`load_tank` from ``configs/tanks/NAME.yaml`` or a path,
-  validated key by key;
-- :mod:`~aftir_rl.cli.tank`: ``python -m aftir_rl.tank [--tank NAME|PATH] [--json]`` prints a
-  z-slice view of the raster, or with ``--json`` the scene export of design.md §2.
+  obstacles, the arm) and its :class:`Enclosure` (the walls, the floor open at the panel);
+- :mod:`~aftir_rl.core.tank.raster`: :class:`Raster`, cubes of ``cell_size``, BFS, z-slices;
+- :mod:`~aftir_rl.core.tank.distance`: :class:`TankDistance`, the signed distance to every solid
+  and wall, compiled once per tank;
+- :mod:`~aftir_rl.core.tank.loading`: :func:`load_tank` from ``configs/tanks/NAME.yaml`` or a
+  path, validated key by key.
+
+The tank YAML: docs/design.md §3; the raster: §4; the scene export
+(``python -m aftir_rl.tank --json``): docs/design.md §5.
 """
 
 from __future__ import annotations

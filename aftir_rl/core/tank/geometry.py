@@ -5,7 +5,8 @@ A tank is an axis-aligned interior box, an access panel in the floor ``z = 0``, 
 (:mod:`aftir_rl.core.tank.solids`). Its walls are an :class:`Enclosure`: the box's faces, the floor
 open at the panel and that opening continued below the floor as the guide of the linear module.
 From these a :class:`Tank` derives its raster (:mod:`aftir_rl.core.tank.raster`), its signed
-distance (:class:`~aftir_rl.core.tank.distance.TankDistance`) and its scene export (design.md §2).
+distance (:class:`~aftir_rl.core.tank.distance.TankDistance`) and its scene export
+(docs/design.md §5).
 """
 
 from __future__ import annotations
@@ -336,7 +337,7 @@ class Tank:
         return bool(lo[k] < self.baffle.position < lo[k] + self.raster.cell_size)
 
     def scene_dict(self) -> dict[str, Any]:
-        """The scene export of design.md §2 (units cm)."""
+        """The scene export of docs/design.md §5 (units cm)."""
         out: dict[str, Any] = {
             "units": "cm",
             "box": {"min": list(self.box_min), "max": list(self.box_max)},

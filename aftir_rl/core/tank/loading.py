@@ -2,7 +2,7 @@
 
 Files load into the frozen dataclasses of :mod:`aftir_rl.core.tank.geometry`; an unknown key, a
 negative size, a hatch outside its baffle or an obstacle outside the box is a
-:class:`~aftir_rl.core.errors.ConfigError` naming the file and the key (design.md §2).
+:class:`~aftir_rl.core.errors.ConfigError` naming the file and the key (docs/design.md §3).
 """
 
 from __future__ import annotations

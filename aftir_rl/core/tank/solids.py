@@ -4,17 +4,14 @@ Every solid carries its own geometry, so no caller switches on its type:
 
 - bounds, overlap with cells and point containment (:meth:`~Box.aabb`, :meth:`~Box.overlaps`,
   :meth:`~Box.contains`), which build the raster;
-- its exact signed distance to points [cm] (< 0 inside), vectorised:
-  :meth:`~Box.signed_distance` on ``(..., 3)`` points, :meth:`~Box.signed_distance_xyz` on
-  separate coordinate arrays. Both evaluate :meth:`~Box.distance_field` on the solid's
-  :attr:`~Box.distance_params`; :class:`~aftir_rl.core.tank.distance.SolidStack` evaluates the same
-  field on the parameters of many solids stacked into arrays, so there is one formula per kind;
+- its exact signed distance to points [cm] (< 0 inside), vectorised (:meth:`~Box.signed_distance`,
+  :meth:`~Box.signed_distance_xyz`), one :meth:`~Box.distance_field` per kind that
+  :class:`~aftir_rl.core.tank.distance.SolidStack` also evaluates on many solids stacked;
 - its python-fcl collision object (:meth:`~Box.fcl_object`: a solid primitive and its pose);
-- what drawing needs: a triangle :meth:`~Box.mesh` (plotly) and :meth:`~Box.wireframe` polylines
-  (matplotlib).
+- a triangle :meth:`~Box.mesh` (plotly) and :meth:`~Box.wireframe` polylines (matplotlib).
 
-Cylinders must be axis-aligned: that makes the overlap test exact, and the tanks of the papers only
-have pipes along an axis.
+Cylinders are axis-aligned (exact overlap tests; the papers' pipes run along an axis). More:
+docs/design.md §3.
 """
 
 from __future__ import annotations

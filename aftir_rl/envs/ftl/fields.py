@@ -1,22 +1,14 @@
-"""Batched kernels of ``AFTIR-ArmFTL-v0``: exact clearances through a distance grid, raster guides.
+"""Grids of ``AFTIR-ArmFTL-v0``: exact clearances through a distance grid, the guide's fields.
 
-Two things make the batched follow-the-leader env fast and goal-aware without approximations:
+- :class:`ClearanceGrid`: the tank's signed distance tabulated on grids where it is
+  1-Lipschitz, so per arm only the samples that can hold the minimum go to the exact function
+  (the result equals the exact minimum); :meth:`ClearanceGrid.approx` for the sensing rays.
+- :class:`FieldGuide`: the free-space distance-to-go fields of the targets seen so far (the
+  motion planner's guide field), read for every tip at once.
+- :func:`raster_distance_table`: all-pairs 6-connected distances through the raster, for the
+  reward's shaping term. :func:`kernel_grid`: all of it as the compiled kernels read it.
 
-- :class:`ClearanceGrid` answers "the smallest signed distance of each arm's backbone samples"
-  exactly, but computes the exact distance only where it can matter. The tank's signed distance
-  is tabulated once on grids of spacing ``g`` laid where the distance is 1-Lipschitz, so a
-  point's value lies within ``δ = g·√3/2`` of its nearest node's. Per arm, the smallest upper
-  bound ``v + δ`` over its samples bounds the minimum; only samples whose lower bound ``v − δ``
-  is below it can hold the minimum, and only those (typically a handful of 121) go to the exact
-  function. The result equals the exact minimum (the tests compare them). The sensing rays of
-  the observation read the nearest node's value (:meth:`ClearanceGrid.approx`, within
-  ``δ`` = 1.7 cm).
-- :class:`FieldGuide` keeps the free-space distance-to-go fields of the targets seen so far
-  (the motion planner's guide field, one per target grid cell) and reads, for every tip at once,
-  the distance-to-go and the way to the next grid point: the way through the hatch as numbers a
-  policy can read.
-- :func:`raster_distance_table`: the all-pairs shortest 6-connected distances through the tank's
-  raster (the BFS the grid world is checked against), for the reward's shaping term.
+How the bounds work: docs/envs/armftl.md.
 """
 
 from __future__ import annotations

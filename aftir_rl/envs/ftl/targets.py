@@ -16,6 +16,7 @@ from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.tank import Tank
 from aftir_rl.envs.ftl import kernel
 from aftir_rl.envs.ftl.fields import kernel_grid
+from aftir_rl.envs.ftl.kernel import KernelTank
 
 __all__ = ["CORNER_DEPTH", "FailureRates", "bay_region", "corner_candidates", "draw_targets"]
 
@@ -52,9 +53,8 @@ def draw_targets(
 
     Each generator draws batches of 64 uniform candidates until one is at least ``clearance``
     from every surface and 20 cm from ``start``; its first such candidate is its target (the
-    tank's :func:`clearance_grid` settles most candidates, the rest are computed exactly, so the
-    verdicts are the exact ones: :func:`aftir_rl.envs.ftl.kernel.usable`). Shape
-    ``(len(rngs), 3)``.
+    clearance grid settles most candidates, the rest are computed exactly: the verdicts are the
+    exact ones, :func:`~aftir_rl.envs.ftl.kernel.usable`). Shape ``(len(rngs), 3)``.
 
     With ``biased > 0`` each generator first draws whether its target is biased (probability
     ``biased``); a biased one keeps each free candidate with probability ``weight(candidate)``
@@ -89,13 +89,9 @@ def draw_targets(
                 for i in todo
             ]
         )
-        # clear of the surfaces and 20 cm from the start: up to each row's first such candidate
-        ok = kernel.usable(cand, float(clearance), start, 20.0, packed, True)
-        if want[todo].any():  # biased rows: every candidate's verdict, then the weights
-            assert weight is not None
-            rows = np.flatnonzero(want[todo])
-            keep = np.stack([rngs[int(todo[r])].random(64) for r in rows]) < weight(cand[rows])
-            ok[rows] = kernel.usable(cand[rows], float(clearance), start, 20.0, packed) & keep
+        ok = _verdicts(
+            cand, [rngs[int(i)] for i in todo], want[todo], weight, clearance, start, packed
+        )
         found = ok.any(1)
         rows = np.flatnonzero(found)
         out[todo[rows]] = cand[rows, ok[rows].argmax(1)]
@@ -103,6 +99,29 @@ def draw_targets(
     if len(todo):
         raise TargetError(f"no free point {clearance:g} cm from every surface in the target region")
     return out
+
+
+def _verdicts(
+    cand: NDArray[np.float64],
+    rngs: Sequence[np.random.Generator],
+    want: NDArray[np.bool_],
+    weight: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    clearance: float,
+    start: NDArray[np.float64],
+    packed: KernelTank,
+) -> NDArray[np.bool_]:
+    """Which candidates ``(R, 64, 3)`` each row may take (its own generator, biased or not).
+
+    Clear of the surfaces and 20 cm from the start; an unbiased row is checked up to its first
+    such candidate, a biased one (``want``) on every candidate, then kept by its weight.
+    """
+    ok = kernel.usable(cand, float(clearance), start, 20.0, packed, True)
+    if want.any():
+        assert weight is not None
+        rows = np.flatnonzero(want)
+        keep = np.stack([rngs[int(r)].random(64) for r in rows]) < weight(cand[rows])
+        ok[rows] = kernel.usable(cand[rows], float(clearance), start, 20.0, packed) & keep
+    return ok
 
 
 #: Side [cm] of the cubes in the corners of a target region that ``corners`` draws from

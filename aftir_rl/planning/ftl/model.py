@@ -2,30 +2,14 @@
 
 The AFTIR group's path tracking ("shift-and-copy", Niu et al.): only the leading section is
 steered; when the module has pushed one section length, every section takes the joint values of
-the section ahead of it. At these *stages* the body lies exactly on the curve the tip has traced,
-and the body at every stage is a part of the final body.
+the section ahead of it. At these *stages* the body lies exactly on the curve the tip has traced.
 
-A :class:`Route` is that curve: a straight ``lead`` [cm] up the panel's axis above the floor, then
-``M`` constant-curvature route sections of the arm's section length ``l``. Route section ``j``
-bends by the vector ``κ_j = (θ_j cos φ_j, θ_j sin φ_j)`` [rad] in its base frame (design.md §1:
-``T = Rz(φ) Ry(θ) Rz(−φ)`` does not twist the frame, so equal ``κ`` in neighbouring sections
-continue one circle and ``|κ_j − κ_{j+1}|`` is the change of curvature).
-
-The arm has ``N ≥ M + ⌈lead / l⌉`` sections, so that its base stays below the floor
-(``dis ≤ 0``). With the tip at arc length ``s`` along the route (measured from the floor):
-
-- ``dis = s − N·l``;
-- while ``s ≤ lead`` the arm is straight;
-- for ``s = lead + (k + f)·l`` (``0 ≤ f < 1``), arm section ``i`` (0-based from the base) takes
-  ``(1 − f)·K[k + i] + f·K[k + i + 1]`` where ``K`` is ``κ`` padded with ``N`` straight sections
-  in front. At ``f = 0`` this is shift-and-copy exactly.
-
-Between stages the interpolation is approximate: Gilbert, Neimat & Webster (IEEE T-RO 2015) show
-that exact FTL holds only for special curves (arcs, helices), and a section that is partly in the
-guide cannot be straight below the floor and bent above it. :func:`ftl_deviation` measures the
-result: the largest and mean distance of the body from the curve the tip actually traced (the
-axis below the first tip position included). Routes whose neighbouring sections have similar
-``κ`` keep it small.
+A :class:`Route` is that curve: a straight ``lead`` [cm] up the panel's axis, then ``M``
+constant-curvature route sections of length ``l``, section ``j`` bending by the vector
+``κ_j = (θ_j cos φ_j, θ_j sin φ_j)`` [rad] in its base frame (docs/design.md §2). Between stages
+arm sections interpolate neighbouring ``κ`` (refined by a least-squares fit in
+:func:`ftl_motion`), which exact FTL cannot do for most curves; :func:`ftl_deviation` measures
+the body's distance from the curve the tip traced. The formulas: docs/design.md §7.3.
 
 Everything is in cm and radians; arrays are batched over motion entries.
 """

@@ -3,29 +3,16 @@
 The route (:class:`aftir_rl.planning.ftl.model.Route`) is planned as a beam search over the bending
 vector ``κ`` of one route section after another:
 
-- **Guide.** A distance-to-go field over the tank's raster: Dijkstra over free cells
-  (26-neighbourhood, Euclidean steps) from the target, restricted to a *corridor* around the
-  learned cell path (the path's cells grown by ``corridor`` cells; the whole free raster when no
-  path is given, or when no route is found in the corridor). A point's distance-to-go is the
-  smallest ``D(c) + |p − centre(c)|`` over the corridor cells ``c`` next to it, so the route
-  follows the learned cells without having to visit their centres (a constant-curvature arm
-  rising from the panel cannot hug the floor as the first cells of a greedy path do).
-- **Moves.** The next section's ``κ`` is the last one plus a change from a fixed set (at most
-  ``max_change`` rad), bounded by ``θ_max``. Small changes between neighbouring sections keep
-  the follow-the-leader deviation between stages small (:mod:`aftir_rl.planning.ftl.model`).
-- **Clearance as a cost** (Kuntz et al.: integrate 1/clearance along the path): each section's
-  backbone samples must keep ``radius + margin + slack`` from every solid, wall and the floor
-  outside the panel, and pay ``clearance_weight · Σ ds / (clearance − margin)``; with the length,
-  a curvature-change cost and the distance-to-go this ranks the beam.
-- **Closing.** A beam state whose tip is within reach of the target is closed exactly by damped
-  least squares on the bending vectors of its last sections (tip error ≤ 1e-6 cm); the closed
-  route is re-checked for clearance over its whole body; one that misses the clearance by less
-  than 3 cm is pushed away from the tank first (gradient ascent on a soft minimum of its
-  clearance in the null space of the tip's Jacobian, the tip staying on the target). Targets
-  within reach of the panel are also closed directly: one to three sections on a continuous
-  lead. The cheapest closed route wins.
+- **Guide**: a distance-to-go field from the target over free space, restricted to a corridor
+  around the learned cells (:mod:`aftir_rl.planning.ftl.guide`);
+- **Moves**: the next ``κ`` is the last one plus a bounded change (at most ``max_change`` rad),
+  which keeps the follow-the-leader deviation between stages small;
+- **Clearance as a cost** (Kuntz et al.) and a hard floor of ``radius + margin + slack``;
+- **Closing**: a state within reach of the target is closed exactly, re-checked and, if needed,
+  pushed away from the tank (:mod:`aftir_rl.planning.ftl.closing`); the cheapest route wins.
 
-Units cm and rad. All candidates of one depth are evaluated in one batched call.
+Units cm and rad; all candidates of one depth are evaluated in one batched call. The costs and
+rules in full: docs/design.md §7.3.
 """
 
 from __future__ import annotations

@@ -9,12 +9,9 @@ clears the tank with the arm's radius and puts the tip on the target by forward 
 
 A method is anything with the :class:`PostureMethod` protocol: a name, a line of help, the paper
 it comes from, the benchmark sets it is measured on, and ``plan(context, target)``. The methods
-live one module each beside this one (:mod:`~aftir_rl.planning.posture.tga`,
-:mod:`~aftir_rl.planning.posture.tsm`, :mod:`~aftir_rl.planning.posture.obstacle_clipping`,
-:mod:`~aftir_rl.planning.posture.region_division`) and import only this module and the search
-(:mod:`~aftir_rl.planning.posture.search`); :mod:`~aftir_rl.planning.posture.registry` lists them
-and
-:class:`~aftir_rl.planning.posture.planner.Planner` dispatches to them.
+live one module each beside this one and import only this module and the search;
+:mod:`~aftir_rl.planning.posture.registry` lists them and
+:class:`~aftir_rl.planning.posture.planner.Planner` dispatches to them (docs/design.md §6).
 """
 
 from __future__ import annotations
@@ -71,7 +68,7 @@ class PlannedPosture:
     details: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
-        """The posture JSON of design.md §5."""
+        """The posture JSON of docs/design.md §6."""
         return {
             **self.posture.to_dict(),
             "section_length": self.section_length,

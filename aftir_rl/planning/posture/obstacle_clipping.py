@@ -1,59 +1,18 @@
 """Collision-free path planning by region clipping among spherical obstacles (icra2014).
 
 The icra2014 paper (§II–III) plans one posture ``q = (dis, θ_i, φ_i)`` that puts the tip in the
-*target plane zone* while the body avoids the obstacles, with these pieces:
+*target plane zone* while the body keeps its backbone out of the *obstacle space zones* (vertical
+cylinders of radius ``r_oba = r0 + r_b`` through the spheres' centres, whose clearance does not
+depend on ``dis``: the projection strategy). Region clipping searches all 2N angles θ and φ with
+the MDS criterion, sections are added until a solution exists, and by default the result is
+refined towards the exact target (``refine=False`` stops at the search step as the paper does).
 
-- **Obstacle space zones** (assumption 4): each spherical obstacle of radius ``r0`` is replaced
-  by the vertical cylinder of radius ``r_oba = r0 + r_b`` through its centre. A backbone point
-  must stay out of every such cylinder. Because the rising distance only moves the arm along
-  ``z``, whether the body clears a vertical cylinder does not depend on ``dis``: that is the
-  *projection strategy* (fig. 3–4), which lets the angles be searched first and ``dis`` be
-  computed after.
-- **Target space zone** (assumption 5): the vertical cylinder of radius ``r_target`` around the
-  target. A combination of angles *reaches* it when its tip (base at the origin) lies inside;
-  then the rising distance ``dis = z_target − z_tip`` puts the tip in the **target plane zone**
-  (the horizontal disc of radius ``r_target`` at the target's height, assumption 3).
-- **MDS** (eq. 5): the sum over body points of their distance to the reference segment from the
-  origin to the target; the feasible, reaching combination of least MDS wins.
-- **Region clipping** (§III.B, eq. 14) over *all* 2N angles (θ and φ: obstacles break the
-  planar reduction of jace): split each interval into NUM parts, evaluate every combination
-  (batched), keep the best, shrink each interval to the best value's neighbours, until the step is
-  below ``Δθ``. Sections are added until a solution exists.
-
-Readings we took where the paper is loose or inconsistent:
-
-- ``r_oba``: §IV sets ``r0 = 2``, ``r_b = 2`` and ``r_oba = 3`` cm, but assumption 4 defines
-  ``r_oba = r0 + r_b`` = 4. We use the definition, with ``r_b`` the arm's body radius (2 cm in
-  ``configs/tanks/open_space*.yaml``): then a backbone outside the zone keeps the body off the
-  sphere, which python-fcl confirms on every returned posture. (The paper's own Table II postures
-  keep 2.8–3.5 cm from obstacles 1 and 2, consistent with its 3 cm, not with 4.)
-- The obstacle zone is the vertical cylinder above the floor (``z ≥ 0`` in assumption 4: "a
-  vertical pipe standing where the obstacle is"); below the floor the arm is in the panel's
-  guide, and the panel rule applies there.
-- Angle ranges: ``θ ∈ [−θ_max, θ_max]`` and ``φ ∈ [−π/2, π/2]`` for the first grid, which covers
-  every section shape once (``(θ, φ)`` and ``(−θ, φ + π)`` are the same section); ``φ`` may
-  leave that interval as the intervals shrink (it is periodic).
-- Coarse loops accept tips within ``max(r_target, Σ_i (s_θ + s_φ)/2 · L_i)`` of the target's
-  vertical (``L_i`` the arc length from section ``i`` to the tip): the continuity bound of §III.B,
-  as in :mod:`aftir_rl.planning.posture.search`. NUM is lowered for more sections so a loop
-  evaluates at
-  most about 2·10⁶ combinations.
-- The paper stops at the search step, the tip anywhere in the target plane zone (its tips are
-  0.03–0.22 cm off in Table II); ``refine=False`` does that. By default we go on clipping with a
-  target zone of the planner's tolerance (0.01 cm), then take minimum-norm Gauss–Newton steps
-  towards the exact target when the result still clears every zone (the least-MDS posture
-  usually touches a zone, so often it does not).
-- The intervals shrink to the best value's two neighbours on each side (the paper keeps one):
-  measured on [30, 18, 51], one neighbour stalls (no feasible tip near the target in the next
-  box) with one obstacle and finds MDS 68.2 cm without obstacles; two find 3-section postures
-  for every row of Table II and MDS 51.7 cm without obstacles.
-
-The tank's other solids and walls (if any) are checked on the backbone with the arm's radius,
-and the panel rule holds. Every returned posture is checked by forward kinematics and python-fcl
-(:meth:`~aftir_rl.planning.posture.context.PlanningContext.checked`). The region clipping loop and
-the
-Gauss–Newton refinement are :mod:`aftir_rl.planning.posture.clipping`'s, the MDS is
-:func:`~aftir_rl.planning.posture.planar.distance_sum`, shared with the planar search.
+The region clipping loop and the Gauss–Newton refinement are
+:mod:`aftir_rl.planning.posture.clipping`'s, the MDS is
+:func:`~aftir_rl.planning.posture.planar.distance_sum`, shared with the planar search. Every
+returned posture is checked by forward kinematics and python-fcl. The paper's pieces and the
+readings we took where it is loose or inconsistent (``r_oba``, the zone, angle ranges, the
+coarse-loop zone, how far intervals shrink): docs/design.md §6.4.
 """
 
 from __future__ import annotations

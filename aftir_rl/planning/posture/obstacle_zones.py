@@ -1,9 +1,8 @@
 """The obstacle zones of icra2014: one problem of collision-free region clipping among spheres.
 
 A problem is a target, N sections and the *obstacle space zones* (the vertical cylinders of
-radius ``r_oba = r0 + r_b`` through the spheres' centres,
-:mod:`aftir_rl.planning.posture.obstacle_clipping`
-has the readings we took): which postures keep their backbone out of every zone, clear the
+radius ``r_oba = r0 + r_b`` through the spheres' centres; the readings we took are in
+docs/design.md §6.4): which postures keep their backbone out of every zone, clear the
 tank's other solids and walls and keep the panel rule, and their MDS. A product grid of angles is
 evaluated in one broadcast product, with body points only for the combinations that reach the
 target zone.

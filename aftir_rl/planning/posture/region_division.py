@@ -1,75 +1,13 @@
 """Region division (st2014): closed-form planar postures chosen by the target's region.
 
-The st2014 paper ("Path planning based on region division") reduces the tank to
-the vertical plane through the ``z`` axis and the target, sorts the target into a *region* by its
-horizontal distance, and solves the posture of that region in closed form instead of searching the
-bending angles. Its figures are missing and its equations are garbled in the scan, so this module
-implements the one consistent reading below; it reproduces the paper's Table 2 rows 3, 5–8 and 9.
-
-Readings taken
---------------
-- **Dimension reduction** (§3.1): the reference plane holds the ``z`` axis and the target
-  ``G = (x_G, y_G, z_G)``; ``R_G = hypot(x_G, y_G)``, the bearing ``ψ = atan2(y_G, x_G)`` is the
-  paper's rotation angle ``ϕ`` and every section's ``φ_i = ψ`` (a planar arm).
-- **Equal-bend arc** (the "terminal bend curve" of §3.2): ``m`` joints of length ``ℓ``, each
-  bending by ``Θ/m`` in that plane, form one circular arc of length ``mℓ`` and total angle ``Θ``
-  (the paper's bending angle θ). Its tip relative to its base is ``R_m(Θ) = mℓ(1 − cos Θ)/Θ``,
-  ``Z_m(Θ) = mℓ sin Θ/Θ``. ``R_m`` rises up to ``Θ* ≈ 2.3311`` rad (``Θ sin Θ = 1 − cos Θ``) and
-  falls after it, so ``f_m = R_m(Θ*) ≈ 0.7246 mℓ`` is the horizontal reach of ``m`` joints and the
-  target's region is ``n`` with ``f_{n−1} < R_G ≤ f_n`` (eq. 2).
-- **Numerical methods I and II** (``n ≤ 7``, eqs. 3–6): the curve traced by the tip of ``m ≥ n``
-  joints as ``Θ`` grows crosses the abscissa ``R_G`` twice: on the rising branch ``Θ ≤ Θ*``
-  (method I, the "slit zone" case) and on the falling branch ``Θ > Θ*`` where the tip curls back
-  down (method II), with ``Θ/m ≤ θ_max`` and ``Θ < 2π``. Each crossing ``z_m`` needs the base to
-  move vertically by ``dis = z_G − z_m``; eqs. 3–6 keep the smallest ``|dis|`` over the joint counts
-  (the paper's ``min(Δz_1, Δz_2)`` over ``z_{n+k−1}`` and ``z_{n+k}``).
-- **Numerical method III** (``n ≥ 8``, eqs. 7–10): the first three joints bend ``π/6`` each, a
-  quarter circle that turns the arm horizontal towards the target (horizontal and vertical extent
-  both ``f3 = 3ℓ · 2/π``, 47.75 cm for ``ℓ = 25``); then ``str`` straight joints; then ``bend = 3``
-  joints bending equally by ``Θ/3``, downwards (``Θ > 0``, the same sense as the quarter circle) or
-  upwards (``Θ < 0``). ``str = ⌊(R_G − f3)/ℓ⌋ − (bend − 1)`` (eq. 9), ``m = str + 6`` (eq. 10), and
-  ``f3 + str·ℓ + 3ℓ sin Θ/Θ = R_G``; the tip is ``f3 ∓ 3ℓ(1 − cos Θ)/Θ`` above the base.
-- Among the candidates of the target's methods, the one with the smallest ``|dis|`` whose posture
-  passes :meth:`~aftir_rl.planning.posture.context.PlanningContext.checked` (joint limits, tip error
-  by
-  forward kinematics, python-fcl collision with the walls, and the panel rule: sections bent
-  below the floor must stay inside the panel's guide) is returned; if none does,
-  :class:`~aftir_rl.core.errors.PlanningError` "Cannot reach the target: ...".
-- **Signs and conventions.** The paper's *descending distance* is ``−dis`` (the tip's height above
-  the base minus ``z_G``; row 9 prints −12.3 for a base raised by 12.3). Our ``dis`` stays ``≤ 0``
-  (the linear module never enters the tank): where the paper raises the base (``dis > 0``), straight
-  sections are added at the base (:func:`~aftir_rl.planning.jointspace.pad_sections` with
-  ``⌈dis/ℓ⌉`` sections), the same arm above the floor; ``details["joints"]`` counts the paper's
-  ``m`` only. The paper's rotation angle lies in ``[0°, 360°)`` (``details["rotation_deg"]``),
-  the posture's ``φ`` in ``(−π, π]``. Method III's bend is signed as above (the paper prints −71.4
-  for the ceiling rows 7–8).
-- Solved exactly (bisection on the monotone branches), not on a grid: tip errors are ~1e-12 cm.
-- The paper claims every point of the cabin is reachable; with the walls and the panel rule it is
-  not quite. The closed forms have fixed shapes (one arc; or a quarter circle, straight joints and
-  three bending joints), and a far target (region 7 and beyond) at mid height needs them with the
-  base far below the floor (the arm then bends outside the guide) or raised until the arm meets
-  the ceiling. Such targets raise :class:`~aftir_rl.core.errors.PlanningError`; no other method is
-  substituted.
-
-Where the paper disagrees with itself
--------------------------------------
-- The tank is "361.7 × 97 × 86 cm (L × W × H)" in §4, but Table 2's vertices span 86 in ``y`` and
-  97 in ``z``; ``configs/tanks/single_cabin.yaml`` follows Table 2.
-- Row 9 prints ``Θ = 91.4°``, descending −12.3; solved exactly the arc needs 91.50° and −12.40.
-  The paper's own pair is consistent with this geometry (at ``Θ = 91.4°`` it gives −12.33), so its
-  angle was found on a grid of about 0.1°.
-- Row 4 (−60, 42.5, 97), a near target (``R_G = 73.5``, region 5), is labelled method III with 14
-  joints, which eqs. 9–10 give only for far targets; its 79.1° is close to method I's 79.3° (5
-  joints) and its −9.0 repeats row 3. Rows 1–2 (method II, 128.8° and 127.5°, +7.4 and +7.7) follow
-  from no reading we found. On the printed vertices ours are method II with 5 joints, about 192°,
-  descending −8.1 and −7.4 (a tip curled past straight down, which would hit the walls); on the
-  targets pulled 3 cm inside, method II with 4 joints, 160° and 158°, descending +8.9 and +10.7.
-- Rows 5–8 (``R_G`` = 304.8 for ``y = −43.5``, 304.7 for ``y = 42.5``): ours are 14 joints,
-  ``|Θ|`` = 71.33° and 71.63°, descending 6.79 and 6.66 (floor), −8.30 and −8.17 (top). The
-  paper's row 5 (ϕ = 8.02°, 71.7°, 6.6) fits ``y = 42.5``, whose bearing is 8.02°, and its row 6
-  (71.4°, 6.8) fits ``y = −43.5``: rows 5 and 6 are printed with their targets swapped. Row 8's
-  71.4° (ours 71.63°) repeats row 7's, though its −8.1 fits. The rotation angle −81.0 of rows 6–7
-  is no bearing of these targets (−8.2°), perhaps a slipped decimal point.
+The st2014 paper reduces the tank to the vertical plane through the ``z`` axis and the target,
+sorts the target into a *region* by its horizontal distance, and solves that region's posture in
+closed form instead of searching: one equal-bend arc on its rising branch (numerical method I)
+or its falling branch (method II), or for far targets a quarter circle, straight joints and three
+bending joints (method III); the candidate of smallest ``|dis|`` that passes the planner's checks
+wins, solved exactly by bisection. Its figures are missing and its equations garbled in the scan:
+the one consistent reading we implement, its sign conventions and where the paper disagrees with
+itself are in docs/design.md §6.5.
 
 The pure geometric helpers (:func:`arc_tip`, :func:`reach`, :func:`region`, :func:`solve_arc`,
 :func:`method_iii_arc`, :func:`candidates`, :func:`geometric_solution`) need no tank; units are

@@ -1,32 +1,15 @@
 """Region clipping and blind search over bending angles (jace §IV and icra2014 §III.B).
 
 Both search the planar problem of :mod:`aftir_rl.planning.posture.planar`: bending angles
-``θ_1..θ_N`` of an
-arm whose base rises by ``dis`` along ``z``. A combination *reaches the target zone* when its tip's
-``ρ`` is within the zone radius of the target's (the zone is the vertical cylinder around the
-target, jace §IV.A); the rising distance then puts the tip at the target's height,
-``dis = z_t − z_tip``. Among reaching, feasible combinations the one with the minimum distance
-summation (MDS: sum over body points of their distance to the reference segment from the base
-point to the target) wins.
+``θ_1..θ_N`` of an arm whose base rises by ``dis`` along ``z``. Among the combinations whose tip
+reaches the target zone (a vertical cylinder around the target; ``dis`` then puts the tip at its
+height) and are feasible, the one of least MDS wins. **Blind search** evaluates one grid of step
+``Δθ`` in chunks; **region clipping** evaluates ``(NUM + 1)ᴺ`` combinations per loop and shrinks
+every interval around the best, with a zone that tightens to ``ε`` as the grid does;
+:func:`refine` then closes the remaining gap by Gauss–Newton. An optional end heading (TSM's
+guided angle) fixes the last angle: ``θ_N = heading − Σ θ_{i<N}``.
 
-- **Blind search** evaluates one grid of step ``Δθ`` over ``[−θ_max, θ_max]ᴺ`` (the baseline of
-  jace Table II), in chunks so memory stays bounded, optionally on a strided sample of the
-  grid (for timing a search too long to run whole).
-- **Region clipping** splits each angle's interval into ``NUM`` parts, evaluates all
-  ``(NUM + 1)ᴺ`` combinations at once, keeps the best and shrinks every interval to the best
-  value's neighbours, until the step is below ``Δθ`` (and the zone below ``ε``, see below) or
-  the MDS stops changing.
-
-Our reading of the zone in region clipping: on a grid of step ``s`` no combination need come within
-0.5 cm of the target, so loop ``k`` accepts tips within ``max(ε, Σ_i (s_i / 2) · L_i)`` where
-``L_i`` is the arc length from section ``i`` to the tip. That bound is the continuity argument of
-jace §III (a half-step change of ``θ_i`` moves the tip by at most ``s_i/2 · L_i``): if an exact
-solution lies in the current box, its nearest grid point is accepted. The zone tightens to ``ε``
-as the grid does, and :func:`refine` then closes the remaining gap (the papers stop at the search
-step and report tip errors up to 2.45 cm; we reach 1e-9 cm).
-
-An optional required end heading (the *guided angle* used inside TSM) removes the last angle from
-the search: ``θ_N = heading − Σ θ_{i<N}``.
+The zone rule we read into the coarse loops, and the numbers: docs/design.md §6.1.
 """
 
 from __future__ import annotations

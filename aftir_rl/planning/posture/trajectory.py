@@ -1,40 +1,16 @@
 """From a learned tip path to joint variables along it (filomat2018 §5).
 
 Every cell centre of the greedy path gets a posture, and the last posture reaches the exact
-target. The paper plans each one with TGA (bay 1) or TSM (beyond the hatch) and relies on similar
-targets giving similar postures. Measured here, that does not hold across the hatch: TGA and TSM
-postures of neighbouring cells differ by up to 180° in a joint and 4 sections. So each posture is
-*continued* from the previous one, with the number of sections held fixed (the most any
-waypoint's planned posture needs):
+target. The paper plans each with TGA (bay 1) or TSM (beyond the hatch); those of neighbouring
+cells can differ by a half turn in a joint, so here each posture is *continued* from the previous
+one (damped least squares, collisions repaired in the null space of the tip's Jacobian, colliding
+sub-steps split; :mod:`aftir_rl.planning.posture.continuation`), with the planner's posture as a
+fallback. A second chain *slides* the arm in along itself (:func:`slide`) when the first has a
+colliding move; a move that still collides gets RRT-Connect
+(:func:`~aftir_rl.planning.jointspace.bridge`), then is reported in ``blocked_moves``, and a cell
+with no posture in ``failures``. Every move is checked densely.
 
-- damped least squares on ``(dis, θ, φ)`` moves the tip to the next waypoint in a few sub-steps;
-- a sub-step posture that collides is *repaired*: it moves in the null space of the tip's
-  Jacobian (the tip stays put) down the gradient of its penetration into a band around the tank
-  (:func:`repair_posture`);
-- a sub-step whose move collides is split in two, down to 1/16 of a sub-step.
-
-Where continuation still fails, the planner's own posture for that waypoint is used (a
-*fallback*). Every move between neighbouring postures, through its sub-steps, is checked
-densely (:func:`~aftir_rl.planning.jointspace.densify`: no joint changes by more than 0.1° and
-``dis`` by no more than 0.5 cm between checked postures).
-
-Damped least squares takes the smallest joint change, which bends the sections and almost never
-pushes more arm in: along the reference paths ``dis`` stays within 1 cm over 8 waypoints, and
-the arm that reached the hatch is then too short for the cells beyond it. So when that chain has
-a colliding move, a second chain is built in which every sub-step first *slides* the arm in by
-the tip's advance along its heading (:func:`slide`, an approximate follow-the-leader step), and
-the chain with fewer waypoints left without a posture, then fewer colliding moves (counted
-before bridging), is kept. A move that still collides is bridged by
-OMPL's RRT-Connect (:func:`~aftir_rl.planning.jointspace.bridge`: in the smallest joint space the
-two
-postures share, in their bending plane when they have one; ``bridge_seconds`` per move); one
-that still collides is reported in ``blocked_moves``, and a cell with no posture in
-``failures``, with the reason, not hidden.
-
-Postures are compared and interpolated after :func:`~aftir_rl.planning.jointspace.align`: a section
-bent by ``θ`` in the plane ``φ`` is the same as one bent by ``−θ`` in ``φ + π``. A posture with
-fewer sections is first written with straight sections added at its base and ``dis`` lowered by
-their length, which is the same arm: the linear module pushes a new section out.
+Why each step, and what it does to the reference paths: docs/design.md §7.2.
 """
 
 from __future__ import annotations
@@ -114,7 +90,7 @@ class Trajectory:
         return not self.failures and not self.blocked_moves
 
     def to_json(self) -> dict[str, Any]:
-        """``trajectory.json``: the postures in order (posture JSON of design.md §5)."""
+        """``trajectory.json``: the postures in order (posture JSON, docs/design.md §6)."""
         return {
             "waypoints_cm": self.waypoints,
             "postures": [p.to_json() if p is not None else None for p in self.postures],

@@ -3,25 +3,13 @@
 P3 is a TGA posture planned in the hatch frame M (origin at the hatch centre, ``z_M`` along the
 hatch normal into the far bay, ``x_M`` towards the floor) from A to G; P2 is one section bending
 by ``θ_m`` that turns the arm onto the hatch axis; P1 is a TGA posture from the panel to C whose
-end direction ``u3`` makes the angle ``α`` with ``z`` at bearing ``δ``. ``α`` is searched.
+end direction ``u3`` makes the angle ``α`` with ``z`` at bearing ``δ``. ``α`` is searched; the
+corner ``B = A − d · n`` (``n`` the hatch normal) with ``d = (l/θ_m) tan(θ_m/2)``, ``δ`` and
+``θ_m`` are solved together by fixed-point iteration. The total is ``N = N_p1 + 1 + N_p3``
+sections and ``dis = dis_p1``.
 
-Which reading of the paper we took, where its equations are garbled:
-
-* P3's base: TGA in frame M returns ``dis_p3`` with the base of P3 at ``(0, 0, dis_p3)`` in M, so
-  ``A = O_M + dis_p3 · n`` (``n`` the hatch normal). The paper's eq. 5 writes ``h = N_p3 l −
-  dis_p3`` in a convention where ``dis`` is measured differently; ours keeps one convention for
-  every ``dis`` (the base of the first section).
-* The corner: eq. 7 reuses ``h`` where the geometry needs ``d``; we take ``B = A − d · n`` with
-  ``d = (l/θ_m) tan(θ_m/2)`` (eq. 6: the tangent length of an arc of length ``l`` turning by
-  ``θ_m``, ``l/2`` at ``θ_m = 0``).
-* ``θ_m`` is the angle between ``u3`` and ``n`` (eq. 9 is that angle for the paper's hatch normal
-  along ``x``); ``δ`` is B's bearing (eq. 10); ``d``, ``δ`` and ``θ_m`` depend on each other
-  and are solved by fixed-point iteration, which converges in a few steps.
-* ``C = B − d · u3`` (eq. 11), and P2's rotation angle is the bearing of ``n`` in the end frame
-  of P1 (eq. 13). P3's rotation angles, planned in M, are turned into the end frame of P2 by the
-  twist between the two frames about ``n``.
-* The total: ``N = N_p1 + 1 + N_p3`` and ``dis = dis_p1`` (eq. 14's ``(N_p3 + 1) l`` belongs to
-  the paper's other ``dis`` convention).
+The reading of the paper we took where its equations are garbled (P3's base, the corner, the
+angles, the rotation of P3 into P2's end frame, the total): docs/design.md §6.3.
 """
 
 from __future__ import annotations

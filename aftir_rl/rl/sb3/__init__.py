@@ -2,16 +2,12 @@
 
 One import for the SB3 side of the package, which lives in three modules:
 
-- :mod:`aftir_rl.rl.sb3.config`: ``configs/{ppo,sac,td3}.yaml`` load into :class:`SB3Config`;
-  ``hyperparameters`` go to the algorithm's constructor and are checked against its signature
-  (an unknown key is a :class:`~aftir_rl.core.errors.ConfigError` naming the file and the key), and
-  :func:`build_model` makes the model;
-- :mod:`aftir_rl.rl.sb3.evaluation`: :class:`ArmEvalCallback` runs the deterministic policy on a
-  fixed set of evaluation targets and logs ``eval/success_rate``, ``eval/tip_error_cm``,
-  ``eval/path_length_cm``, ``eval/collision_rate``, ``eval/min_clearance_cm`` and a picture of
-  the tip path and arm under ``paths/eval`` through the model's SB3 logger, so SB3 runs and
-  Q-learning runs overlay in one TensorBoard; checkpoints are written atomically (temporary
-  file, then rename: :class:`AtomicCheckpoint`, :func:`save_model`);
+- :mod:`aftir_rl.rl.sb3.config`: ``configs/{ppo,sac,td3}.yaml`` load into a checked
+  :class:`SB3Config`, and :func:`build_model` makes the model;
+- :mod:`aftir_rl.rl.sb3.evaluation`: :class:`ArmEvalCallback` evaluates the deterministic policy
+  on fixed targets and logs the ``eval/*`` tags and ``paths/eval`` shared with the Q-learning
+  runs (docs/design.md §10); checkpoints are written atomically (:class:`AtomicCheckpoint`,
+  :func:`save_model`);
 - :mod:`aftir_rl.rl.sb3.loading`: a saved model is loaded without unpickling anything from the
   file (:func:`load_model`, :func:`load_run`).
 """

@@ -5,7 +5,8 @@
 against bounds (an unknown key or a value out of range is a
 :class:`~aftir_rl.core.errors.ConfigError`
 naming the file and the key), as is a run directory's ``config.json``
-(:func:`sb3_config_from_run`). :func:`build_model` makes the model of a checked config.
+(:func:`sb3_config_from_run`). :func:`build_model` makes the model of a checked config. The
+bounds of the hyperparameters and their checks are :mod:`aftir_rl.rl.sb3.checks`'.
 """
 
 from __future__ import annotations
@@ -24,6 +25,14 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 
 from aftir_rl.core.config import brief, from_mapping, read_yaml, shorten, to_float
 from aftir_rl.core.errors import CheckpointError, ConfigError
+from aftir_rl.envs.ftl.spec import (
+    CONFIG_KWARG_TYPES,
+    SHAPING_KINDS,
+    STEER_MODES,
+)
+from aftir_rl.rl.sb3.checks import LINEAR_PREFIX as LINEAR_PREFIX
+from aftir_rl.rl.sb3.checks import OBJECT_KEYS, check_hyperparameters, check_range
+from aftir_rl.rl.sb3.checks import linear_start as linear_start
 
 __all__ = [
     "ALGORITHMS",
@@ -104,55 +113,6 @@ def load_sb3_config(path: str | os.PathLike[str], algo: str) -> SB3Config:
     return config
 
 
-# Bounds of what a config may ask for: each is far above what the shipped configs use, and keeps
-# the memory and time of building a model small (a replay buffer of 2e6 transitions of the arm
-# envs is about 0.5 GB).
-_INT_RANGES: dict[str, tuple[int, int]] = {
-    "n_steps": (1, 1_000_000),
-    "batch_size": (1, 1_000_000),
-    "n_epochs": (1, 1000),
-    "buffer_size": (1, 2_000_000),
-    "learning_starts": (0, 1_000_000_000),
-    "gradient_steps": (-1, 10_000),
-    "policy_delay": (1, 1000),
-    "target_update_interval": (1, 1_000_000),
-    "sde_sample_freq": (-1, 1_000_000),
-    "stats_window_size": (1, 100_000),
-}
-_FLOAT_RANGES: dict[str, tuple[float, float]] = {
-    "learning_rate": (1e-12, 10.0),
-    "gamma": (0.0, 1.0),
-    "gae_lambda": (0.0, 1.0),
-    "clip_range": (1e-12, 100.0),
-    "vf_coef": (0.0, 1e6),
-    "max_grad_norm": (1e-12, 1e9),
-    "tau": (0.0, 1.0),
-    "target_policy_noise": (0.0, 1e3),
-    "target_noise_clip": (0.0, 1e3),
-}
-_OPTIONAL_FLOATS: dict[str, tuple[float, float]] = {
-    "clip_range_vf": (1e-12, 1e6),
-    "target_kl": (1e-12, 1e6),
-}
-_BOOLS = ("normalize_advantage", "use_sde", "use_sde_at_warmup", "optimize_memory_usage")
-#: Keys a YAML config cannot give: they take Python objects (classes, noise processes).
-OBJECT_KEYS = (
-    "rollout_buffer_class",
-    "rollout_buffer_kwargs",
-    "replay_buffer_class",
-    "replay_buffer_kwargs",
-    "action_noise",
-)
-_POLICY_KWARGS = {
-    "net_arch",
-    "log_std_init",
-    "ortho_init",
-    "n_critics",
-    "share_features_extractor",
-    "squash_output",
-    "full_std",
-    "use_expln",
-}
 #: Bounds of the fields of :class:`SB3Config`.
 _CONFIG_RANGES = {
     "total_timesteps": (1, 1_000_000_000),
@@ -161,52 +121,6 @@ _CONFIG_RANGES = {
     "eval_targets": (1, 1000),
     "checkpoint_freq": (1, 1_000_000_000),
 }
-
-
-#: Prefix of a learning rate that falls linearly to 0 over a run (RL Zoo's ``lin_3e-4``). With
-#: ``--resume``, SB3's progress counts every step of the model: the rate starts the resumed stage
-#: at ``start · (1 − resumed / (resumed + stage))`` and reaches 0 at its end.
-LINEAR_PREFIX = "lin_"
-
-
-def linear_start(value: Any) -> float | None:
-    """The starting value of a ``lin_<number>`` schedule (NaN if not a number), else None."""
-    if not (isinstance(value, str) and value.startswith(LINEAR_PREFIX)):
-        return None
-    try:
-        return float(value[len(LINEAR_PREFIX) :])
-    except ValueError:
-        return math.nan
-
-
-def _check_range(value: Any, lo: float, hi: float, where: str, integer: bool) -> None:
-    kind = "an integer" if integer else "a number"
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f"{where}: expected {kind} from {lo:g} to {hi:g}, got {brief(value)}")
-    try:
-        number = float(value)
-    except OverflowError:
-        number = math.inf
-    if integer and math.isfinite(number) and not number.is_integer():
-        raise ConfigError(f"{where}: expected {kind} from {lo:g} to {hi:g}, got {brief(value)}")
-    if not (math.isfinite(number) and lo <= number <= hi):
-        raise ConfigError(f"{where}: expected {kind} from {lo:g} to {hi:g}, got {brief(value)}")
-
-
-def _check_net_arch(value: Any, where: str) -> None:
-    def layers(v: Any, w: str) -> None:
-        if not isinstance(v, list) or len(v) > 8:
-            raise ConfigError(f"{w}: expected a list of at most 8 layer widths, got {brief(v)}")
-        for i, width in enumerate(v):
-            _check_range(width, 1, 4096, f"{w}[{i}]", integer=True)
-
-    if isinstance(value, dict):
-        for key, v in value.items():
-            if key not in ("pi", "vf", "qf"):
-                raise ConfigError(f"{where}: unknown key {brief(key)}; allowed keys are pi, qf, vf")
-            layers(v, f"{where}.{key}")
-    else:
-        layers(value, where)
 
 
 def check_sb3_config(config: SB3Config, algo: str, source: str) -> None:
@@ -222,79 +136,14 @@ def check_sb3_config(config: SB3Config, algo: str, source: str) -> None:
     for key, (lo, hi) in _CONFIG_RANGES.items():
         if key == "n_envs" and bare in BATCHED_ENV_IDS:
             hi = MAX_BATCHED_ENVS  # rows of one numpy batch, not processes
-        _check_range(getattr(config, key), lo, hi, f"{source}: {key}", integer=True)
+        check_range(getattr(config, key), lo, hi, f"{source}: {key}", integer=True)
     aliases = getattr(ALGORITHMS[algo], "policy_aliases", {})
     if config.policy not in aliases:
         raise ConfigError(
             f"{source}: policy: {brief(config.policy)} is not a {algo.upper()} policy; use one of "
             f"{', '.join(aliases)}"
         )
-    for key, value in config.hyperparameters.items():
-        where = f"{source}: hyperparameters.{key}"
-        if key in _INT_RANGES:
-            _check_range(value, *_INT_RANGES[key], where, integer=True)
-        elif key == "learning_rate" and isinstance(value, str):
-            start, (low, high) = linear_start(value), _FLOAT_RANGES[key]
-            if start is None or not (math.isfinite(start) and low <= start <= high):
-                raise ConfigError(
-                    f"{where}: expected a number or {LINEAR_PREFIX}<number> from {low:g} to "
-                    f"{high:g} (falling linearly to 0), got {brief(value)}"
-                )
-        elif key in _FLOAT_RANGES:
-            _check_range(value, *_FLOAT_RANGES[key], where, integer=False)
-        elif key in _OPTIONAL_FLOATS:
-            if value is not None:
-                _check_range(value, *_OPTIONAL_FLOATS[key], where, integer=False)
-        elif key in _BOOLS:
-            if not isinstance(value, bool):
-                raise ConfigError(f"{where}: expected true or false, got {brief(value)}")
-        elif key in OBJECT_KEYS:
-            raise ConfigError(f"{where}: takes a Python object, which a config file cannot give")
-        elif key == "ent_coef" or key == "target_entropy":
-            auto = isinstance(value, str) and (value == "auto" or value.startswith("auto_"))
-            if not (auto and algo == "sac"):
-                _check_range(value, -1e6 if key == "target_entropy" else 0.0, 1e6, where, False)
-            elif value.startswith("auto_"):
-                try:
-                    float(value[5:])
-                except ValueError:
-                    raise ConfigError(f"{where}: expected 'auto' or 'auto_<number>'") from None
-        elif key == "train_freq":
-            ok = isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 10**6
-            if isinstance(value, list) and len(value) == 2:
-                ok = value[1] in ("step", "episode")
-                _check_range(value[0], 1, 10**6, f"{where}[0]", integer=True)
-            if not ok:
-                raise ConfigError(f"{where}: expected N or [N, step|episode], got {brief(value)}")
-        elif key == "device":
-            if value not in ("auto", "cpu", "cuda"):
-                raise ConfigError(f"{where}: expected auto, cpu or cuda, got {brief(value)}")
-        elif key == "policy_kwargs":
-            if not isinstance(value, dict):
-                raise ConfigError(f"{where}: expected a mapping, got {brief(value)}")
-            for k, v in value.items():
-                if k not in _POLICY_KWARGS:
-                    raise ConfigError(
-                        f"{where}: unknown or unsupported key {brief(k)}; allowed keys are "
-                        f"{', '.join(sorted(_POLICY_KWARGS))}"
-                    )
-                if k == "net_arch":
-                    _check_net_arch(v, f"{where}.net_arch")
-                elif k in (
-                    "ortho_init",
-                    "share_features_extractor",
-                    "squash_output",
-                    "full_std",
-                    "use_expln",
-                ):
-                    if not isinstance(v, bool):
-                        raise ConfigError(f"{where}.{k}: expected true or false, got {brief(v)}")
-                elif k == "n_critics":
-                    _check_range(v, 1, 10, f"{where}.{k}", integer=True)
-                else:
-                    _check_range(v, -20, 20, f"{where}.{k}", integer=False)
-        elif not (value is None or isinstance(value, (bool, int, float, str))):
-            raise ConfigError(f"{where}: expected a plain value, got {brief(value)}")
+    check_hyperparameters(config.hyperparameters, algo, source)
     batch, steps = config.hyperparameters.get("batch_size"), config.hyperparameters.get("n_steps")
     if algo == "ppo" and steps is not None and steps * config.n_envs < 2:
         raise ConfigError(f"{source}: hyperparameters.n_steps: n_steps * n_envs must exceed 1")
@@ -341,37 +190,13 @@ def sb3_config_from_run(data: Any, source: str) -> tuple[str, SB3Config]:
 #: observation space: a model is always loaded into an env made with its run's ``env_kwargs``.
 ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
     "AFTIR-ArmFull-v0": {"bay": (int, type(None))},
-    "AFTIR-ArmFTL-v0": {
-        "bay": (int, type(None)),
-        "shaping": (bool, str),
-        "guide": (bool,),
-        "near_goal": (bool,),
-        "target_clearance": (int, float),
-        "success_tolerance": (int, float),
-        "margin": (int, float),
-        "kappa_step": (int, float),
-        "push_step": (int, float),
-        "start_height": (int, float),
-        "detour_bias": (int, float),
-        "corner_bias": (int, float),
-        "slack": (int, float),
-        "failure_bias": (int, float),
-        "steer": (str,),
-        "step_cost": (int, float),
-    },
+    "AFTIR-ArmFTL-v0": CONFIG_KWARG_TYPES,
 }
 #: Env keyword arguments whose values are one of a few.
 ENV_KWARG_CHOICES: dict[str, tuple[object, ...]] = {
-    "shaping": (False, True, "raster", "field"),
-    "steer": ("increment", "target"),
+    "shaping": tuple(SHAPING_KINDS),
+    "steer": STEER_MODES,
 }
-#: Env keyword arguments that only change how training draws its targets (``target_clearance``:
-#: how near the surfaces they may lie; ``detour_bias``: how often behind obstacles;
-#: ``corner_bias``: how often in the corners; ``failure_bias``: how often where the policy
-#: fails) or how strictly it judges them (``slack``: a tighter tolerance and a wider margin):
-#: evaluations go without them, so every run of an env is measured on the same targets by the
-#: same rule.
-TRAINING_ONLY_KWARGS = ("detour_bias", "target_clearance", "corner_bias", "slack", "failure_bias")
 #: Envs with a batched implementation: ``n_envs`` are rows of one process (at most
 #: :data:`MAX_BATCHED_ENVS`), not subprocesses (at most 64).
 BATCHED_ENV_IDS = ("AFTIR-ArmFTL-v0",)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import io
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, cast
 
@@ -25,7 +26,7 @@ from stable_baselines3.common.logger import Image
 
 from aftir_rl.core.config import EVAL_SEED
 from aftir_rl.core.files import atomic_open, write_json
-from aftir_rl.rl.sb3.config import TRAINING_ONLY_KWARGS
+from aftir_rl.envs.ftl.spec import TRAINING_ONLY_KWARGS
 
 __all__ = [
     "EVAL_SEED",
@@ -42,7 +43,7 @@ __all__ = [
 def evaluation_env_kwargs(env_kwargs: dict[str, Any] | None) -> dict[str, Any]:
     """A run's env kwargs as evaluations use them: without the training-only ones.
 
-    The keys of :data:`~aftir_rl.rl.sb3.config.TRAINING_ONLY_KWARGS` change how training
+    The keys of :data:`~aftir_rl.envs.ftl.spec.TRAINING_ONLY_KWARGS` change how training
     draws or judges its targets, not the env's spaces: every run of an env is evaluated on the
     same targets by the same rule.
     """
@@ -108,16 +109,7 @@ def evaluate_policy_on_targets(
     rows, smallest, first = [], np.inf, {}
     for i, target in enumerate(targets):
         start = time.perf_counter()
-        obs, info = env.reset(options={"target": target})
-        tips, done = [arm.tip], False
-        while not done:
-            action, _ = model.predict(obs, deterministic=True)
-            obs, _, terminated, truncated, info = env.step(action)
-            tips.append(arm.tip)
-            if clearance:
-                smallest = min(smallest, _clearance(arm))
-            done = terminated or truncated
-        path = np.array(tips)
+        path, info, smallest = _run_target(model, env, arm, target, clearance, smallest)
         rows.append(
             (
                 float(info.get("is_success", False)),
@@ -130,6 +122,35 @@ def evaluate_policy_on_targets(
         if i == 0:
             first = {"tips": path, "target": target, "arm": arm.body(), "tank": arm.tank}
     env.close()
+    return _mean_metrics(rows, clearance, smallest), first
+
+
+def _run_target(
+    model: Any, env: gym.Env, arm: Any, target: np.ndarray, clearance: bool, smallest: float
+) -> tuple[np.ndarray, dict[str, Any], float]:
+    """One deterministic episode to ``target``.
+
+    Returns:
+        The tip path, the last step's info and ``smallest`` lowered to the smallest clearance
+        along the motion (when ``clearance``; else unchanged).
+
+    """
+    obs, info = env.reset(options={"target": target})
+    tips, done = [arm.tip], False
+    while not done:
+        action, _ = model.predict(obs, deterministic=True)
+        obs, _, terminated, truncated, info = env.step(action)
+        tips.append(arm.tip)
+        if clearance:
+            smallest = min(smallest, _clearance(arm))
+        done = terminated or truncated
+    return np.array(tips), info, smallest
+
+
+def _mean_metrics(
+    rows: Sequence[tuple[float, ...]], clearance: bool, smallest: float
+) -> dict[str, float]:
+    """The means over targets of the rows' metrics (and the smallest clearance, if measured)."""
     mean = np.mean(np.array(rows), axis=0)
     keys = (
         "success_rate",
@@ -141,7 +162,7 @@ def evaluate_policy_on_targets(
     metrics = {k: float(v) for k, v in zip(keys, mean)}
     if clearance:
         metrics["min_clearance_cm"] = float(smallest)
-    return metrics, first
+    return metrics
 
 
 class Period:

@@ -263,8 +263,6 @@ def load_model(
         CheckpointError: saying what is wrong.
 
     """
-    import torch
-
     from aftir_rl.envs.registration import registered_env_id
 
     if algo not in ALGORITHMS:
@@ -286,14 +284,44 @@ def load_model(
         raise CheckpointError(
             f"{path}: its policy_kwargs are pickled Python objects, which are never loaded; refused"
         )
-    hint = "load it with the config it was trained with (the run's config.json)"
+    _set_weights(model, params, path, algo, config)
+    _set_extra_tensors(model, extra, path)
+    _set_counters(model, data, path)
+    return model
+
+
+#: How to load a model whose weights do not fit the one built from a config.
+_CONFIG_HINT = "load it with the config it was trained with (the run's config.json)"
+
+
+def _set_weights(
+    model: BaseAlgorithm, params: dict[str, Any], path: Path, algo: str, config: SB3Config
+) -> None:
+    """Set the archive's weights and optimizer states (``params``) on ``model``.
+
+    Raises:
+        CheckpointError: they do not fit the model built from ``config``.
+
+    """
     try:
         model.set_parameters(params, exact_match=True, device="cpu")
     except (RuntimeError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
         raise CheckpointError(
             f"{path}: its weights do not fit a {algo.upper()} {config.policy} on "
-            f"{config.env_id} with these hyperparameters ({shorten(str(exc), 160)}); {hint}"
+            f"{config.env_id} with these hyperparameters ({shorten(str(exc), 160)}); "
+            f"{_CONFIG_HINT}"
         ) from None
+
+
+def _set_extra_tensors(model: BaseAlgorithm, extra: dict[str, Any], path: Path) -> None:
+    """Copy the archive's other tensors (``log_ent_coef``...) into the model's own.
+
+    Raises:
+        CheckpointError: one is not a tensor, or not of the model's shape.
+
+    """
+    import torch
+
     for name, tensor in extra.items():
         if tensor is None:
             continue
@@ -305,15 +333,23 @@ def load_model(
             or not isinstance(current, torch.Tensor)
             or tensor.shape != current.shape
         ):
-            raise CheckpointError(f"{path}: {name} does not fit this model; {hint}")
+            raise CheckpointError(f"{path}: {name} does not fit this model; {_CONFIG_HINT}")
         current.data = tensor.data.to(current.dtype)
+
+
+def _set_counters(model: BaseAlgorithm, data: dict[str, Any], path: Path) -> None:
+    """Set the step counters of ``data`` (plain JSON integers) on ``model``.
+
+    Raises:
+        CheckpointError: a counter is not a step count.
+
+    """
     for key in _COUNTERS:
         value = data.get(key, 0)
         if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 10**12:
             raise CheckpointError(f"{path}: data.{key} is not a step count; refused")
         if hasattr(model, key):
             setattr(model, key, value)
-    return model
 
 
 def load_run(run_dir: str | os.PathLike[str]) -> tuple[str, SB3Config, str, BaseAlgorithm]:

@@ -42,26 +42,9 @@ def train_sb3(
         KeyboardInterrupt: Ctrl-C, once the model is saved; its message says where.
 
     """
-    import signal
-    import threading
-
-    from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.logger import configure
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
-
     from aftir_rl.core.files import check_writable_dir
-    from aftir_rl.rl.sb3 import (
-        ArmEvalCallback,
-        AtomicCheckpoint,
-        build_model,
-        check_sb3_config,
-        evaluation_targets,
-        load_model,
-        newest_model,
-        save_model,
-    )
+    from aftir_rl.rl.sb3 import check_sb3_config, evaluation_targets, newest_model
     from aftir_rl.rl.sb3.config import SB3_ENV_IDS
-    from aftir_rl.rl.sb3.vec_adapter import make_batched_vec_env
 
     bare = check_env_id(config.env_id, SB3_ENV_IDS, algo)
     check_sb3_config(config, algo, "config")
@@ -69,6 +52,37 @@ def train_sb3(
     logdir = check_writable_dir(logdir)
     resume_path = newest_model(resume) if resume is not None else None
     targets = evaluation_targets(env_id, config.eval_targets, env_kwargs=config.env_kwargs)
+    venv = _make_venv(env_id, config, seed)
+    try:
+        return _train_run(
+            algo,
+            bare,
+            config,
+            venv,
+            seed,
+            logdir,
+            resume_path,
+            targets,
+            progress_bar=progress_bar,
+            on_evaluation=on_evaluation,
+        )
+    finally:
+        try:
+            venv.close()
+        except (OSError, EOFError):
+            pass
+
+
+def _make_venv(env_id: str, config: Any, seed: int) -> Any:
+    """The training envs: a batched env when the env has one, else copies (Ctrl-C ignored)."""
+    import signal
+    import threading
+
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    from aftir_rl.rl.sb3.vec_adapter import make_batched_vec_env
+
     vec_cls = SubprocVecEnv if config.n_envs > 1 else DummyVecEnv
     # Workers ignore Ctrl-C: the main process stops them once the model is saved. Only the main
     # thread may set handlers (a Ray Tune trial runs in another one).
@@ -91,6 +105,29 @@ def train_sb3(
     finally:
         if main_thread:
             signal.signal(signal.SIGINT, previous)
+    return venv
+
+
+def _train_run(
+    algo: str,
+    bare: str,
+    config: Any,
+    venv: Any,
+    seed: int,
+    logdir: Path,
+    resume_path: Path | None,
+    targets: Any,
+    *,
+    progress_bar: bool,
+    on_evaluation: Any,
+) -> dict[str, Any]:
+    """Build (or load) the model, train it and write its run directory under ``logdir``.
+
+    A partial directory that holds a checkpoint is kept on failure (resumable); any other is
+    removed.
+    """
+    from aftir_rl.rl.sb3 import build_model, load_model, save_model
+
     partial = None
     try:
         if resume_path is not None:
@@ -101,42 +138,11 @@ def train_sb3(
         run_dir = logdir / name
         partial = logdir / f".{name}.partial"
         partial.mkdir(parents=True, exist_ok=False)
-        logger = configure(str(partial), ["csv", "tensorboard"])
-        model.set_logger(logger)
-        params = {
-            **dataclasses.asdict(config),
-            "algo": algo,
-            "seed": seed,
-            "resume": str(resume_path) if resume_path else None,
-        }
-        write_json(partial / "config.json", params)
-        logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
-        evaluator = ArmEvalCallback(
-            env_id,
-            targets,
-            config.eval_freq,
-            config.env_kwargs,
-            on_evaluate=on_evaluation,
-            best_dir=partial / "best",
+        logger = _open_logger(model, partial, algo, config, seed, resume_path)
+        evaluator, callbacks = _callbacks(
+            f"aftir_rl:{bare}", config, targets, on_evaluation, partial
         )
-        callbacks = [evaluator, AtomicCheckpoint(partial / "checkpoints", config.checkpoint_freq)]
-        start = time.perf_counter()
-        try:
-            model.learn(
-                config.total_timesteps,
-                callback=callbacks,
-                progress_bar=progress_bar,
-                reset_num_timesteps=resume_path is None,
-            )
-        except KeyboardInterrupt:
-            steps = int(model.num_timesteps)
-            save_model(model, partial / "checkpoints" / f"model_{steps}.zip")
-            logger.close()
-            raise KeyboardInterrupt(
-                f"the model at step {steps} is saved in {partial}/checkpoints; continue with "
-                f"--resume {partial}"
-            ) from None
-        seconds = time.perf_counter() - start
+        seconds = _learn(model, config, callbacks, progress_bar, resume_path, partial, logger)
         save_model(model, partial / "model.zip")
         logger.close()
         summary = {
@@ -155,9 +161,80 @@ def train_sb3(
         if partial is not None and not any((partial / "checkpoints").glob("model_*.zip")):
             shutil.rmtree(partial, ignore_errors=True)
         raise
-    finally:
-        try:
-            venv.close()
-        except (OSError, EOFError):
-            pass
     return summary
+
+
+def _open_logger(
+    model: Any, partial: Path, algo: str, config: Any, seed: int, resume_path: Path | None
+) -> Any:
+    """The run's CSV and TensorBoard logger, set on ``model``; writes ``config.json``."""
+    from stable_baselines3.common.logger import configure
+
+    logger = configure(str(partial), ["csv", "tensorboard"])
+    model.set_logger(logger)
+    params = {
+        **dataclasses.asdict(config),
+        "algo": algo,
+        "seed": seed,
+        "resume": str(resume_path) if resume_path else None,
+    }
+    write_json(partial / "config.json", params)
+    logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
+    return logger
+
+
+def _callbacks(
+    env_id: str, config: Any, targets: Any, on_evaluation: Any, partial: Path
+) -> tuple[Any, list[Any]]:
+    """The evaluation callback (best model under ``best/``) and the list of training callbacks."""
+    from aftir_rl.rl.sb3 import ArmEvalCallback, AtomicCheckpoint
+
+    evaluator = ArmEvalCallback(
+        env_id,
+        targets,
+        config.eval_freq,
+        config.env_kwargs,
+        on_evaluate=on_evaluation,
+        best_dir=partial / "best",
+    )
+    callbacks = [evaluator, AtomicCheckpoint(partial / "checkpoints", config.checkpoint_freq)]
+    return evaluator, callbacks
+
+
+def _learn(
+    model: Any,
+    config: Any,
+    callbacks: list[Any],
+    progress_bar: bool,
+    resume_path: Path | None,
+    partial: Path,
+    logger: Any,
+) -> float:
+    """Train for ``config.total_timesteps``; on Ctrl-C save a checkpoint and say where.
+
+    Returns:
+        The seconds training took.
+
+    Raises:
+        KeyboardInterrupt: Ctrl-C, once the model is saved under ``partial/checkpoints``.
+
+    """
+    from aftir_rl.rl.sb3 import save_model
+
+    start = time.perf_counter()
+    try:
+        model.learn(
+            config.total_timesteps,
+            callback=callbacks,
+            progress_bar=progress_bar,
+            reset_num_timesteps=resume_path is None,
+        )
+    except KeyboardInterrupt:
+        steps = int(model.num_timesteps)
+        save_model(model, partial / "checkpoints" / f"model_{steps}.zip")
+        logger.close()
+        raise KeyboardInterrupt(
+            f"the model at step {steps} is saved in {partial}/checkpoints; continue with "
+            f"--resume {partial}"
+        ) from None
+    return time.perf_counter() - start

@@ -3,17 +3,9 @@
 The update is ``Q(s,a) ← Q(s,a) + α [r + γ max_a' Q(s',a') − Q(s,a)]``; with ``α = 1`` it is the
 paper's rule ``Q(s,a) = r + γ max_a' Q(s',a')``. Exploration is ε-greedy with ε decaying
 geometrically per episode from ``exploration_initial_eps`` to a floor. Truncated episodes bootstrap
-from the next state; terminated ones do not.
-
-Why the defaults of ``configs/q_table.yaml`` converge: in the tank a random walk rarely reaches a
-target 20 cells away before an exploratory step hits a wall and ends the episode, so a
-zero-initialised table never sees the +100 (measured with ε decaying by 0.99 per episode to 0.05:
-none of the 4 reference targets in 4,000 episodes). An optimistic table (``initial_q = 100``, the
-largest return) makes the greedy policy try every untried action, and with α = 1 in a
-deterministic env every entry stays an upper bound of Q*. With ε decaying to 0 and greedy ties
-broken by the lowest index in training exactly as in evaluation, the greedy path the agent follows
-is corrected each time it passes an overestimate, until it is a shortest path (measured: stable
-from about 1,200 episodes on the reference and random targets).
+from the next state; terminated ones do not. Why the optimistic defaults of
+``configs/q_table.yaml`` (``initial_q = 100``, α = 1, ε decaying to 0, ties broken by the lowest
+index) converge to a shortest path in the tank: docs/design.md §8.
 
 Checkpoints are ``.npz`` files holding the table and a JSON metadata record (hyperparameters,
 episodes trained, the random generator's state), written to a temporary file and renamed, so a
@@ -112,34 +104,13 @@ class QLearning(TabularAgent):
         env, rng = self.env, self._rng
         q = self.q_table.tolist()  # lists index and max() far faster than numpy rows
         alpha, gamma = self.learning_rate, self.gamma
-        n_actions = len(q[0])
         returns: deque[float] = deque(maxlen=100)
         lengths: deque[int] = deque(maxlen=100)
         start = time.perf_counter()
         bar = episode_bar(progress_bar, episodes, "Q-learning")
         try:
             for _ in range(episodes):
-                eps = self.exploration_rate
-                seed = None if self._seeded_env else self.seed
-                self._seeded_env = True
-                s, _ = env.reset(seed=seed, options=reset_options)
-                s = int(s)
-                ep_return, ep_len = 0.0, 0
-                while True:
-                    row = q[s]
-                    if rng.random() < eps:
-                        a = rng.randrange(n_actions)
-                    else:
-                        a = row.index(max(row))
-                    s2, r, terminated, truncated, _ = env.step(a)
-                    s2, r = int(s2), float(r)
-                    target = r if terminated else r + gamma * max(q[s2])
-                    row[a] += alpha * (target - row[a])
-                    ep_return += r
-                    ep_len += 1
-                    s = s2
-                    if terminated or truncated:
-                        break
+                ep_return, ep_len = self._run_episode(env, rng, q, alpha, gamma, reset_options)
                 self.episodes_done += 1
                 self.num_timesteps += ep_len
                 returns.append(ep_return)
@@ -158,6 +129,53 @@ class QLearning(TabularAgent):
                 bar.close()
             self.q_table = np.array(q)
         return self
+
+    def _run_episode(
+        self,
+        env: gym.Env,
+        rng: random.Random,
+        q: list[list[float]],
+        alpha: float,
+        gamma: float,
+        reset_options: dict[str, Any] | None,
+    ) -> tuple[float, int]:
+        """Run one epsilon-greedy episode, updating the Q-table rows ``q`` in place.
+
+        Args:
+            env: the environment to run in.
+            rng: the exploration generator.
+            q: the Q-table as lists of rows (updated in place).
+            alpha: the learning rate.
+            gamma: the discount factor.
+            reset_options: passed to ``env.reset``.
+
+        Returns:
+            The episode's return and length.
+
+        """
+        n_actions = len(q[0])
+        eps = self.exploration_rate
+        seed = None if self._seeded_env else self.seed
+        self._seeded_env = True
+        s, _ = env.reset(seed=seed, options=reset_options)
+        s = int(s)
+        ep_return, ep_len = 0.0, 0
+        while True:
+            row = q[s]
+            if rng.random() < eps:
+                a = rng.randrange(n_actions)
+            else:
+                a = row.index(max(row))
+            s2, r, terminated, truncated, _ = env.step(a)
+            s2, r = int(s2), float(r)
+            target = r if terminated else r + gamma * max(q[s2])
+            row[a] += alpha * (target - row[a])
+            ep_return += r
+            ep_len += 1
+            s = s2
+            if terminated or truncated:
+                break
+        return ep_return, ep_len
 
     # ------------------------------------------------------------------ acting
     def predict(self, observation: int, deterministic: bool = True) -> tuple[int, None]:

@@ -7,36 +7,12 @@ filomat2018 eq. 1, ``Q(s,g,a) ← Q(s,g,a) + α [r + γ max_a' Q(s',g,a') − Q(
 on termination), with the step reward of ``AFTIR-TankGoal-v0`` (+100 entering ``g``, −100 on a
 hit, ``-step_penalty`` otherwise).
 
-**Why every goal's episode is stepped in parallel.** Training one
-:class:`~aftir_rl.rl.tabular.q_table.QLearning` per target costs one Python-level step per
-transition
-(about 21 s for the 586 targets of the reference tank). Here each goal has its own behaviour
-episode, ε-greedy on its own slice ``Q[:, g, :]`` with its own ε schedule, and all G episodes
-advance together: one vectorised numpy step moves every unfinished episode by one transition
-(``next_state``/``hit`` read from the env's goal-independent model,
-:meth:`~aftir_rl.envs.tank_goal.TankGoalEnv.dynamics`) and applies eq. 1 to the one
-``(s, g, a)`` entry each episode experienced. Episodes end and restart per goal (on reaching the
-goal, a hit, or ``max_episode_steps``), and a goal leaves the batch after ``episodes`` episodes.
-Because episode ``g`` only ever writes ``Q[:, g, :]``, the run is exactly G independent
-Q-learning runs of the paper's algorithm (only the random stream is shared), so the convergence
-argument of :mod:`aftir_rl.rl.tabular.q_table` holds goal by goal: with an optimistic table
-(``initial_q = 100``), α = 1, ε decaying to 0 and greedy ties broken by the lowest action index,
-the greedy path to every goal becomes a BFS shortest path. It is model-free learning from
-experienced transitions, not value iteration: an entry changes only when its goal's episode takes
-that action in that state, and the model is used only as the simulator (it is the env's step
-table, so this is the env's ``step`` without the Python overhead). The alternative, sweeping every
-``(s, a)`` through the model for every goal with α = 1, is value iteration under another name;
-relabelling each experienced transition for all goals (Kaelbling's all-goals updating) would be
-legitimate too, but costs O(G) per transition for each of G episodes.
-
-Measured (``benchmarks/bench_goal.py``, 2,000 episodes per target, 2 shared cores): 586 goals,
-18.5 M transitions in 8.3 s, every greedy path BFS-optimal, against 41.8 s for 586 separate
-``QLearning`` tables in the same run (5.1x). The table, its greedy policy and its checkpoints are
-:class:`~aftir_rl.rl.tabular.goal_table.GoalTable`'s.
-
-Resuming (``learn`` again, or :meth:`GoalQLearning.load` then ``learn``) continues each goal's ε
-schedule and the random generator, and starts every goal on a fresh episode; because the goals'
-episodes interleave differently, ``learn(a); learn(b)`` is not bit-identical to ``learn(a + b)``.
+Every goal's ε-greedy episode is stepped in parallel: one vectorised numpy step moves every
+unfinished episode by one transition through the env's goal-independent model
+(:meth:`~aftir_rl.envs.tank_goal.TankGoalEnv.dynamics`) and updates the one ``(s, g, a)`` entry
+each experienced: G independent Q-learning runs of the paper's algorithm. Table, greedy policy
+and checkpoints: :class:`~aftir_rl.rl.tabular.goal_table.GoalTable`. Why this is learning, not
+value iteration, and how resuming behaves: docs/design.md §8; its speed: docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -44,10 +20,12 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from aftir_rl.core.tank import Tank
 from aftir_rl.envs.tank_goal import TankGoalEnv
@@ -56,6 +34,81 @@ from aftir_rl.rl.tabular.goal_table import GoalTable
 from aftir_rl.rl.tabular.learning import QLearningConfig, episode_bar
 
 __all__ = ["GoalQLearning", "train_all_targets"]
+
+
+@dataclass
+class _GoalRun:
+    """What one :meth:`GoalQLearning.learn` call works on.
+
+    The tables and hyperparameters, read once at the start, and the state of every goal's
+    unfinished episode (one lane per goal, dropped when the goal has run all its episodes).
+    """
+
+    q: NDArray[np.float64]  # actions first: (n_actions, n_cells * n_goals), a view of the table
+    q_flat: NDArray[np.float64]
+    next_state: NDArray[np.int64]  # flat, indexed by s * n_actions + a
+    hit: NDArray[np.bool_]
+    rng: np.random.Generator
+    alpha: float
+    gamma: float
+    start: int
+    max_steps: int
+    n_goals: int
+    rewards: NDArray[np.float64]
+    lanes: NDArray[np.int64]  # goal index of each unfinished episode
+    goal: NDArray[np.int64]
+    s: NDArray[np.int64]
+    t: NDArray[np.int64]
+    ret: NDArray[np.float64]
+    ep: NDArray[np.int64]  # episodes finished in this call, per lane
+    eps: NDArray[np.float64]
+    returns: deque[float]
+    lengths: deque[int]
+    ar: NDArray[np.int64]  # 0, 1, ..., n_lanes - 1
+    next_log: int
+    begin: float
+    total_eps: int = 0
+    steps: int = 0
+
+
+def _step_lanes(run: _GoalRun) -> NDArray[np.bool_] | None:
+    """One epsilon-greedy step and Q update of every unfinished episode.
+
+    Returns:
+        Which lanes' episodes ended (``None`` when none did).
+
+    """
+    n = len(run.lanes)
+    if len(run.ar) != n:
+        run.ar = run.ar[:n]
+    q, s, lanes, n_goals, rng = run.q, run.s, run.lanes, run.n_goals, run.rng
+    n_actions, size = q.shape
+    idx = s * n_goals + lanes  # flat (s, g)
+    a = q.take(idx, axis=1).argmax(axis=0)  # greedy, lowest index on ties
+    explore = np.flatnonzero(rng.random(n) < run.eps)
+    if len(explore):
+        a[explore] = rng.integers(0, n_actions, len(explore))
+    sa = s * n_actions + a
+    s2 = run.next_state[sa]
+    hit = run.hit[sa]
+    reached = s2 == run.goal  # a hit stays in s, never the goal during an episode
+    term = hit | reached
+    r = run.rewards[hit + 2 * reached]
+    nxt_rows = q.take(s2 * n_goals + lanes, axis=1)
+    boot = nxt_rows[nxt_rows.argmax(axis=0), run.ar]
+    boot[term] = 0.0
+    flat = a * size + idx
+    old = run.q_flat[flat]
+    run.q_flat[flat] = old + run.alpha * (r + run.gamma * boot - old)
+    run.steps += n
+    run.t += 1
+    run.ret += r
+    end = term | (run.t >= run.max_steps)
+    if not end.any():
+        run.s = s2
+        return None
+    run.s = np.where(end, run.start, s2)
+    return end
 
 
 class GoalQLearning(GoalTable):
@@ -94,95 +147,114 @@ class GoalQLearning(GoalTable):
         """
         if episodes < 1:
             raise ValueError(f"episodes must be at least 1, got {episodes}")
+        run = self._start_run(log_interval)
+        bar = episode_bar(progress_bar, episodes * run.n_goals, "goal Q-learning")
+        stopped = False
+        try:
+            stopped = self._run_lanes(run, episodes, callback, logger, log_interval, bar)
+        finally:
+            if bar is not None:
+                bar.close()
+            self.num_timesteps += run.steps
+            self.episodes_done += run.total_eps // run.n_goals
+        if logger is not None:
+            self._log_goals(
+                logger, run.returns, run.lengths, len(run.lanes), run.begin, run.total_eps
+            )
+        if callback is not None and not stopped:
+            callback(self)
+        return self
+
+    def _start_run(self, log_interval: int) -> _GoalRun:
+        """The tables and the lanes of one :meth:`learn` call, every goal's episode at its start."""
         # Actions first: Q[a] is a flat (n_cells * n_goals) vector, so gathering the 6 values of
         # n episodes gives a (6, n) block whose argmax over axis 0 is fast (numpy reduces short
         # trailing axes several times slower).
         q = self._q.reshape(self._q.shape[0], -1)
-        q_flat = q.reshape(-1)
-        n_actions, size = q.shape
-        nxt_t, hit_t, rng = self.next_state.ravel(), self.hit.ravel(), self._rng
-        alpha, gamma = self.learning_rate, self.gamma
-        pen, start, max_steps = -self.step_penalty, self.start_state, self.max_episode_steps
         n_goals = self.n_goals
-        rewards = np.array([pen, OBSTACLE_REWARD, TARGET_REWARD])  # by hit + 2 * reached
-        lanes = np.arange(n_goals)  # goal index of each unfinished episode
-        goal = self.goal_states.copy()
-        s = np.full(n_goals, start, dtype=np.int64)
-        t = np.zeros(n_goals, dtype=np.int64)
-        ret = np.zeros(n_goals)
-        ep = np.zeros(n_goals, dtype=np.int64)  # episodes finished in this call, per lane
-        eps = self._eps(np.full(n_goals, self.episodes_done, dtype=np.float64))
-        returns: deque[float] = deque(maxlen=100 * n_goals)
-        lengths: deque[int] = deque(maxlen=100 * n_goals)
-        total_eps, next_log, steps = 0, log_interval * n_goals, 0
-        begin = time.perf_counter()
-        bar = episode_bar(progress_bar, episodes * n_goals, "goal Q-learning")
-        stopped = False
-        try:
-            ar = np.arange(n_goals)
-            while len(lanes):
-                n = len(lanes)
-                if len(ar) != n:
-                    ar = ar[:n]
-                idx = s * n_goals + lanes  # flat (s, g)
-                a = q.take(idx, axis=1).argmax(axis=0)  # greedy, lowest index on ties
-                explore = np.flatnonzero(rng.random(n) < eps)
-                if len(explore):
-                    a[explore] = rng.integers(0, n_actions, len(explore))
-                sa = s * n_actions + a
-                s2 = nxt_t[sa]
-                hit = hit_t[sa]
-                reached = s2 == goal  # a hit stays in s, never the goal during an episode
-                term = hit | reached
-                r = rewards[hit + 2 * reached]
-                nxt_rows = q.take(s2 * n_goals + lanes, axis=1)
-                boot = nxt_rows[nxt_rows.argmax(axis=0), ar]
-                boot[term] = 0.0
-                flat = a * size + idx
-                old = q_flat[flat]
-                q_flat[flat] = old + alpha * (r + gamma * boot - old)
-                steps += n
-                t += 1
-                ret += r
-                end = term | (t >= max_steps)
-                if not end.any():
-                    s = s2
-                    continue
-                s = np.where(end, start, s2)
-                ended = np.flatnonzero(end)
+        return _GoalRun(
+            q=q,
+            q_flat=q.reshape(-1),
+            next_state=self.next_state.ravel(),
+            hit=self.hit.ravel(),
+            rng=self._rng,
+            alpha=self.learning_rate,
+            gamma=self.gamma,
+            start=self.start_state,
+            max_steps=self.max_episode_steps,
+            n_goals=n_goals,
+            # by hit + 2 * reached
+            rewards=np.array([-self.step_penalty, OBSTACLE_REWARD, TARGET_REWARD]),
+            lanes=np.arange(n_goals),
+            goal=self.goal_states.copy(),
+            s=np.full(n_goals, self.start_state, dtype=np.int64),
+            t=np.zeros(n_goals, dtype=np.int64),
+            ret=np.zeros(n_goals),
+            ep=np.zeros(n_goals, dtype=np.int64),
+            eps=self._eps(np.full(n_goals, self.episodes_done, dtype=np.float64)),
+            ar=np.arange(n_goals),
+            returns=deque(maxlen=100 * n_goals),
+            lengths=deque(maxlen=100 * n_goals),
+            next_log=log_interval * n_goals,
+            begin=time.perf_counter(),
+        )
+
+    def _run_lanes(
+        self,
+        run: _GoalRun,
+        episodes: int,
+        callback: Callable[[GoalQLearning], bool] | None,
+        logger: Any | None,
+        log_interval: int,
+        bar: Any,
+    ) -> bool:
+        """Step every goal's episodes until each goal has run ``episodes`` of them.
+
+        Returns:
+            True when the callback stopped training.
+
+        """
+        while len(run.lanes):
+            end = _step_lanes(run)
+            if end is None:
+                continue
+            self._end_episodes(run, end, episodes, logger is not None, bar)
+            if run.total_eps >= run.next_log and len(run.lanes):
+                run.next_log += log_interval * run.n_goals
+                self.num_timesteps += run.steps
+                run.steps = 0
                 if logger is not None:
-                    returns.extend(ret[ended].tolist())
-                    lengths.extend(t[ended].tolist())
-                ep[ended] += 1
-                t[ended] = 0
-                ret[ended] = 0.0
-                eps[ended] = self._eps(self.episodes_done + ep[ended])
-                total_eps += len(ended)
-                if bar is not None:
-                    bar.update(len(ended))
-                keep = ep < episodes
-                if not keep.all():
-                    lanes, goal, s, t = lanes[keep], goal[keep], s[keep], t[keep]
-                    ret, ep, eps = ret[keep], ep[keep], eps[keep]
-                if total_eps >= next_log and len(lanes):
-                    next_log += log_interval * n_goals
-                    self.num_timesteps += steps
-                    steps = 0
-                    if logger is not None:
-                        self._log_goals(logger, returns, lengths, len(lanes), begin, total_eps)
-                    if callback is not None and callback(self) is False:
-                        stopped = True
-                        break
-        finally:
-            if bar is not None:
-                bar.close()
-            self.num_timesteps += steps
-            self.episodes_done += total_eps // n_goals
-        if logger is not None:
-            self._log_goals(logger, returns, lengths, len(lanes), begin, total_eps)
-        if callback is not None and not stopped:
-            callback(self)
-        return self
+                    self._log_goals(
+                        logger, run.returns, run.lengths, len(run.lanes), run.begin, run.total_eps
+                    )
+                if callback is not None and callback(self) is False:
+                    return True
+        return False
+
+    def _end_episodes(
+        self, run: _GoalRun, end: NDArray[np.bool_], episodes: int, logged: bool, bar: Any
+    ) -> None:
+        """Count the episodes that ended, restart them and drop the goals that are done."""
+        ended = np.flatnonzero(end)
+        if logged:
+            run.returns.extend(run.ret[ended].tolist())
+            run.lengths.extend(run.t[ended].tolist())
+        run.ep[ended] += 1
+        run.t[ended] = 0
+        run.ret[ended] = 0.0
+        run.eps[ended] = self._eps(self.episodes_done + run.ep[ended])
+        run.total_eps += len(ended)
+        if bar is not None:
+            bar.update(len(ended))
+        keep = run.ep < episodes
+        if not keep.all():
+            run.lanes, run.goal, run.s = run.lanes[keep], run.goal[keep], run.s[keep]
+            run.t, run.ret, run.ep, run.eps = (
+                run.t[keep],
+                run.ret[keep],
+                run.ep[keep],
+                run.eps[keep],
+            )
 
     def _log_goals(
         self,

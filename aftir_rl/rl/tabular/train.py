@@ -27,8 +27,19 @@ from aftir_rl.rl.tabular.paths import path_summary
 
 if TYPE_CHECKING:
     from aftir_rl.envs.tank_grid import TankGridEnv
+    from aftir_rl.rl.tabular.q_table import QLearning
 
 __all__ = ["train_q_table", "train_q_table_all_targets"]
+
+
+@dataclasses.dataclass(frozen=True)
+class _MotionOptions:
+    """How :func:`train_q_table` turns a greedy cell path into arm motion (its arguments)."""
+
+    postures: bool
+    bridge_seconds: float
+    motion: str
+    margin: float
 
 
 def train_q_table(
@@ -71,15 +82,26 @@ def train_q_table(
         CheckpointError: ``resume`` is unreadable or was trained for another env or target.
 
     """
-    import gymnasium as gym
-    from stable_baselines3.common.logger import Image, configure
-
-    from aftir_rl.rl.tabular.q_table import QLearning
-    from aftir_rl.viz.plotting import render_path
-
     check_env_id(config.env_id, ("AFTIR-Tank-v0",), "q_table")
     # Make (and so validate) every env before training anything.
-    envs = [
+    envs = _make_target_envs(config, targets)
+    checkpoint = _checkpoint_path(resume, len(envs))
+    options = _MotionOptions(postures, bridge_seconds, motion, margin)
+    summaries = []
+    for target, env in zip(targets, envs):
+        agent = _make_agent(config, env, checkpoint, seed)
+        summary = _train_target_run(
+            agent, env, config, target, seed, Path(logdir), progress_bar, options
+        )
+        summaries.append(summary)
+    return summaries
+
+
+def _make_target_envs(config: Any, targets: Sequence[Sequence[float]]) -> list[Any]:
+    """Make one ``AFTIR-Tank-v0`` env per target (which validates every target)."""
+    import gymnasium as gym
+
+    return [
         gym.make(
             config.env_id,
             tank=config.tank,
@@ -89,108 +111,179 @@ def train_q_table(
         )
         for t in targets
     ]
-    checkpoint = None
-    if resume is not None:
-        checkpoint = Path(resume)
-        if checkpoint.is_dir():
-            checkpoint = checkpoint / "q_table.npz"
-        if len(envs) != 1:
-            raise CheckpointError("--resume continues one run: give at most one --target")
-    summaries = []
-    for target, env in zip(targets, envs):
-        base = cast("TankGridEnv", env.unwrapped)  # config.env_id is AFTIR-Tank-v0 (checked above)
-        if checkpoint is not None:
-            agent = QLearning.load(checkpoint, env)
-            meta = agent.metadata
-            if meta.get("target_cell") not in (None, list(base.target_cell)):
-                raise CheckpointError(
-                    f"{checkpoint}: trained for target cell {meta['target_cell']}, not "
-                    f"{list(base.target_cell)}; resume with the same --target"
-                )
-            if meta.get("tank_fingerprint", base.tank.fingerprint) != base.tank.fingerprint:
-                raise CheckpointError(
-                    f"{checkpoint}: trained in another tank ({brief(meta.get('tank'))}) than "
-                    f"{config.tank!r}; resume with the tank it was trained in"
-                )
-        else:
-            agent = QLearning.from_config(env, config, seed=seed)
-        name = run_name("q_table", config.env_id, target, seed)
-        logdir = Path(logdir)
-        partial = logdir / f".{name}.partial"
-        partial.mkdir(parents=True, exist_ok=False)
-        try:
-            logger = configure(str(partial), ["csv", "tensorboard"])
-            params = {**dataclasses.asdict(config), "seed": seed, "target": list(target)}
-            logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
-            logger.dump(step=agent.num_timesteps)
-            start = time.perf_counter()
-            agent.learn(
-                config.episodes,
-                progress_bar=progress_bar,
-                logger=logger,
-                log_interval=config.log_interval,
-            )
-            seconds = time.perf_counter() - start
-            summary = path_summary(agent, env, target, config.max_episode_steps)
-            summary["seconds"] = seconds
-            success, optimum = summary["success"], summary["bfs_optimal_steps"]
-            tip_error, length_cm = summary["tip_error_cm"], summary["path_length_cm"]
-            points, steps = np.array(summary["points_cm"]), summary["length_steps"]
-            logger.record("eval/path_length_steps", steps)
-            logger.record("eval/bfs_optimal_steps", optimum)
-            picture = render_path(
-                base.tank,
-                points,
-                base.target_point,
-                title=f"Q-learning greedy path to {target_tag(target)} "
-                f"({steps} steps, BFS {optimum})",
-            )
-            logger.record(
-                f"paths/{target_tag(target)}",
-                Image(picture, "HWC"),
-                exclude=("stdout", "log", "json", "csv"),
-            )
-            trajectory = None
-            if postures and motion == "ftl":
-                trajectory = _log_motion(logger, base, summary, target, margin)
-            elif postures:
-                trajectory = _log_trajectory(
-                    logger, base, points, target, summary, bridge_seconds, seed
-                )
-                logger.record("eval/success_rate", float(success))
-                logger.record("eval/tip_error_cm", tip_error)
-                logger.record("eval/path_length_cm", length_cm)
-            else:
-                logger.record("eval/success_rate", float(success))
-            if trajectory is None or getattr(trajectory, "motion", None) is None:
-                # one picture card in every run: the cell path where there is no FTL motion
-                logger.record(
-                    "paths/eval", Image(picture, "HWC"), exclude=("stdout", "log", "json", "csv")
-                )
-            logger.dump(step=agent.num_timesteps)
-            logger.close()
-            agent.save(
-                partial / "q_table.npz",
-                extra={
-                    "env_id": config.env_id,
-                    "tank": config.tank,
-                    "tank_fingerprint": base.tank.fingerprint,
-                    "target": [float(v) for v in target],
-                    "target_cell": list(base.target_cell),
-                    "config": dataclasses.asdict(config),
-                },
-            )
-            write_json(partial / "path.json", summary)
-            if trajectory is not None:
-                write_json(partial / "trajectory.json", trajectory.to_json())
-            run_dir = logdir / name
-            partial.rename(run_dir)
-        except BaseException:
-            shutil.rmtree(partial, ignore_errors=True)
-            raise
-        summary["run_dir"] = str(run_dir)
-        summaries.append(summary)
-    return summaries
+
+
+def _checkpoint_path(resume: str | Path | None, n_targets: int) -> Path | None:
+    """The ``q_table.npz`` to resume from (``None``: train from scratch).
+
+    Raises:
+        CheckpointError: a checkpoint is given with more than one target.
+
+    """
+    if resume is None:
+        return None
+    checkpoint = Path(resume)
+    if checkpoint.is_dir():
+        checkpoint = checkpoint / "q_table.npz"
+    if n_targets != 1:
+        raise CheckpointError("--resume continues one run: give at most one --target")
+    return checkpoint
+
+
+def _make_agent(config: Any, env: Any, checkpoint: Path | None, seed: int) -> QLearning:
+    """A fresh agent, or the checkpoint's after checking it was trained for this target and tank.
+
+    Raises:
+        CheckpointError: the checkpoint was trained for another target cell or tank.
+
+    """
+    from aftir_rl.rl.tabular.q_table import QLearning
+
+    if checkpoint is None:
+        return QLearning.from_config(env, config, seed=seed)
+    base = cast("TankGridEnv", env.unwrapped)  # config.env_id is AFTIR-Tank-v0 (checked)
+    agent = QLearning.load(checkpoint, env)
+    meta = agent.metadata
+    if meta.get("target_cell") not in (None, list(base.target_cell)):
+        raise CheckpointError(
+            f"{checkpoint}: trained for target cell {meta['target_cell']}, not "
+            f"{list(base.target_cell)}; resume with the same --target"
+        )
+    if meta.get("tank_fingerprint", base.tank.fingerprint) != base.tank.fingerprint:
+        raise CheckpointError(
+            f"{checkpoint}: trained in another tank ({brief(meta.get('tank'))}) than "
+            f"{config.tank!r}; resume with the tank it was trained in"
+        )
+    return agent
+
+
+def _train_target_run(
+    agent: QLearning,
+    env: Any,
+    config: Any,
+    target: Sequence[float],
+    seed: int,
+    logdir: Path,
+    progress_bar: bool,
+    options: _MotionOptions,
+) -> dict[str, Any]:
+    """Train ``agent`` on one target and write its run directory (nothing left if it fails).
+
+    Returns:
+        The target's summary (what ``path.json`` holds, plus ``run_dir`` and ``seconds``).
+
+    """
+    from stable_baselines3.common.logger import configure
+
+    name = run_name("q_table", config.env_id, target, seed)
+    partial = logdir / f".{name}.partial"
+    partial.mkdir(parents=True, exist_ok=False)
+    try:
+        logger = configure(str(partial), ["csv", "tensorboard"])
+        params = {**dataclasses.asdict(config), "seed": seed, "target": list(target)}
+        logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
+        logger.dump(step=agent.num_timesteps)
+        start = time.perf_counter()
+        agent.learn(
+            config.episodes,
+            progress_bar=progress_bar,
+            logger=logger,
+            log_interval=config.log_interval,
+        )
+        seconds = time.perf_counter() - start
+        summary = path_summary(agent, env, target, config.max_episode_steps)
+        summary["seconds"] = seconds
+        trajectory = _log_greedy_path(logger, env, summary, target, seed, options)
+        logger.dump(step=agent.num_timesteps)
+        logger.close()
+        _save_target_run(partial, agent, env, config, target, summary, trajectory)
+        run_dir = logdir / name
+        partial.rename(run_dir)
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        raise
+    summary["run_dir"] = str(run_dir)
+    return summary
+
+
+def _log_greedy_path(
+    logger: Any,
+    env: Any,
+    summary: dict[str, Any],
+    target: Sequence[float],
+    seed: int,
+    options: _MotionOptions,
+) -> Any:
+    """Log the greedy cell path, and the motion or postures along it, with their pictures.
+
+    Returns:
+        The FTL plan or posture trajectory (``None`` without ``postures``).
+
+    """
+    from stable_baselines3.common.logger import Image
+
+    from aftir_rl.viz.plotting import render_path
+
+    base = cast("TankGridEnv", env.unwrapped)
+    success, optimum = summary["success"], summary["bfs_optimal_steps"]
+    tip_error, length_cm = summary["tip_error_cm"], summary["path_length_cm"]
+    points, steps = np.array(summary["points_cm"]), summary["length_steps"]
+    logger.record("eval/path_length_steps", steps)
+    logger.record("eval/bfs_optimal_steps", optimum)
+    picture = render_path(
+        base.tank,
+        points,
+        base.target_point,
+        title=f"Q-learning greedy path to {target_tag(target)} ({steps} steps, BFS {optimum})",
+    )
+    logger.record(
+        f"paths/{target_tag(target)}",
+        Image(picture, "HWC"),
+        exclude=("stdout", "log", "json", "csv"),
+    )
+    trajectory = None
+    if options.postures and options.motion == "ftl":
+        trajectory = _log_motion(logger, base, summary, target, options.margin)
+    elif options.postures:
+        trajectory = _log_trajectory(
+            logger, base, points, target, summary, options.bridge_seconds, seed
+        )
+        logger.record("eval/success_rate", float(success))
+        logger.record("eval/tip_error_cm", tip_error)
+        logger.record("eval/path_length_cm", length_cm)
+    else:
+        logger.record("eval/success_rate", float(success))
+    if trajectory is None or getattr(trajectory, "motion", None) is None:
+        # one picture card in every run: the cell path where there is no FTL motion
+        logger.record("paths/eval", Image(picture, "HWC"), exclude=("stdout", "log", "json", "csv"))
+    return trajectory
+
+
+def _save_target_run(
+    partial: Path,
+    agent: QLearning,
+    env: Any,
+    config: Any,
+    target: Sequence[float],
+    summary: dict[str, Any],
+    trajectory: Any,
+) -> None:
+    """Write the Q-table, ``path.json`` and (if any) ``trajectory.json`` into ``partial``."""
+    base = cast("TankGridEnv", env.unwrapped)
+    agent.save(
+        partial / "q_table.npz",
+        extra={
+            "env_id": config.env_id,
+            "tank": config.tank,
+            "tank_fingerprint": base.tank.fingerprint,
+            "target": [float(v) for v in target],
+            "target_cell": list(base.target_cell),
+            "config": dataclasses.asdict(config),
+        },
+    )
+    write_json(partial / "path.json", summary)
+    if trajectory is not None:
+        write_json(partial / "trajectory.json", trajectory.to_json())
 
 
 def train_q_table_all_targets(

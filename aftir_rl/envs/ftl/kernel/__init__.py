@@ -5,7 +5,7 @@ one compiled loop, and are tested equal to those definitions (``tests/envs/test_
 By concern: :mod:`.kinematics` (forward kinematics, steering frames, shift-and-copy),
 :mod:`.clearance` (the tank's signed distance and clearance grids, usable targets),
 :mod:`.guide` (the guide field's queries) and :mod:`.observation` (observation and reward).
-Compiled on first use and cached beside the files (``cache=True``). See docs/design.md.
+Compiled on first use and cached beside the files (``cache=True``). See docs/envs/armftl.md.
 """
 
 from aftir_rl.envs.ftl.kernel.clearance import KernelTank, refresh, sdf, usable
