@@ -18,7 +18,7 @@ import pytest
 from aftir_rl.core.config import CONFIG_DIR
 from aftir_rl.core.errors import ConfigError
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 BASE_PPO = """\
 env_id: AFTIR-ArmReach-v0
