@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
@@ -18,7 +19,14 @@ from typing import IO, Any
 from aftir_rl.core.config import read_limited, shorten
 from aftir_rl.core.errors import CheckpointError, ConfigError
 
-__all__ = ["MAX_JSON_BYTES", "atomic_open", "check_writable_dir", "read_json", "write_json"]
+__all__ = [
+    "MAX_JSON_BYTES",
+    "atomic_open",
+    "check_writable_dir",
+    "staged_dir",
+    "read_json",
+    "write_json",
+]
 
 #: The largest JSON file read from a run directory [bytes].
 MAX_JSON_BYTES = 16_000_000
@@ -79,3 +87,25 @@ def check_writable_dir(path: str | os.PathLike[str], flag: str = "--logdir") -> 
     if not os.access(path, os.W_OK | os.X_OK):
         raise ConfigError(f"{flag} {path}: not writable")
     return path
+
+
+@contextmanager
+def staged_dir(
+    final: str | os.PathLike[str], keep: Callable[[Path], bool] | None = None
+) -> Iterator[Path]:
+    """A hidden ``.<name>.partial`` folder beside ``final``, renamed to ``final`` on success.
+
+    A run directory is written under this name, so a half-written one never looks finished.
+    If the block fails (Ctrl-C included) the folder is removed, unless ``keep(folder)`` says
+    to keep it (e.g. it holds a checkpoint to resume from).
+    """
+    final = Path(final)
+    partial = final.with_name(f".{final.name}.partial")
+    partial.mkdir(parents=True, exist_ok=False)
+    try:
+        yield partial
+        partial.rename(final)
+    except BaseException:
+        if keep is None or not keep(partial):
+            shutil.rmtree(partial, ignore_errors=True)
+        raise

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
-import shutil
 import time
 from pathlib import Path
 from typing import Any
 
-from aftir_rl.core.files import write_json
+from aftir_rl.core.files import staged_dir, write_json
 from aftir_rl.rl.common import check_env_id, hyperparameter_text, run_name
 
 __all__ = ["train_sb3"]
@@ -128,16 +127,14 @@ def _train_run(
     """
     from aftir_rl.rl.sb3 import build_model, load_model, save_model
 
-    partial = None
-    try:
-        if resume_path is not None:
-            model = load_model(algo, resume_path, env=venv, config=config, evaluation=False)
-        else:
-            model = build_model(algo, config, venv, seed=seed)
-        name = run_name(algo, bare, "random", seed)
-        run_dir = logdir / name
-        partial = logdir / f".{name}.partial"
-        partial.mkdir(parents=True, exist_ok=False)
+    if resume_path is not None:
+        model = load_model(algo, resume_path, env=venv, config=config, evaluation=False)
+    else:
+        model = build_model(algo, config, venv, seed=seed)
+    name = run_name(algo, bare, "random", seed)
+    run_dir = logdir / name
+    # a partial run that holds a checkpoint is kept on failure (resumable)
+    with staged_dir(run_dir, keep=_has_checkpoint) as partial:
         logger = _open_logger(model, partial, algo, config, seed, resume_path)
         evaluator, callbacks = _callbacks(
             f"aftir_rl:{bare}", config, targets, on_evaluation, partial
@@ -155,12 +152,6 @@ def _train_run(
             "best": evaluator.best_metrics,
         }
         write_json(partial / "summary.json", summary)
-        partial.rename(run_dir)
-    except BaseException:
-        # Keep a partial run that holds a checkpoint (resumable); remove any other.
-        if partial is not None and not any((partial / "checkpoints").glob("model_*.zip")):
-            shutil.rmtree(partial, ignore_errors=True)
-        raise
     return summary
 
 
@@ -238,3 +229,7 @@ def _learn(
             f"--resume {partial}"
         ) from None
     return time.perf_counter() - start
+
+
+def _has_checkpoint(partial: Path) -> bool:
+    return any((partial / "checkpoints").glob("model_*.zip"))

@@ -10,7 +10,6 @@ postures per cell; :func:`train_q_table_all_targets` runs goal-conditioned Q-lea
 from __future__ import annotations
 
 import dataclasses
-import shutil
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -20,7 +19,7 @@ import numpy as np
 
 from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN, brief
 from aftir_rl.core.errors import CheckpointError
-from aftir_rl.core.files import write_json
+from aftir_rl.core.files import staged_dir, write_json
 from aftir_rl.planning.ftl.plan import motion_summary
 from aftir_rl.rl.common import check_env_id, hyperparameter_text, run_name, target_tag
 from aftir_rl.rl.tabular.paths import path_summary
@@ -176,9 +175,8 @@ def _train_target_run(
     from stable_baselines3.common.logger import configure
 
     name = run_name("q_table", config.env_id, target, seed)
-    partial = logdir / f".{name}.partial"
-    partial.mkdir(parents=True, exist_ok=False)
-    try:
+    run_dir = logdir / name
+    with staged_dir(run_dir) as partial:
         logger = configure(str(partial), ["csv", "tensorboard"])
         params = {**dataclasses.asdict(config), "seed": seed, "target": list(target)}
         logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
@@ -197,11 +195,6 @@ def _train_target_run(
         logger.dump(step=agent.num_timesteps)
         logger.close()
         _save_target_run(partial, agent, env, config, target, summary, trajectory)
-        run_dir = logdir / name
-        partial.rename(run_dir)
-    except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
-        raise
     summary["run_dir"] = str(run_dir)
     return summary
 
@@ -300,9 +293,8 @@ def train_q_table_all_targets(
     from aftir_rl.rl.tabular.q_table_goal import train_all_targets
 
     name = run_name("q_table_goal", "AFTIR-TankGoal-v0", "all", seed)
-    partial = Path(logdir) / f".{name}.partial"
-    partial.mkdir(parents=True, exist_ok=False)
-    try:
+    run_dir = Path(logdir) / name
+    with staged_dir(run_dir) as partial:
         logger = configure(str(partial), ["csv", "tensorboard"])
         params = {**dataclasses.asdict(config), "seed": seed, "target": "all"}
         logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
@@ -315,11 +307,6 @@ def train_q_table_all_targets(
         logger.close()
         agent.save(partial / "q_table_goal.npz", extra={"config": dataclasses.asdict(config)})
         write_json(partial / "summary.json", summary)
-        run_dir = Path(logdir) / name
-        partial.rename(run_dir)
-    except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
-        raise
     summary["run_dir"] = str(run_dir)
     return summary
 
