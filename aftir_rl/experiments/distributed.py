@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from aftir_rl.core.config import shorten
-from aftir_rl.core.errors import AftirError
+from aftir_rl.core.errors import AftirError, CheckpointError
 
 __all__ = [
     "INSTALL_HINT",
@@ -393,7 +393,6 @@ def evaluate_on_ray(
     Needs a connected Ray (:func:`ray_session`). Results in the order of ``runs``; a run whose
     evaluation fails is a row whose note holds the error (:func:`failed_evaluation`).
     """
-    from aftir_rl.core.errors import CheckpointError
     from aftir_rl.experiments.runs import evaluate_run, run_kind
 
     for r in runs:  # a path that is no run directory is the user's error, before any task

@@ -21,9 +21,10 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
+from aftir_rl.core.config import CONFIG_DIR, DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, PlanningError
 from aftir_rl.core.extras import require
+from aftir_rl.core.robot import Posture
 from aftir_rl.experiments.runs import load_q_table_config, load_sb3_run
 from aftir_rl.planning.posture.registry import get_method
 from aftir_rl.rl.tabular.paths import learn_cells
@@ -200,14 +201,11 @@ def q_table_ftl_outcome(
 @functools.cache
 def _q_table_config() -> Any:
     """``configs/q_table.yaml``, read once per process."""
-    from aftir_rl.core.config import CONFIG_DIR
-
     return load_q_table_config(CONFIG_DIR / "q_table.yaml")
 
 
 def rrt_outcome(planner: Any, target: ArrayLike, seconds: float = 10.0, seed: int = 0) -> Outcome:
     """RRT-Connect from the start posture to the planner's posture for ``target``."""
-    from aftir_rl.core.robot import Posture
     from aftir_rl.planning.jointspace import (
         densify,
         pad_sections,

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from aftir_rl.core.errors import AftirError
+from aftir_rl.core.files import atomic_open, check_writable_dir, write_json
 from aftir_rl.experiments.search_space import DISTRIBUTIONS, Dimension, load_search_space
 
 __all__ = [
@@ -97,8 +98,6 @@ def _trial(params: dict[str, Any], algo: str, base: Any, logdir: str, seed: int)
 
 def _finish_stopped(run_dir: Path, result: dict[str, Any], algo: str, env_id: str) -> None:
     """Turn the partial directory of a trial that ASHA stopped into a finished run directory."""
-    from aftir_rl.core.files import write_json
-
     partial = run_dir.with_name(f".{run_dir.name}.partial")
     if run_dir.exists() or not (partial / "model.zip").exists():
         return
@@ -187,8 +186,6 @@ def _make_sweep_dir(logdir: str | Path, algo: str, env_id: str) -> Path:
         ConfigError: ``logdir`` cannot be written.
 
     """
-    from aftir_rl.core.files import check_writable_dir
-
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S-%f")
     sweep = check_writable_dir(logdir).resolve() / f"tune__{algo}__{env_id}__{stamp}"
     sweep.mkdir(parents=True)
@@ -289,8 +286,6 @@ def _or_inf(value: float) -> float:
 def write_config_yaml(path: Path, config: Any, algo: str, trial: dict[str, Any]) -> None:
     """Write ``config`` as a YAML that ``aftir train ALGO --config`` reads."""
     import yaml
-
-    from aftir_rl.core.files import atomic_open
 
     data = dataclasses.asdict(config)
     data["hyperparameters"] = {k: _plain(v) for k, v in data["hyperparameters"].items()}

@@ -30,6 +30,7 @@ from aftir_rl.envs.ftl.spec import (
     SHAPING_KINDS,
     STEER_MODES,
 )
+from aftir_rl.envs.registration import registered_env_id
 from aftir_rl.rl.sb3.checks import LINEAR_PREFIX as LINEAR_PREFIX
 from aftir_rl.rl.sb3.checks import OBJECT_KEYS, check_hyperparameters, check_range
 from aftir_rl.rl.sb3.checks import linear_start as linear_start
@@ -130,8 +131,6 @@ def check_sb3_config(config: SB3Config, algo: str, source: str) -> None:
         ConfigError: naming ``source`` and the key.
 
     """
-    from aftir_rl.envs.registration import registered_env_id
-
     bare = registered_env_id(config.env_id, source)
     for key, (lo, hi) in _CONFIG_RANGES.items():
         if key == "n_envs" and bare in BATCHED_ENV_IDS:

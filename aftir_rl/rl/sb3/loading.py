@@ -18,6 +18,8 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 
 from aftir_rl.core.config import brief, shorten
 from aftir_rl.core.errors import CheckpointError
+from aftir_rl.core.files import read_json
+from aftir_rl.envs.registration import registered_env_id
 from aftir_rl.rl.sb3.config import ALGORITHMS, SB3Config, build_model, sb3_config_from_run
 
 __all__ = ["MAX_MODEL_BYTES", "newest_model", "load_model", "load_run"]
@@ -263,8 +265,6 @@ def load_model(
         CheckpointError: saying what is wrong.
 
     """
-    from aftir_rl.envs.registration import registered_env_id
-
     if algo not in ALGORITHMS:
         raise CheckpointError(
             f"unknown algorithm {brief(algo)}; use one of {', '.join(ALGORITHMS)}"
@@ -363,9 +363,6 @@ def load_run(run_dir: str | os.PathLike[str]) -> tuple[str, SB3Config, str, Base
         CheckpointError: saying what is wrong.
 
     """
-    from aftir_rl.core.files import read_json
-    from aftir_rl.envs.registration import registered_env_id
-
     run_dir = Path(run_dir)
     source = str(run_dir / "config.json")
     algo, config = sb3_config_from_run(read_json(source, "config.json"), source)

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from aftir_rl.core.files import staged_dir, write_json
+from aftir_rl.core.files import check_writable_dir, staged_dir, write_json
 from aftir_rl.rl.common import check_env_id, hyperparameter_text, run_name
 
 __all__ = ["train_sb3"]
@@ -41,7 +41,6 @@ def train_sb3(
         KeyboardInterrupt: Ctrl-C, once the model is saved; its message says where.
 
     """
-    from aftir_rl.core.files import check_writable_dir
     from aftir_rl.rl.sb3 import check_sb3_config, evaluation_targets, newest_model
     from aftir_rl.rl.sb3.config import SB3_ENV_IDS
 
