@@ -64,7 +64,7 @@ def test_wheel_runs_train_and_plan(installed) -> None:
         [
             sys.executable,
             "-m",
-            "aftir_rl.cli.main",
+            "aftir_rl.cli",
             "plan",
             "--target",
             "230",
@@ -81,7 +81,7 @@ def test_wheel_runs_train_and_plan(installed) -> None:
         [
             sys.executable,
             "-m",
-            "aftir_rl.cli.train",
+            "aftir_rl.train",
             "q_table",
             "--target",
             "20",

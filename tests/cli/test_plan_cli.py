@@ -11,7 +11,7 @@ from aftir_rl.core.robot import tip_position
 
 def _run(*args):
     return subprocess.run(
-        [sys.executable, "-m", "aftir_rl.cli.plan", *args], capture_output=True, text=True
+        [sys.executable, "-m", "aftir_rl.plan", *args], capture_output=True, text=True
     )
 
 

@@ -137,7 +137,7 @@ def test_user_errors_exit_2_without_traceback(tmp_path, args, message):
         [
             sys.executable,
             "-m",
-            "aftir_rl.cli.train",
+            "aftir_rl.train",
             "q_table",
             "--logdir",
             str(tmp_path / "runs"),
@@ -184,7 +184,7 @@ def test_bad_config_and_corrupt_resume(tmp_path, capsys):
 
 def test_help():
     proc = subprocess.run(
-        [sys.executable, "-m", "aftir_rl.cli.train", "q_table", "--help"],
+        [sys.executable, "-m", "aftir_rl.train", "q_table", "--help"],
         capture_output=True,
         text=True,
     )

@@ -411,14 +411,14 @@ def test_plan_does_not_build_the_raster(tmp_path):
 def test_tank_cli_one_line_and_closed_stdout(tmp_path):
     bad = _tank(tmp_path, _ref("box: {min: [-60, -50, 0]", "box: {min: [-1e200, -50, 0]"))
     proc = subprocess.run(
-        [sys.executable, "-m", "aftir_rl.cli.main", "tank", "--tank", str(bad)],
+        [sys.executable, "-m", "aftir_rl.cli", "tank", "--tank", str(bad)],
         capture_output=True,
         text=True,
     )
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
     # a reader that went away: one line, exit 2
     proc = subprocess.Popen(
-        [sys.executable, "-m", "aftir_rl.cli.main", "tank", "--json"],
+        [sys.executable, "-m", "aftir_rl.cli", "tank", "--json"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
@@ -428,7 +428,7 @@ def test_tank_cli_one_line_and_closed_stdout(tmp_path):
     # a full disk
     with open("/dev/full", "w") as full:
         proc = subprocess.run(
-            [sys.executable, "-m", "aftir_rl.cli.main", "tank", "--json"],
+            [sys.executable, "-m", "aftir_rl.cli", "tank", "--json"],
             stdout=full,
             stderr=subprocess.PIPE,
             text=True,
@@ -516,7 +516,7 @@ def test_ctrl_c_saves_a_resumable_partial_run(tmp_path):
         [
             sys.executable,
             "-m",
-            "aftir_rl.cli.train",
+            "aftir_rl.train",
             "ppo",
             "--config",
             str(config),

@@ -298,7 +298,7 @@ def sweep(tmp_path_factory):
     (tmp / "space.yaml").write_text(SPACE_PPO)
     run = _python(
         "-m",
-        "aftir_rl.experiments.tune",
+        "aftir_rl.tune",
         "ppo",
         "--env",
         "AFTIR-ArmReach-v0",
@@ -338,7 +338,7 @@ def test_sweep_writes_runs_and_a_best_config(sweep):
     # `train ppo --config best.yaml` takes it
     run = _python(
         "-m",
-        "aftir_rl.cli.train",
+        "aftir_rl.train",
         "ppo",
         "--config",
         str(folder / "best.yaml"),

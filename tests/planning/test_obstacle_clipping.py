@@ -68,7 +68,7 @@ def test_plan_cli_obstacle_clipping_json():
         [
             sys.executable,
             "-m",
-            "aftir_rl.cli.plan",
+            "aftir_rl.plan",
             "--tank",
             ROWS[3],
             "--target",
