@@ -18,11 +18,15 @@ $(STAMP): pyproject.toml constraints.txt
 train: $(STAMP)  ## default Q-learning job: the four reference targets of the two-bay tank
 	$(PY) -m aftir_rl.train q_table
 
+# One process per core (pytest-xdist), a test file per process, one BLAS/torch thread each so
+# the processes do not slow each other down.
+PYTEST := OMP_NUM_THREADS=1 $(PY) -m pytest -q -n auto --dist loadfile
+
 test: $(STAMP)  ## the test suite (fast; long checks are marked slow and run by test-all)
-	$(PY) -m pytest -q -m "not slow"
+	$(PYTEST) -m "not slow"
 
 test-all: $(STAMP)
-	$(PY) -m pytest -q
+	$(PYTEST)
 
 lint: $(STAMP)
 	$(PY) -m ruff check aftir_rl tests benchmarks
