@@ -26,12 +26,12 @@ transitions and predictions, as ``python -m aftir_rl.evaluate --target`` runs th
 only, like *extreme*.
 
 Each checkpoint's deterministic policy runs every target once, all targets as rows of the batched
-env (the same transitions as the single env for the same actions: ``tests/envs/test_arm_ftl.py``; the
-policy's actions for a batch differ from one-by-one predictions by about 1e-6, float32
-rounding, which can turn an episode that grazes a wall or the tolerance either way). Prints a
-markdown table with the success and contact rates per set, and the checkpoint with the best
-mean success marked. Choose a checkpoint here, then measure it on test targets with
-``python -m aftir_rl.evaluate``.
+env (the same transitions as the single env for the same actions:
+``tests/envs/test_arm_ftl.py``; the policy's actions for a batch differ from one-by-one
+predictions by about 1e-6, float32 rounding, which can turn an episode that grazes a wall or
+the tolerance either way). Prints a markdown table with the success and contact rates per set,
+and the checkpoint with the best mean success marked. Choose a checkpoint here, then measure it
+on test targets with ``python -m aftir_rl.evaluate``.
 """
 
 from __future__ import annotations

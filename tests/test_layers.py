@@ -20,7 +20,7 @@ PACKAGE = ROOT / "aftir_rl"
 
 #: Sub-package -> layer (lowest first). The top-level ``python -m`` shims are command lines.
 LAYERS = {"core": 0, "viz": 1, "planning": 2, "envs": 3, "rl": 4, "experiments": 5, "cli": 6}
-SHIMS = {"train", "plan", "evaluate", "bench", "tune", "tank"}
+SHIMS = {"train", "plan", "evaluate", "bench", "tune", "tank", "view"}
 #: The root package registers the envs: it sits with them.
 ROOT_LAYER = LAYERS["envs"]
 

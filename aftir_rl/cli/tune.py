@@ -26,7 +26,7 @@ __all__ = ["main"]
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="aftir tune",
+        prog="python -m aftir_rl.tune",
         description="Hyperparameter sweep of an SB3 algorithm on Ray Tune: Optuna samples the "
         "search space, ASHA stops the trials that trail on eval/success_rate, every trial is a "
         "run directory, and the best config is written as a YAML for `aftir train`. Needs "

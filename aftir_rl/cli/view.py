@@ -24,7 +24,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from aftir_rl.viz.page import DEFAULT_MAX_FRAMES, write_view
 
     parser = argparse.ArgumentParser(
-        prog="python -m aftir_rl.cli.view",
+        prog="python -m aftir_rl.view",
         description="Write one self-contained HTML page showing runs in 3D: the tank, each run's "
         "cell path and tip route, and the arm moving along its motion (trajectory.json).",
     )

@@ -21,7 +21,8 @@ import numpy as np
 
 from aftir_rl.core import papers
 from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
-from aftir_rl.experiments.outcomes import Outcome, Planners, Row, method_outcome
+from aftir_rl.core.extras import require
+from aftir_rl.experiments.outcomes import Outcome, Planners, Row, method_outcome, needs_ompl
 from aftir_rl.experiments.outcomes import sb3_outcomes as sb3_outcomes
 from aftir_rl.planning.posture.registry import REGISTRY
 
@@ -103,10 +104,16 @@ def run_benchmark(
 
     With ``ray`` (``local``, ``auto`` or ``HOST:PORT``), every (set, method, target) is a Ray
     task (:func:`aftir_rl.experiments.distributed.benchmark_on_ray`; ``workers``: CPUs of a local
-    Ray): the
-    same rows, and a task that fails is an outcome holding its error.
+    Ray): the same rows, and a task that fails is an outcome holding its error.
+
+    Raises:
+        MissingExtraError: a chosen method needs OMPL and it is not installed (before any work).
+
     """
     table: dict[str, Sequence[str]] = dict(methods or METHODS_FOR)
+    chosen = {m for name in sets for m in table.get(name, ())}
+    if any(needs_ompl(m, bridge_seconds) for m in chosen):
+        require("ompl.util", "ompl")
     options: dict[str, Any] = {
         "seed": seed,
         "margin": margin,

@@ -36,6 +36,7 @@ __all__ = [
     "Outcome",
     "Row",
     "method_outcome",
+    "needs_ompl",
     "posture_outcome",
     "q_table_outcome",
     "q_table_ftl_outcome",
@@ -287,7 +288,7 @@ def method_outcome(
     ``q_table+postures``), so an outcome does not depend on what ran before it in the process:
     a serial run and a run on Ray (one task per item) give the same table.
     """
-    if method in ("rrt_connect", "q_table+postures"):
+    if needs_ompl(method, bridge_seconds):
         _reseed_ompl(seed)
     if method == "q_table+ftl":
         return q_table_ftl_outcome(planner, target, seed, margin)
@@ -296,6 +297,11 @@ def method_outcome(
     if method == "rrt_connect":
         return rrt_outcome(planner, target, rrt_seconds, seed)
     return posture_outcome(planner, target, method)
+
+
+def needs_ompl(method: str, bridge_seconds: float) -> bool:
+    """Whether ``method`` runs OMPL (RRT-Connect, or the postures' bridges when they have time)."""
+    return method == "rrt_connect" or (method == "q_table+postures" and bridge_seconds > 0)
 
 
 def _reseed_ompl(seed: int) -> None:

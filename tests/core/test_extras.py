@@ -55,3 +55,21 @@ def test_view_without_plotly_exits_2(tmp_path):
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0 and "aftir_rl[view]" in out.stderr
     assert not (tmp_path / "v.html").exists()
+
+
+def test_bench_without_ompl_stops_before_any_work():
+    code = (
+        "import sys; sys.modules['ompl'] = None\n"
+        "import numpy as np\n"
+        "from aftir_rl.core.errors import MissingExtraError\n"
+        "from aftir_rl.experiments.bench import run_benchmark\n"
+        "calls = []\n"
+        "try:\n"
+        "    run_benchmark({'s': [('b737_center', np.array([20.0, 10.0, 60.0]))]},\n"
+        "                  methods={'s': ['tga', 'rrt_connect']}, progress=calls.append)\n"
+        "except MissingExtraError as exc:\n"
+        "    print(len(calls), exc)\n"
+    )
+    out = _python(code)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("0 ") and "aftir_rl[ompl]" in out.stdout

@@ -654,3 +654,14 @@ def test_train_cli_sac_her(tmp_path):
     assert len(runs) == 1 and (runs[0] / "model.zip").is_file()
     csv = (runs[0] / "progress.csv").read_text()
     assert "eval/success_rate" in csv and "eval/tip_error_cm" in csv
+
+
+def test_spec_checks_hold_however_it_is_built():
+    from aftir_rl.envs.ftl.spec import FTLSpec, TaskSpec, TrainingSpec
+
+    with pytest.raises(ConfigError, match="slack"):
+        FTLSpec(task=TaskSpec(success_tolerance=2.0), training=TrainingSpec(slack=4.0))
+    with pytest.raises(ConfigError, match="unknown argument 'colour'"):
+        FTLSpec.from_kwargs(colour="red")
+    with pytest.raises(ConfigError, match="unknown argument"):
+        gym.make(ENV_ID, shapping=True)

@@ -144,7 +144,7 @@ def test_unreadable_runs_raise_one_line(tmp_path, setup, message):
 
 def test_cli(tmp_path, tank):
     run = _q_table_run(tmp_path, tank)
-    cmd = [sys.executable, "-m", "aftir_rl.cli.view"]
+    cmd = [sys.executable, "-m", "aftir_rl.view"]
     out = tmp_path / "page" / "v.html"
     proc = subprocess.run(
         [*cmd, str(run), "-o", str(out), "--max-frames", "10"], capture_output=True, text=True

@@ -36,7 +36,7 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
     ## Description
     The AFTIR arm (``n_sections`` sections, default the tank's maximum, 12 × 50 cm in the
     reference tank) on its linear module. The agent steers the section the tip is tracing and
-    pushes or pulls the module; the body follows the traced route (module docstring). The task:
+    pushes or pulls the module; the body follows the traced route (docs/envs/armftl.md). The task:
     bring the tip within ``success_tolerance`` of a target anywhere free in the tank (both bays
     by default), through the hatch for bay-2 targets, without contact.
 
@@ -63,7 +63,7 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
     ## Rewards
     Progress ``(d_prev − d)/10`` [per cm], the raster-detour potential term when ``shaping``,
     ``+10`` on success, ``−10`` on contact, ``−step_cost`` per step: :meth:`compute_reward`
-    (module docstring).
+    (docs/envs/armftl.md).
 
     ## Episode End
     Terminated on success (tip within ``success_tolerance`` and no contact) or contact (surface
@@ -77,7 +77,7 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
     - ``success_tolerance`` (2 cm), ``margin`` (1 cm), ``kappa_step`` (0.1 rad), ``push_step``
       (5 cm), ``start_height`` (10 cm), ``samples_per_section`` (10).
     - ``shaping`` (False): the reward's potential term, ``True`` or ``"raster"`` (the raster
-      BFS's detour) or ``"field"`` (the guide field's cost-to-go; module docstring).
+      BFS's detour) or ``"field"`` (the guide field's cost-to-go; docs/envs/armftl.md).
     - ``guide`` (False): append to ``observation`` what the way to *this* target looks like: the
       free-space distance-to-go (cm/100, at most 10), then, in the frame the steered section
       bends in (:meth:`FTLBatch.steering_frames`), the unit way to the next point of the
@@ -130,7 +130,7 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+    def __init__(self, *, render_mode: str | None = None, **kwargs: Any) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         self.render_mode = render_mode
@@ -264,6 +264,7 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
         self,
         num_envs: int = 1,
         max_episode_steps: int = 300,
+        *,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
         **kwargs: Any,

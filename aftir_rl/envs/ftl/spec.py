@@ -156,12 +156,14 @@ class FTLSpec:
                 known = ", ".join(sorted(n for s in _SPECS for n in _FIELDS[s]))
                 raise ConfigError(f"unknown argument {key!r} of AFTIR-ArmFTL-v0; use {known}")
         task, reward, training = (spec(**part) for spec, part in zip(_SPECS, parts))
-        slack = training.slack
-        if not (_number(slack) and 0 <= slack < min(task.success_tolerance, MAX_SLACK)):
+        return cls(task, reward, training)
+
+    def __post_init__(self) -> None:
+        slack = self.training.slack
+        if not (_number(slack) and 0 <= slack < min(self.task.success_tolerance, MAX_SLACK)):
             raise ConfigError(
                 f"slack must be in [0, {MAX_SLACK:g}) cm and below success_tolerance, got {slack!r}"
             )
-        return cls(task, reward, training)
 
 
 _FIELDS: dict[type, tuple[str, ...]] = {

@@ -38,7 +38,7 @@ class FTLTask(GoalReward):
     """The base of :class:`~aftir_rl.envs.ftl.env.ArmFTLEnv` and its vector env.
 
     :meth:`_configure` applies an :class:`~aftir_rl.envs.ftl.spec.FTLSpec` to ``rows`` arms;
-    the attributes it sets (``spec``, ``tank``, ``batch``, ``region``, ``start_tip``,
+    the attributes it sets (``spec_options``, ``tank``, ``batch``, ``region``, ``start_tip``,
     ``fixed_target``, ``failures`` and the training options) are the envs' public state.
     """
 

@@ -1,9 +1,8 @@
 """Tabular Q-learning runs: one run directory per target, or one for every target.
 
 :func:`train_q_table` learns each target (``AFTIR-Tank-v0``), replays the greedy cell path
-(:func:`aftir_rl.experiments.runs.path_summary`) and turns it into a follow-the-leader motion or the
-papers'
-postures per cell; :func:`train_q_table_all_targets` runs goal-conditioned Q-learning on
+(:func:`aftir_rl.rl.tabular.paths.path_summary`) and turns it into a follow-the-leader motion or
+the papers' postures per cell; :func:`train_q_table_all_targets` runs goal-conditioned Q-learning on
 ``AFTIR-TankGoal-v0``. The run directory's files are described in :mod:`aftir_rl.cli.train`.
 """
 

@@ -8,9 +8,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from aftir_rl.envs.ftl.kernel.observation import OBS_LIMIT
-
-__all__ = ["cell_of", "guide_query", "lookahead", "guide_columns"]
+__all__ = ["cell_of", "guide_query", "lookahead"]
 
 
 @njit(cache=True)
@@ -117,46 +115,3 @@ def lookahead(
                 out[b, j, 0] = origin[0] + (a0 + 0.5) * size
                 out[b, j, 1] = origin[1] + (rem // s2 + 0.5) * size
                 out[b, j, 2] = origin[2] + (rem % s2 + 0.5) * size
-
-
-@njit(cache=True)
-def guide_columns(
-    frames: NDArray[np.float64],
-    to_go: NDArray[np.float64],
-    way: NDArray[np.float64],
-    target: NDArray[np.float64],
-    tip: NDArray[np.float64],
-    heading: NDArray[np.float64],
-    ahead: NDArray[np.float64],
-    out: NDArray[np.float32],
-    start: int,
-) -> None:
-    """The guide's columns of the observation from column ``start``, in place.
-
-    ``min(to_go, 1000)/100``, then in the steering frame (``Fᵀ v``): the way, ``(target −
-    tip)/100``, the heading and the unit directions to the ``ahead`` points ``(B, H, 3)``.
-    """
-    for b in range(to_go.shape[0]):
-        o = out[b]
-        f = frames[b]
-        o[start] = min(to_go[b], 1000.0) / 100.0
-        c = start + 1
-        for v in range(3 + ahead.shape[1]):
-            if v == 0:
-                x, y, z = way[b, 0], way[b, 1], way[b, 2]
-            elif v == 1:
-                x = (target[b, 0] - tip[b, 0]) / 100.0
-                y = (target[b, 1] - tip[b, 1]) / 100.0
-                z = (target[b, 2] - tip[b, 2]) / 100.0
-            elif v == 2:
-                x, y, z = heading[b, 0], heading[b, 1], heading[b, 2]
-            else:
-                h = v - 3
-                x = ahead[b, h, 0] - tip[b, 0]
-                y = ahead[b, h, 1] - tip[b, 1]
-                z = ahead[b, h, 2] - tip[b, 2]
-                norm = max(math.sqrt(x * x + y * y + z * z), 1e-9)
-                x, y, z = x / norm, y / norm, z / norm
-            for i in range(3):
-                o[c + i] = min(max(f[0, i] * x + f[1, i] * y + f[2, i] * z, -OBS_LIMIT), OBS_LIMIT)
-            c += 3
