@@ -38,13 +38,12 @@ class FTLTask(GoalReward):
     """The base of :class:`~aftir_rl.envs.ftl.env.ArmFTLEnv` and its vector env.
 
     :meth:`_configure` applies an :class:`~aftir_rl.envs.ftl.spec.FTLSpec` to ``rows`` arms;
-    the attributes it sets (``spec_options``, ``tank``, ``batch``, ``region``, ``start_tip``,
+    the attributes it sets (``tank``, ``batch``, ``region``, ``start_tip``,
     ``fixed_target``, ``failures`` and the training options) are the envs' public state.
     """
 
     def _configure(self, spec: FTLSpec, rows: int) -> None:
         task, reward, training = spec.task, spec.reward, spec.training
-        self.spec_options = spec
         self.tank = load_tank(task.tank)
         arm = self.tank.arm
         n = arm.max_sections if task.n_sections is None else int(task.n_sections)
