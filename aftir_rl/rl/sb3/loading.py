@@ -5,6 +5,12 @@ model is built from our config and env (:func:`~aftir_rl.rl.sb3.config.build_mod
 archive gives only the weights and optimizer states (``torch.load(weights_only=True)``) and the
 step counters (plain JSON), and a file that needs anything more is refused with a
 :class:`~aftir_rl.core.errors.CheckpointError` (:func:`load_model`, :func:`load_run`).
+
+Sizes are counted as the bytes are read, whatever the file declares
+(:class:`~aftir_rl.core.archives.BoundedZip`): the file (``MAX_MODEL_FILE_BYTES``), its
+entries and the tensors (``MAX_MODEL_BYTES`` each, one ``.pth`` entry held at a time with its
+re-packed copy) and ``data``'s JSON: reading a model takes under 320 MB (5 × 64 MB) besides the
+model it builds, whatever the file.
 """
 
 from __future__ import annotations
@@ -16,16 +22,40 @@ from typing import Any, cast
 import gymnasium as gym
 from stable_baselines3.common.base_class import BaseAlgorithm
 
-from aftir_rl.core.config import brief, shorten
+from aftir_rl.core.archives import BoundedZip
+from aftir_rl.core.config import brief, read_limited, shorten
 from aftir_rl.core.errors import CheckpointError
 from aftir_rl.core.files import read_json
 from aftir_rl.envs.registration import registered_env_id
 from aftir_rl.rl.sb3.config import ALGORITHMS, SB3Config, build_model, sb3_config_from_run
 
-__all__ = ["MAX_MODEL_BYTES", "newest_model", "load_model", "load_run"]
+__all__ = [
+    "MAX_MODEL_FILE_BYTES",
+    "MAX_MODEL_BYTES",
+    "MAX_MODEL_ENTRIES",
+    "MAX_PTH_RECORDS",
+    "MAX_DATA_BYTES",
+    "SB3_NOTES",
+    "newest_model",
+    "load_model",
+    "load_run",
+]
 
-#: The most bytes a model archive may expand to (the arm envs' models are well under 10 MB).
-MAX_MODEL_BYTES = 512_000_000
+#: The largest model file read [bytes] (SB3 stores its entries as they are; the arm envs'
+#: models are under 10 MB).
+MAX_MODEL_FILE_BYTES = 64_000_000
+#: The most bytes a model's entries may inflate to, in all, counted as they are read; the
+#: records of its ``.pth`` files (the tensors) have a budget as large.
+MAX_MODEL_BYTES = 64_000_000
+#: The most entries of a model file (SB3 writes 6 to 8).
+MAX_MODEL_ENTRIES = 16
+#: The most records of one ``.pth`` file (one per tensor: about 40 for SAC's policy).
+MAX_PTH_RECORDS = 1024
+#: The longest ``data`` entry [bytes] (SB3 writes about 10 kB); parsed JSON may take 25 times
+#: its length.
+MAX_DATA_BYTES = 1_000_000
+#: The entries SB3 writes besides ``data`` and the ``.pth`` files; never read.
+SB3_NOTES = ("_stable_baselines3_version", "system_info.txt")
 
 #: Counters read from a model's ``data`` (plain JSON integers); every other entry of ``data``,
 #: pickled or not, is ignored: the model is built from our config and env.
@@ -178,64 +208,88 @@ def newest_model(path: str | os.PathLike[str]) -> Path:
     return max(steps)[1]
 
 
+def _check_entries(entries: list[str], names: set[str], path: Path) -> None:
+    """Refuse an archive without ``data`` or with an entry SB3 does not write for this algorithm.
+
+    Besides ``data`` and :data:`SB3_NOTES`, only ``<name>.pth`` for the state dicts ``names``
+    and ``pytorch_variables.pth``.
+    """
+    if "data" not in entries:
+        raise CheckpointError(f"{path}: not an SB3 model (no data entry)")
+    for name in entries:
+        if name == "data" or name in SB3_NOTES:
+            continue
+        if not name.endswith(".pth"):
+            raise CheckpointError(f"{path}: holds {brief(name)}, which SB3 does not write; refused")
+        if name[: -len(".pth")] not in names and name != "pytorch_variables.pth":
+            raise CheckpointError(
+                f"{path}: holds {brief(name)}, which this algorithm does not save; refused"
+            )
+
+
+def _read_tensors(archive: BoundedZip, name: str, spent: int, path: Path) -> tuple[Any, int]:
+    """The tensors of the ``.pth`` entry ``name``, and the bytes of tensors read so far.
+
+    The entry (itself a zip archive) is inflated record by record, the records of all ``.pth``
+    entries together under :data:`MAX_MODEL_BYTES` (``spent`` before this one), and torch
+    reads a re-packed copy whose records are stored, each as long as its directory says: torch
+    allocates what a record's directory entry declares, and would inflate a compressed one.
+    ``torch.load(weights_only=True)`` builds tensors and plain containers only.
+    """
+    import torch
+
+    where = f"{path}: {name}"
+    raw = archive.read(name)
+    with BoundedZip(
+        raw, where, MAX_MODEL_BYTES, MAX_PTH_RECORDS, "tensor file", spent=spent
+    ) as pth:
+        del raw  # the archive holds a copy
+        packed = pth.repack()
+        spent = pth.budget - pth.left
+    try:
+        return torch.load(packed, map_location="cpu", weights_only=True), spent
+    except Exception as exc:  # UnpicklingError for anything but tensors
+        raise CheckpointError(
+            f"{where} holds more than tensors ({shorten(str(exc), 120)}); refused without "
+            "running it"
+        ) from None
+
+
 def _read_archive(
     path: Path, names: set[str], variables: set[str]
 ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
     """``(data, state_dicts, variables)`` of an SB3 ``.zip`` without unpickling anything.
 
     ``data`` is parsed as JSON; SB3's base64 cloudpickle entries in it are never decoded. Tensors
-    are read with ``torch.load(weights_only=True)``, which builds tensors and plain containers
-    only; ``.pth`` files other than ``names`` (state dicts) and ``pytorch_variables.pth`` are
-    refused.
+    are read with ``torch.load(weights_only=True)`` (:func:`_read_tensors`); entries SB3 does
+    not write for this algorithm are refused (:func:`_check_entries`). Every size is counted as
+    read, under the limits of this module's constants.
     """
-    import io
     import json
-    import zipfile
 
-    import torch
-
-    try:
-        with zipfile.ZipFile(path) as archive:
-            infos = archive.infolist()
-            if len(infos) > 64 or sum(i.file_size for i in infos) > MAX_MODEL_BYTES:
-                raise CheckpointError(f"{path}: too large or too many files for an SB3 model")
-            files = {i.filename for i in infos}
-            if "data" not in files:
-                raise CheckpointError(f"{path}: not an SB3 model (no data entry)")
-            data = json.loads(archive.read("data").decode("utf-8"))
-            if not isinstance(data, dict):
-                raise CheckpointError(f"{path}: not an SB3 model (data is not a JSON object)")
-            _check_pickled_entries(data, path)
-            params, extra = {}, {}
-            for name in sorted(files):
-                if not name.endswith(".pth"):
-                    continue
-                key = name[: -len(".pth")]
-                if key not in names and name != "pytorch_variables.pth":
-                    raise CheckpointError(
-                        f"{path}: holds {brief(name)}, which this algorithm does not save; refused"
-                    )
-                buffer = io.BytesIO(archive.read(name))
-                try:
-                    obj = torch.load(buffer, map_location="cpu", weights_only=True)
-                except Exception as exc:  # UnpicklingError for anything but tensors
-                    raise CheckpointError(
-                        f"{path}: {name} holds more than tensors ({shorten(str(exc), 120)}); "
-                        "refused without running it"
-                    ) from None
-                if name == "pytorch_variables.pth":
-                    if not isinstance(obj, dict) or set(obj) - variables:
-                        raise CheckpointError(f"{path}: unexpected pytorch_variables; refused")
-                    extra = obj
-                else:
-                    params[key] = obj
-    except (zipfile.BadZipFile, OSError, EOFError, ValueError, RecursionError) as exc:
-        if isinstance(exc, CheckpointError):
-            raise
-        raise CheckpointError(
-            f"{path}: not a readable SB3 model ({type(exc).__name__}: {shorten(str(exc), 120)}); "
-            "retrain or pass the right file"
-        ) from None
+    raw = read_limited(path, MAX_MODEL_FILE_BYTES, CheckpointError, "model", "loadable SB3 model")
+    hint = "retrain or pass the right file"
+    with BoundedZip(raw, str(path), MAX_MODEL_BYTES, MAX_MODEL_ENTRIES, "SB3 model", hint) as zf:
+        _check_entries(zf.names, names, path)
+        text = zf.read("data", MAX_DATA_BYTES)
+        try:
+            data = json.loads(text.decode("utf-8"))
+        except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+            raise CheckpointError(
+                f"{path}: not an SB3 model (its data is not JSON: {shorten(str(exc), 80)}); {hint}"
+            ) from None
+        if not isinstance(data, dict):
+            raise CheckpointError(f"{path}: not an SB3 model (data is not a JSON object)")
+        _check_pickled_entries(data, path)
+        params, extra, spent = {}, {}, 0
+        for name in sorted(n for n in zf.names if n.endswith(".pth")):
+            obj, spent = _read_tensors(zf, name, spent, path)
+            if name == "pytorch_variables.pth":
+                if not isinstance(obj, dict) or set(obj) - variables:
+                    raise CheckpointError(f"{path}: unexpected pytorch_variables; refused")
+                extra = obj
+            else:
+                params[name[: -len(".pth")]] = obj
     return data, params, extra
 
 

@@ -7,15 +7,18 @@ renames it, so a crash never leaves half a file. :func:`read_q_table` (``aftir_r
 (``aftir_rl.q_table_goal/1``, :class:`~aftir_rl.rl.tabular.q_table_goal.GoalQLearning`) check
 everything they read (:func:`read_npz_checkpoint`, :func:`check_hyperparameters`) and raise
 :class:`~aftir_rl.core.errors.CheckpointError` with a one-line message, so that loading never passes
-an unknown or unbounded value on.
+an unknown or unbounded value on. Reading takes at most the file (``MAX_CHECKPOINT_FILE_BYTES``)
+and the arrays (``MAX_CHECKPOINT_BYTES``, views of the bytes inflated), plus the metadata's
+JSON: under 400 MB, whatever the file declares.
 """
 
 from __future__ import annotations
 
+import io
 import json
+import math
 import os
 import random
-import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -23,7 +26,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.core.config import brief, shorten
+from aftir_rl.core.archives import BoundedZip
+from aftir_rl.core.config import brief, read_limited, shorten
 from aftir_rl.core.errors import AftirError, CheckpointError
 from aftir_rl.core.files import atomic_open
 
@@ -31,11 +35,16 @@ __all__ = [
     "Q_TABLE_FORMAT",
     "GOAL_TABLE_FORMAT",
     "GOAL_INTEGER_HYPERPARAMETERS",
+    "MAX_CHECKPOINT_FILE_BYTES",
     "MAX_CHECKPOINT_BYTES",
+    "MAX_CHECKPOINT_ENTRIES",
+    "MAX_METADATA_BYTES",
+    "MAX_NPY_HEADER_BYTES",
     "HYPERPARAMETER_BOUNDS",
     "npz_path",
     "write_npz",
     "read_npz_checkpoint",
+    "npy_array",
     "check_number",
     "check_hyperparameters",
     "read_q_table",
@@ -49,8 +58,18 @@ GOAL_TABLE_FORMAT = "aftir_rl.q_table_goal/1"
 #: Integer keywords of the goal-conditioned agent, with their bounds.
 GOAL_INTEGER_HYPERPARAMETERS = {"max_episode_steps": (1, 1_000_000)}
 
-#: The most bytes a checkpoint may expand to (a 1e6-cell raster's table is 48 MB).
+#: The largest checkpoint file read [bytes] (a 1e6-cell raster's table is 48 MB; the goal
+#: tables are compressed).
+MAX_CHECKPOINT_FILE_BYTES = 128_000_000
+#: The most bytes a checkpoint's entries may inflate to, in all, counted as they are read.
 MAX_CHECKPOINT_BYTES = 256_000_000
+#: The most entries of a checkpoint (its arrays and the metadata: 2 or 3 are written).
+MAX_CHECKPOINT_ENTRIES = 8
+#: The longest metadata entry [bytes] (JSON in a numpy string, 4 bytes a character; a few kB
+#: are written); parsed JSON may take 25 times the characters' count.
+MAX_METADATA_BYTES = 1_000_000
+#: The longest ``.npy`` header read [bytes] (numpy's own default).
+MAX_NPY_HEADER_BYTES = 10_000
 
 #: Bounds of the float keywords every tabular agent's constructor takes (besides ``seed``).
 HYPERPARAMETER_BOUNDS: dict[str, tuple[float, float]] = {
@@ -62,16 +81,8 @@ HYPERPARAMETER_BOUNDS: dict[str, tuple[float, float]] = {
     "initial_q": (-1e12, 1e12),
 }
 
-#: What reading a damaged archive may raise (numpy, zipfile and json each have their own).
-_READ_ERRORS = (
-    OSError,
-    ValueError,
-    TypeError,
-    KeyError,
-    zipfile.BadZipFile,
-    EOFError,
-    RecursionError,
-)
+#: What reading a damaged array or metadata may raise (numpy and json each have their own).
+_READ_ERRORS = (ValueError, TypeError, RecursionError)
 
 
 def npz_path(path: str | os.PathLike[str]) -> Path:
@@ -96,32 +107,64 @@ def read_npz_checkpoint(
 ) -> tuple[dict[str, NDArray[Any]], dict[str, Any]]:
     """The arrays ``names`` and the JSON metadata of an ``.npz`` checkpoint, read safely.
 
-    Nothing is unpickled (``allow_pickle=False``), an archive that would expand beyond
-    :data:`MAX_CHECKPOINT_BYTES` is refused before reading, and the metadata must be a mapping
-    whose ``format`` is ``fmt``.
+    Nothing is unpickled; the file, its entries as they inflate and the metadata are read under
+    the limits of this module's constants (:class:`~aftir_rl.core.archives.BoundedZip`), and the
+    arrays are views of the bytes read (:func:`npy_array`). The metadata must be a mapping whose
+    ``format`` is ``fmt``.
 
     Raises:
         CheckpointError: missing, oversized, corrupt or of another format (one line, ``hint``).
 
     """
-    try:
-        with zipfile.ZipFile(path) as archive:  # refuse a zip bomb before reading it
-            if sum(i.file_size for i in archive.infolist()) > MAX_CHECKPOINT_BYTES:
-                raise CheckpointError(f"{path}: larger than a {what} checkpoint; {hint}")
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {name: np.array(data[name]) for name in names}
-            meta = json.loads(str(data["metadata"]))
-    except FileNotFoundError:
-        raise CheckpointError(f"{path}: no such {what} file; {hint}") from None
-    except _READ_ERRORS as exc:
-        if isinstance(exc, CheckpointError):
+    if not path.exists():
+        raise CheckpointError(f"{path}: no such {what} file; {hint}")
+    raw = read_limited(
+        path, MAX_CHECKPOINT_FILE_BYTES, CheckpointError, f"{what} file", f"{what} checkpoint"
+    )
+    kind = f"{what} checkpoint"
+    with BoundedZip(raw, str(path), MAX_CHECKPOINT_BYTES, MAX_CHECKPOINT_ENTRIES, kind, hint) as zf:
+        missing = [n for n in (*names, "metadata") if f"{n}.npy" not in zf.names]
+        if missing:
+            raise CheckpointError(f"{path}: not a readable {kind} (no {missing[0]}); {hint}")
+        try:
+            arrays = {name: npy_array(zf.read(f"{name}.npy")) for name in names}
+            meta = json.loads(npy_array(zf.read("metadata.npy", MAX_METADATA_BYTES)).item())
+        except CheckpointError:  # a limit passed: said already
             raise
-        raise CheckpointError(
-            f"{path}: not a readable {what} checkpoint ({shorten(str(exc), 160)}); {hint}"
-        ) from None
+        except _READ_ERRORS as exc:
+            raise CheckpointError(
+                f"{path}: not a readable {kind} ({shorten(str(exc), 160)}); {hint}"
+            ) from None
     if not isinstance(meta, dict) or meta.get("format") != fmt:
         raise CheckpointError(f"{path}: not an aftir_rl {what} checkpoint; {hint}")
     return arrays, meta
+
+
+def npy_array(raw: bytearray) -> NDArray[Any]:
+    """The array of an ``.npy`` file's bytes: a writable view of them, its header checked first.
+
+    Raises:
+        ValueError: not an ``.npy`` file of format 1.0 or 2.0 (what ``np.save`` writes), an array
+            of Python objects (never unpickled), or a header that declares more or fewer bytes
+            than follow it.
+
+    """
+    fmt = np.lib.format
+    head = io.BytesIO(bytes(raw[: MAX_NPY_HEADER_BYTES + 16]))
+    version = fmt.read_magic(head)
+    if version not in ((1, 0), (2, 0)):
+        raise ValueError(f"an .npy file of format {version}, not 1.0 or 2.0")
+    read_header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+    shape, fortran, dtype = read_header(head, max_header_size=MAX_NPY_HEADER_BYTES)
+    if dtype.hasobject:
+        raise ValueError("an array of Python objects, which is never unpickled")
+    count, offset = math.prod(shape), head.tell()
+    if min(shape, default=0) < 0 or count * dtype.itemsize != len(raw) - offset:
+        raise ValueError(
+            f"an array of shape {brief(shape)} {dtype} over {len(raw) - offset:,} bytes of data"
+        )
+    array = np.frombuffer(raw, dtype=dtype, count=count, offset=offset)
+    return array.reshape(shape[::-1]).T if fortran else array.reshape(shape)
 
 
 def check_number(value: Any, lo: float, hi: float, where: str, integer: bool = False) -> None:
