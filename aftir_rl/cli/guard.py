@@ -1,24 +1,36 @@
 """How every command line fails: one line on stderr and an exit status, never a traceback.
 
-:func:`cli` wraps the ``main`` of every command line: a user error prints one line and exits 2,
-Ctrl-C prints "interrupted" and exits 130, a closed or full output is one line and exit 2.
+:func:`cli` wraps the ``main`` of every command line: a user error prints one line and exits 2;
+Ctrl-C and SIGTERM ask the running loop to stop (:mod:`aftir_rl.core.interrupts`), then print
+"interrupted" (with where the run is kept) and exit 130, a second one exits at once; a closed
+or full output, or a failing disk, is one line naming the file and exit 2.
 """
 
 from __future__ import annotations
 
+import atexit
 import errno
 import functools
+import importlib
 import os
+import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any, TypeVar
 
+from aftir_rl.core import interrupts
 from aftir_rl.core.config import shorten
 from aftir_rl.core.errors import AftirError
+from aftir_rl.core.files import describe_write_error
 
-__all__ = ["cli"]
+__all__ = ["cli", "preload"]
 
 F = TypeVar("F", bound=Callable[..., int])
+
+#: The signals a command line treats as Ctrl-C.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def _say(line: str) -> None:
@@ -37,43 +49,101 @@ def _silence_stdout() -> None:
         pass
 
 
+def _quiet_disk_errors(args: Any) -> None:
+    """``threading.excepthook`` that keeps a thread's failed write (a log writer's) quiet.
+
+    The main thread meets the same error at its next write and reports it in one line; any other
+    error of a thread is printed as usual.
+    """
+    exc = args.exc_value
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EIO, errno.EDQUOT):
+        return
+    threading.__excepthook__(args)
+
+
+@contextmanager
+def _stop_signals() -> Iterator[None]:
+    """Route SIGINT and SIGTERM to :func:`aftir_rl.core.interrupts.on_signal` (main thread)."""
+    interrupts.reset()
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.signal(sig, interrupts.on_signal) for sig in STOP_SIGNALS}
+    hook, threading.excepthook = threading.excepthook, _quiet_disk_errors
+    try:
+        yield
+    finally:
+        threading.excepthook = hook
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        if interrupts.requested():  # the process ends soon: a second Ctrl-C then ends it at once
+            atexit.unregister(_exit_at_once_from_now)
+            atexit.register(_exit_at_once_from_now)
+        interrupts.reset()  # a library call after this one (a notebook, a test) is not stopped
+
+
+def preload(*modules: str) -> None:
+    """Import ``modules`` (compiled code: torch, Ray) with a Ctrl-C held until they are in.
+
+    A ``KeyboardInterrupt`` raised inside such an import may abort the process, or be taken for
+    an unhandled one at exit; a long command imports them first, so that one is raised after.
+    """
+    with interrupts.held():
+        for name in modules:
+            importlib.import_module(name)
+
+
+def _exit_at_once(signum: int, frame: Any) -> None:
+    os._exit(130)
+
+
+def _exit_at_once_from_now() -> None:
+    """At exit after an interrupt: another signal ends the process, not a traceback there."""
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, _exit_at_once)
+
+
 def cli(main: F) -> F:
     """Wrap a command line's ``main``: every failure a user can cause is one line.
 
     - :class:`~aftir_rl.core.errors.AftirError`: ``error: <message>`` (cut to a sane length), exit
       2;
-    - ``KeyboardInterrupt`` (Ctrl-C): ``interrupted``, exit 130;
+    - Ctrl-C or SIGTERM (``KeyboardInterrupt``): ``interrupted`` and the interrupted run's
+      message (where it is kept, how to resume it), exit 130;
     - a closed standard output (``BrokenPipeError``): exit 2 with one line on stderr;
-    - any other ``OSError`` (a full disk, a read-only or missing folder): one line, exit 2;
+    - any other ``OSError`` (a full disk, a read-only or missing folder): one line naming the
+      file, exit 2;
     - ``MemoryError``: one line, exit 2.
     """
 
     @functools.wraps(main)
     def wrapper(*args: Any, **kwargs: Any) -> int:
-        try:
-            code = main(*args, **kwargs)
-            sys.stdout.flush()  # a full or closed output fails here, not at exit
-            return code
-        except AftirError as exc:
-            _say(f"error: {exc}")
-            return 2
-        except KeyboardInterrupt:
-            _say("interrupted")
-            return 130
-        except BrokenPipeError:
-            _silence_stdout()
-            _say("error: the output was closed (broken pipe)")
-            return 2
-        except OSError as exc:
-            _silence_stdout()
-            where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
-            if exc.errno == errno.ENOSPC:
-                _say(f"error: no space left on the device writing{where}")
-            else:
-                _say(f"error: cannot access{where}: {exc.strerror or exc}")
-            return 2
-        except MemoryError:
-            _say("error: out of memory; use a smaller input")
-            return 2
+        with _stop_signals():  # a second Ctrl-C while the first is reported exits at once too
+            return _one_line_failures(main, args, kwargs)
 
     return wrapper  # type: ignore[return-value]
+
+
+def _one_line_failures(main: Callable[..., int], args: Any, kwargs: Any) -> int:
+    """Run ``main``; turn what a user can cause into one line and an exit status (:func:`cli`)."""
+    try:
+        code = main(*args, **kwargs)
+        sys.stdout.flush()  # a full or closed output fails here, not at exit
+        return code
+    except AftirError as exc:
+        _say(f"error: {exc}")
+        return 2
+    except KeyboardInterrupt as exc:
+        _say(f"interrupted: {exc}" if str(exc) else "interrupted")
+        return 130
+    except BrokenPipeError:
+        _silence_stdout()
+        _say("error: the output was closed (broken pipe)")
+        return 2
+    except OSError as exc:
+        _silence_stdout()
+        _say(f"error: {describe_write_error(exc)}")
+        return 2
+    except MemoryError:
+        _say("error: out of memory; use a smaller input")
+        return 2

@@ -1,12 +1,15 @@
-"""Files: atomic writes, bounded JSON reads, writable output folders.
+"""Files: atomic writes, bounded JSON reads, writable output folders, failed writes named.
 
 A write goes to a temporary file beside the target and is renamed over it, so a crash or an
-error mid-write leaves the old file (or none), never half of a new one. JSON read from a run
-directory is size-limited (:data:`MAX_JSON_BYTES`).
+error mid-write leaves the old file (or none), never half of a new one. A full disk or an I/O
+error is a :class:`WriteError` naming the file; a run directory being written keeps what it
+holds then (:func:`staged_dir`). JSON read from a run directory is size-limited
+(:data:`MAX_JSON_BYTES`).
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import shutil
@@ -20,16 +23,83 @@ from aftir_rl.core.config import read_limited, shorten
 from aftir_rl.core.errors import CheckpointError, ConfigError
 
 __all__ = [
+    "DISK_ERRNOS",
     "MAX_JSON_BYTES",
+    "WriteError",
     "atomic_open",
+    "describe_write_error",
     "check_writable_dir",
     "staged_dir",
+    "UNFINISHED",
+    "unfinished_start",
+    "run_file",
     "read_json",
     "write_json",
 ]
 
 #: The largest JSON file read from a run directory [bytes].
 MAX_JSON_BYTES = 16_000_000
+#: The file of an unfinished run directory: the counters its training started from.
+UNFINISHED = "unfinished.json"
+#: The errors of a write that no retry fixes: a full disk, a full quota, a failing device.
+DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EIO)
+
+
+class WriteError(OSError):
+    """A write that failed on a full disk or a failing device, with the file it was writing.
+
+    Attributes:
+        needed: bytes it had written when it failed (it needed more), if known.
+        kept: the unfinished run directory kept with what it holds (:func:`staged_dir`).
+        resumable: whether ``kept`` holds a checkpoint ``--resume`` continues from.
+
+    """
+
+    def __init__(self, exc: OSError, path: str | os.PathLike[str], needed: int | None = None):
+        super().__init__(exc.errno, exc.strerror or str(exc), str(path))
+        self.needed = needed
+        self.kept: Path | None = None
+        self.resumable = False
+
+
+def _size_text(n: float) -> str:
+    """``n`` bytes as ``"512 B"``, ``"12.3 kB"``, ``"1.5 MB"``..."""
+    units = ["B", "kB", "MB", "GB", "TB"]
+    while n >= 1000 and len(units) > 1:
+        n, units = n / 1000, units[1:]
+    return f"{n:.0f} B" if units[0] == "B" else f"{n:.1f} {units[0]}"
+
+
+def _free_space(path: str) -> str:
+    """``", N MB free"`` on the device of ``path`` (or of its nearest existing folder), or ""."""
+    where = Path(path)
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    try:
+        return f"{_size_text(shutil.disk_usage(where).free)} free"
+    except OSError:
+        return ""
+
+
+def describe_write_error(exc: OSError) -> str:
+    """One line for an ``OSError``: what failed, the file, the space; where a run is kept."""
+    name = f" {exc.filename}" if exc.filename else ""
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        needed = getattr(exc, "needed", None)
+        space = [f"it needs more than {_size_text(needed)}"] if needed else []
+        free = _free_space(str(exc.filename)) if exc.filename else ""
+        detail = ", ".join(space + ([free] if free else []))
+        text = f"no space left on the device writing{name}" + (f" ({detail})" if detail else "")
+    elif exc.errno == errno.EIO:
+        text = f"input/output error writing{name}"
+    else:
+        return f"cannot access{name}: {exc.strerror or exc}"
+    kept = getattr(exc, "kept", None)
+    if kept is not None and getattr(exc, "resumable", False):
+        text += f"; continue the run with --resume {kept}"
+    elif kept is not None:
+        text += f"; the run's logs are kept in {kept}"
+    return text
 
 
 @contextmanager
@@ -46,6 +116,12 @@ def atomic_open(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO[An
         with os.fdopen(fd, mode, encoding=None if "b" in mode else "utf-8") as fh:
             yield fh
         os.replace(tmp, path)
+    except OSError as exc:
+        written = Path(tmp).stat().st_size if Path(tmp).exists() else None
+        Path(tmp).unlink(missing_ok=True)
+        if exc.errno in DISK_ERRNOS and not exc.filename:  # name the file it was writing
+            raise WriteError(exc, path, written) from None
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -91,21 +167,78 @@ def check_writable_dir(path: str | os.PathLike[str], flag: str = "--logdir") -> 
 
 @contextmanager
 def staged_dir(
-    final: str | os.PathLike[str], keep: Callable[[Path], bool] | None = None
+    final: str | os.PathLike[str],
+    keep: Callable[[Path], bool] | None = None,
+    start: dict[str, int] | None = None,
 ) -> Iterator[Path]:
     """A hidden ``.<name>.partial`` folder beside ``final``, renamed to ``final`` on success.
 
-    A run directory is written under this name, so a half-written one never looks finished.
-    If the block fails (Ctrl-C included) the folder is removed, unless ``keep(folder)`` says
-    to keep it (e.g. it holds a checkpoint to resume from).
+    A run directory is written under this name, with an :data:`UNFINISHED` file that holds
+    ``start`` (the counters its training started from), so a half-written one never looks
+    finished. If the block fails (Ctrl-C included) the folder is removed, unless
+    ``keep(folder)`` says to keep it (it holds a checkpoint to resume from). A full disk or a
+    failing device keeps it with its logs whatever ``keep`` says, and raises a
+    :class:`WriteError` that says so.
     """
     final = Path(final)
     partial = final.with_name(f".{final.name}.partial")
     partial.mkdir(parents=True, exist_ok=False)
     try:
+        write_json(partial / UNFINISHED, {"start": start or {}})
         yield partial
+        (partial / UNFINISHED).unlink(missing_ok=True)
         partial.rename(final)
+    except OSError as exc:
+        if exc.errno not in DISK_ERRNOS:
+            if keep is None or not keep(partial):
+                shutil.rmtree(partial, ignore_errors=True)
+            raise
+        error = exc if isinstance(exc, WriteError) else WriteError(exc, exc.filename or partial)
+        error.kept, error.resumable = partial, keep is not None and keep(partial)
+        raise error from None
     except BaseException:
         if keep is None or not keep(partial):
             shutil.rmtree(partial, ignore_errors=True)
         raise
+
+
+def unfinished_start(path: str | os.PathLike[str]) -> dict[str, int] | None:
+    """The counters an unfinished run started from, if ``path`` is or lies in one (else None).
+
+    An unfinished run directory holds :data:`UNFINISHED` (:func:`staged_dir`): a run stopped
+    by Ctrl-C, which resuming finishes. Counters that are not whole numbers are left out.
+    """
+    path = Path(path)
+    for folder in (path, *list(path.parents)[:2]):
+        if not (folder / UNFINISHED).is_file():
+            continue
+        try:
+            data = read_json(run_file(folder, UNFINISHED), UNFINISHED)
+        except (CheckpointError, OSError):
+            return None
+        start = data.get("start") if isinstance(data, dict) else None
+        if not isinstance(start, dict):
+            return None
+        return {k: v for k, v in start.items() if type(v) is int and v >= 0}
+    return None
+
+
+def run_file(run_dir: str | os.PathLike[str], name: str) -> Path:
+    """``run_dir/name``, refused if it (or a symlink on the way) leads out of ``run_dir``.
+
+    A run directory handed over by someone else may hold a symlink to any file of this machine;
+    what it names is read only when it stays inside the directory.
+
+    Raises:
+        CheckpointError: the path leaves the directory.
+
+    """
+    folder = Path(run_dir)
+    path = folder / name
+    try:
+        inside = path.resolve().is_relative_to(folder.resolve())
+    except (OSError, RuntimeError, ValueError):  # a symlink loop, a NUL byte
+        inside = False
+    if not inside:
+        raise CheckpointError(f"{path}: leads out of the run directory (a symlink?); refused")
+    return path

@@ -25,8 +25,9 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from aftir_rl.core import interrupts
 from aftir_rl.core.errors import AftirError
-from aftir_rl.core.files import atomic_open, check_writable_dir, write_json
+from aftir_rl.core.files import UNFINISHED, atomic_open, check_writable_dir, write_json
 from aftir_rl.experiments.search_space import DISTRIBUTIONS, Dimension, load_search_space
 
 __all__ = [
@@ -42,6 +43,14 @@ ALGOS = ("ppo", "sac", "td3")
 #: Bounds of the command line's numbers.
 MAX_TRIALS, MAX_EVALUATIONS = 10_000, 100
 METRIC = "eval/success_rate"
+#: Ray Tune's settings for a sweep: its own CSV/JSON/TensorBoard loggers off (the trials' run
+#: directories hold the logs), and Ctrl-C left to :mod:`aftir_rl.core.interrupts`, which ends
+#: the trials (``_stop_on_request``).
+TUNE_ENVIRONMENT = {
+    "TUNE_DISABLE_AUTO_CALLBACK_LOGGERS": "1",
+    "RAY_AIR_NEW_OUTPUT": "0",
+    "TUNE_DISABLE_SIGINT_HANDLER": "1",
+}
 
 
 class TuneError(AftirError, RuntimeError):
@@ -114,6 +123,7 @@ def _finish_stopped(run_dir: Path, result: dict[str, Any], algo: str, env_id: st
             **metrics,
         },
     )
+    (partial / UNFINISHED).unlink(missing_ok=True)
     partial.rename(run_dir)
 
 
@@ -140,8 +150,7 @@ def run_sweep(
         space: the search space (:func:`load_search_space`).
         trials: number of trials.
         logdir: parent of the sweep folder.
-        ray: ``local``, ``auto`` or ``HOST:PORT``
-        (:func:`aftir_rl.experiments.distributed.ray_session`).
+        ray: ``local``, ``auto`` or ``HOST:PORT`` (:mod:`aftir_rl.experiments.distributed`).
         workers: CPUs of a local Ray (default: every core).
         seed: seed of every trial's training and of Optuna's sampler.
         verbose: Ray Tune's verbosity (0: quiet).
@@ -155,6 +164,8 @@ def run_sweep(
         ConfigError: ``logdir`` cannot be written.
         RayError: Ray missing or unreachable.
         TuneError: every trial failed.
+        KeyboardInterrupt: a stop request (Ctrl-C or SIGTERM under the command line): the
+            trials end, ``trials.csv`` is written and the message says where.
 
     """
     from aftir_rl.experiments.distributed import ray_session, require_ray
@@ -162,14 +173,16 @@ def run_sweep(
     require_ray()
     env_id = base.env_id
     sweep = _make_sweep_dir(logdir, algo, env_id)
-    # Tune's own CSV/JSON/TensorBoard loggers off: the trials' run directories hold the logs.
-    os.environ.setdefault("TUNE_DISABLE_AUTO_CALLBACK_LOGGERS", "1")
-    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
+    for key, value in TUNE_ENVIRONMENT.items():
+        os.environ.setdefault(key, value)
     with ray_session(ray, workers):
         tuner = _make_tuner(algo, base, space, trials, sweep, seed, verbose)
-        grid = tuner.fit()
+        with interrupts.deferred():
+            grid = tuner.fit()
         rows = [_trial_row(grid[i], space, algo, env_id) for i in range(len(grid))]
     _write_trials_csv(sweep / "trials.csv", rows)
+    if interrupts.requested():
+        raise KeyboardInterrupt(f"the sweep so far is in {sweep} (trials.csv, no best.yaml)")
     best = _best_trial(rows, sweep)
     best_config = dataclasses.replace(
         base, hyperparameters={**base.hyperparameters, **{d.key: best[d.key] for d in space}}
@@ -228,9 +241,27 @@ def _make_tuner(
             search_alg=OptunaSearch(seed=seed),
         ),
         run_config=tune.RunConfig(
-            name="ray", storage_path=str(sweep), verbose=verbose, log_to_file=True
+            name="ray",
+            storage_path=str(sweep),
+            verbose=verbose,
+            log_to_file=True,
+            stop=_stop_on_request(),
         ),
     )
+
+
+def _stop_on_request() -> Any:
+    """A Tune stopper that ends every trial once a stop is requested (Ctrl-C, SIGTERM)."""
+    from ray.tune import Stopper
+
+    class StopOnRequest(Stopper):
+        def __call__(self, trial_id: str, result: dict[str, Any]) -> bool:
+            return False
+
+        def stop_all(self) -> bool:
+            return interrupts.requested()
+
+    return StopOnRequest()
 
 
 def _trial_row(result: Any, space: Sequence[Dimension], algo: str, env_id: str) -> dict[str, Any]:

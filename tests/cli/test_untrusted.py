@@ -543,7 +543,8 @@ def test_ctrl_c_saves_a_resumable_partial_run(tmp_path):
     (saved,) = (partial / "checkpoints").glob("model_*.zip")
     steps = int(saved.stem.split("_")[1])
     assert steps > 0
-    # --resume RUN_DIR continues from that checkpoint; its checkpoints follow on, no burst
+    # --resume RUN_DIR finishes that run from its checkpoint (to its --total-timesteps, here
+    # 128 after it); its checkpoints follow on, no burst
     config.write_text(PPO_YAML)
     again = tmp_path / "again"
     assert (
@@ -555,7 +556,7 @@ def test_ctrl_c_saves_a_resumable_partial_run(tmp_path):
                 "--resume",
                 str(partial),
                 "--total-timesteps",
-                "128",
+                str(steps + 128),
                 "--logdir",
                 str(again),
                 "--no-progress",

@@ -24,12 +24,14 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import Image
 
+from aftir_rl.core import interrupts
 from aftir_rl.core.config import EVAL_SEED
 from aftir_rl.core.files import atomic_open, write_json
 from aftir_rl.envs.ftl.spec import TRAINING_ONLY_KWARGS
 
 __all__ = [
     "EVAL_SEED",
+    "arm_clearance",
     "evaluation_env_kwargs",
     "evaluation_targets",
     "evaluate_policy_on_targets",
@@ -66,7 +68,7 @@ def evaluation_targets(
     return targets
 
 
-def _clearance(arm: Any) -> float:
+def arm_clearance(arm: Any) -> float:
     """The arm's surface clearance [cm].
 
     python-fcl where the env has a collision scene, else the numpy signed distance of its
@@ -103,11 +105,18 @@ def evaluate_policy_on_targets(
         all motions, when asked) and the first episode's ``tips``, ``arm``, ``target`` and
         ``tank`` for a picture.
 
+    Raises:
+        KeyboardInterrupt: a stop was requested (:mod:`aftir_rl.core.interrupts`); checked
+            before each target.
+
     """
     env = gym.make(env_id, **evaluation_env_kwargs(env_kwargs))
     arm: Any = env.unwrapped  # an arm env: tip, posture, scene, body(), tank
     rows, smallest, first = [], np.inf, {}
     for i, target in enumerate(targets):
+        if interrupts.requested():
+            env.close()
+            raise KeyboardInterrupt
         start = time.perf_counter()
         path, info, smallest = _run_target(model, env, arm, target, clearance, smallest)
         rows.append(
@@ -142,7 +151,7 @@ def _run_target(
         obs, _, terminated, truncated, info = env.step(action)
         tips.append(arm.tip)
         if clearance:
-            smallest = min(smallest, _clearance(arm))
+            smallest = min(smallest, arm_clearance(arm))
         done = terminated or truncated
     return np.array(tips), info, smallest
 
@@ -223,12 +232,13 @@ class ArmEvalCallback(BaseCallback):
         self._period.start(self.model.num_timesteps)
 
     def _on_step(self) -> bool:
-        if self._period.due(self.num_timesteps):
+        if self._period.due(self.num_timesteps) and not interrupts.requested():
             self.evaluate()
         return True
 
     def _on_training_end(self) -> None:
-        self.evaluate()
+        if not interrupts.requested():  # stopped on request: saved, not evaluated
+            self.evaluate()
 
     def evaluate(self) -> dict[str, float]:
         """Run the evaluation now and log it."""
@@ -274,7 +284,11 @@ class ArmEvalCallback(BaseCallback):
 
 
 class AtomicCheckpoint(BaseCallback):
-    """Save ``checkpoints/model_<steps>.zip`` every ``freq`` steps, atomically."""
+    """Save ``checkpoints/model_<steps>.zip`` every ``freq`` steps, atomically.
+
+    Not once a stop is requested: the run saves its own then
+    (:func:`aftir_rl.rl.sb3.train.train_sb3`).
+    """
 
     def __init__(self, directory: Path, freq: int) -> None:
         super().__init__()
@@ -285,7 +299,7 @@ class AtomicCheckpoint(BaseCallback):
         self._period.start(self.model.num_timesteps)
 
     def _on_step(self) -> bool:
-        if self._period.due(self.num_timesteps):
+        if self._period.due(self.num_timesteps) and not interrupts.requested():
             save_model(self.model, self.directory / f"model_{self.num_timesteps}.zip")
         return True
 

@@ -3,12 +3,20 @@
 from __future__ import annotations
 
 import dataclasses
+import signal
+import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from aftir_rl.core.files import check_writable_dir, staged_dir, write_json
+from stable_baselines3.common.callbacks import BaseCallback
+
+from aftir_rl.core import interrupts
+from aftir_rl.core.files import check_writable_dir, staged_dir, unfinished_start, write_json
 from aftir_rl.rl.common import check_env_id, hyperparameter_text, run_name
+from aftir_rl.rl.logs import run_logger
 
 __all__ = ["train_sb3"]
 
@@ -29,16 +37,20 @@ def train_sb3(
     ``eval/*``, ``paths/eval``, the hyperparameters as text) and ``best/``, the best model
     evaluated during training as a run directory of its own (:class:`ArmEvalCallback`). It is
     built under a hidden ``.<name>.partial`` name and renamed once ``model.zip`` is written, so an
-    interrupted run never looks finished. On Ctrl-C the model is saved to
-    ``checkpoints/model_<steps>.zip`` of the partial directory, which ``--resume`` continues
-    from. ``on_evaluation(model, metrics)``, if
-    given, is called after each evaluation is logged (``aftir tune`` reports to Ray Tune there).
+    interrupted run never looks finished. On a stop request (Ctrl-C or SIGTERM under the command
+    line, :mod:`aftir_rl.core.interrupts`) the model as of its last update is saved to
+    ``checkpoints/model_<steps>.zip`` of the partial directory. Resuming from such an unfinished
+    run finishes it: it trains what is left of ``total_timesteps`` counted from where that run
+    started, so it ends where an uninterrupted run would; resuming a finished run trains
+    ``total_timesteps`` more. ``on_evaluation(model, metrics)``, if given, is called after each
+    evaluation is logged (``aftir tune`` reports to Ray Tune there).
 
     Raises:
         ConfigError: the config, ``logdir`` or the hyperparameters are refused (before any
             training).
         CheckpointError: ``resume`` is unreadable, or does not fit this config.
-        KeyboardInterrupt: Ctrl-C, once the model is saved; its message says where.
+        KeyboardInterrupt: a stop request, once the model is saved; its message says where.
+        WriteError: a full disk or a failing device; the partial directory is kept.
 
     """
     from aftir_rl.rl.sb3 import check_sb3_config, evaluation_targets, newest_model
@@ -72,38 +84,47 @@ def train_sb3(
 
 
 def _make_venv(env_id: str, config: Any, seed: int) -> Any:
-    """The training envs: a batched env when the env has one, else copies (Ctrl-C ignored)."""
-    import signal
-    import threading
-
+    """The training envs: a batched env when the env has one, else copies (Ctrl-C held back)."""
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     from aftir_rl.rl.sb3.vec_adapter import make_batched_vec_env
 
+    # a batched env (one numpy pass for all rows) when the env has one, else copies
+    # only HER's replay buffer reads the infos of rows that did not finish
+    venv = make_batched_vec_env(
+        env_id, config.n_envs, seed, config.env_kwargs, None if config.her else ()
+    )
+    if venv is not None:
+        return venv
     vec_cls = SubprocVecEnv if config.n_envs > 1 else DummyVecEnv
-    # Workers ignore Ctrl-C: the main process stops them once the model is saved. Only the main
-    # thread may set handlers (a Ray Tune trial runs in another one).
-    main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
-    try:
-        # a batched env (one numpy pass for all rows) when the env has one, else copies
-        # only HER's replay buffer reads the infos of rows that did not finish
-        venv = make_batched_vec_env(
-            env_id, config.n_envs, seed, config.env_kwargs, None if config.her else ()
+    with _ctrl_c_held():
+        return make_vec_env(
+            env_id,
+            n_envs=config.n_envs,
+            seed=seed,
+            vec_env_cls=vec_cls,
+            env_kwargs=config.env_kwargs,
         )
-        if venv is None:
-            venv = make_vec_env(
-                env_id,
-                n_envs=config.n_envs,
-                seed=seed,
-                vec_env_cls=vec_cls,
-                env_kwargs=config.env_kwargs,
-            )
+
+
+@contextmanager
+def _ctrl_c_held() -> Iterator[None]:
+    """Hold SIGINT back from this thread while subprocess workers start.
+
+    The workers inherit the signal mask, so Ctrl-C never reaches them (the main process stops
+    them once the model is saved); a Ctrl-C meanwhile is delivered to the main process when the
+    block ends, never lost. Only the main thread's signals matter (a Ray Tune trial runs in
+    another one).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
     finally:
-        if main_thread:
-            signal.signal(signal.SIGINT, previous)
-    return venv
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _train_run(
@@ -122,7 +143,7 @@ def _train_run(
     """Build (or load) the model, train it and write its run directory under ``logdir``.
 
     A partial directory that holds a checkpoint is kept on failure (resumable); any other is
-    removed.
+    removed, but on a full disk or a failing device (kept with its logs).
     """
     from aftir_rl.rl.sb3 import build_model, load_model, save_model
 
@@ -130,17 +151,20 @@ def _train_run(
         model = load_model(algo, resume_path, env=venv, config=config, evaluation=False)
     else:
         model = build_model(algo, config, venv, seed=seed)
-    name = run_name(algo, bare, "random", seed)
-    run_dir = logdir / name
+    start = _run_start(resume_path, int(model.num_timesteps))
+    steps = max(0, config.total_timesteps - (int(model.num_timesteps) - start))
+    run_dir = logdir / run_name(algo, bare, "random", seed)
     # a partial run that holds a checkpoint is kept on failure (resumable)
-    with staged_dir(run_dir, keep=_has_checkpoint) as partial:
-        logger = _open_logger(model, partial, algo, config, seed, resume_path)
+    staged = staged_dir(run_dir, keep=_has_checkpoint, start={"timesteps": start})
+    with staged as partial, run_logger(partial) as logger:
+        model.set_logger(logger)
+        _write_config(partial, logger, algo, config, seed, resume_path)
         evaluator, callbacks = _callbacks(
             f"aftir_rl:{bare}", config, targets, on_evaluation, partial
         )
-        seconds = _learn(model, config, callbacks, progress_bar, resume_path, partial, logger)
-        save_model(model, partial / "model.zip")
-        logger.close()
+        with interrupts.deferred():  # a stop request ends training at the next step
+            seconds = _learn(model, steps, callbacks, progress_bar, resume_path, partial)
+            save_model(model, partial / "model.zip")
         summary = {
             "algo": algo,
             "env_id": config.env_id,
@@ -154,14 +178,19 @@ def _train_run(
     return summary
 
 
-def _open_logger(
-    model: Any, partial: Path, algo: str, config: Any, seed: int, resume_path: Path | None
-) -> Any:
-    """The run's CSV and TensorBoard logger, set on ``model``; writes ``config.json``."""
-    from stable_baselines3.common.logger import configure
+def _run_start(resume_path: Path | None, steps: int) -> int:
+    """The step count this run counts ``total_timesteps`` from (``steps``: the model's now).
 
-    logger = configure(str(partial), ["csv", "tensorboard"])
-    model.set_logger(logger)
+    Resuming an unfinished run (stopped by Ctrl-C) continues it: from that run's own start.
+    """
+    start = (unfinished_start(resume_path) or {}).get("timesteps") if resume_path else None
+    return start if start is not None and start <= steps else steps
+
+
+def _write_config(
+    partial: Path, logger: Any, algo: str, config: Any, seed: int, resume_path: Path | None
+) -> None:
+    """Write ``config.json`` and log it as text."""
     params = {
         **dataclasses.asdict(config),
         "algo": algo,
@@ -170,7 +199,6 @@ def _open_logger(
     }
     write_json(partial / "config.json", params)
     logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
-    return logger
 
 
 def _callbacks(
@@ -191,43 +219,77 @@ def _callbacks(
     return evaluator, callbacks
 
 
+class _StopOnRequest(BaseCallback):
+    """End training at the next step once a stop is requested; remember where the rollout began.
+
+    The model's weights change only between rollouts, so the steps of an unfinished rollout
+    were never learnt from: the model is saved as of the rollout's start.
+    """
+
+    rollout_start = 0
+
+    def _on_training_start(self) -> None:
+        self.rollout_start = int(self.model.num_timesteps)
+
+    def _on_rollout_start(self) -> None:
+        self.rollout_start = int(self.model.num_timesteps)
+
+    def _on_step(self) -> bool:
+        return not interrupts.requested()
+
+
 def _learn(
     model: Any,
-    config: Any,
+    steps: int,
     callbacks: list[Any],
     progress_bar: bool,
     resume_path: Path | None,
     partial: Path,
-    logger: Any,
 ) -> float:
-    """Train for ``config.total_timesteps``; on Ctrl-C save a checkpoint and say where.
+    """Train ``steps`` more steps; on a stop request save a checkpoint and say where.
 
     Returns:
         The seconds training took.
 
     Raises:
-        KeyboardInterrupt: Ctrl-C, once the model is saved under ``partial/checkpoints``.
+        KeyboardInterrupt: a stop request, once the model is saved under
+            ``partial/checkpoints``.
 
     """
-    from aftir_rl.rl.sb3 import save_model
-
+    stop = _StopOnRequest()
     start = time.perf_counter()
     try:
         model.learn(
-            config.total_timesteps,
-            callback=callbacks,
+            steps,
+            callback=[*callbacks, stop],
             progress_bar=progress_bar,
             reset_num_timesteps=resume_path is None,
         )
     except KeyboardInterrupt:
-        steps = int(model.num_timesteps)
-        save_model(model, partial / "checkpoints" / f"model_{steps}.zip")
-        logger.close()
-        raise KeyboardInterrupt(
-            f"the model at step {steps} is saved in {partial}/checkpoints; continue with "
-            f"--resume {partial}"
-        ) from None
+        pass  # a stop requested during an evaluation: saved as between two steps
+    if interrupts.requested():
+        _save_stopped(model, stop.rollout_start, partial)
     return time.perf_counter() - start
+
+
+def _save_stopped(model: Any, steps: int, partial: Path) -> None:
+    """Save the stopped model as of step ``steps`` (its last update) and raise KeyboardInterrupt.
+
+    Periodic checkpoints of the unfinished rollout hold the same weights under later step
+    counts: they are removed, so ``--resume`` takes this one and ends where the run would.
+    """
+    from aftir_rl.rl.sb3 import save_model
+
+    model.num_timesteps = steps
+    folder = partial / "checkpoints"
+    save_model(model, folder / f"model_{steps}.zip")
+    for path in folder.glob("model_*.zip"):
+        tail = path.stem[len("model_") :]
+        if tail.isdigit() and int(tail) > steps:
+            path.unlink(missing_ok=True)
+    raise KeyboardInterrupt(
+        f"the model at step {steps} is saved in {folder}; continue with --resume {partial}"
+    )
 
 
 def _has_checkpoint(partial: Path) -> bool:

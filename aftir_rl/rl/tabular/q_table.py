@@ -27,6 +27,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
+from aftir_rl.core import interrupts
 from aftir_rl.core.errors import CheckpointError
 from aftir_rl.rl.tabular.checkpoint import (
     Q_TABLE_FORMAT,
@@ -98,7 +99,9 @@ class QLearning(TabularAgent):
             reset_options: passed to every ``env.reset``.
 
         Returns:
-            self, trained further (``episodes_done`` and ``num_timesteps`` advance).
+            self, trained further (``episodes_done`` and ``num_timesteps`` advance). A stop
+            request (Ctrl-C under the command lines, :mod:`aftir_rl.core.interrupts`) ends
+            training after the current episode.
 
         """
         env, rng = self.env, self._rng
@@ -124,6 +127,8 @@ class QLearning(TabularAgent):
                     self.q_table = np.array(q)
                     if callback(self) is False:
                         break
+                if interrupts.requested():
+                    break
         finally:
             if bar is not None:
                 bar.close()

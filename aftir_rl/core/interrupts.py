@@ -1,0 +1,72 @@
+"""Ctrl-C and SIGTERM as a request to stop, which the long loops honour at their next step.
+
+The command lines (:func:`aftir_rl.cli.guard.cli`) route SIGINT and SIGTERM to :func:`on_signal`.
+Outside a :func:`deferred` block the first signal raises ``KeyboardInterrupt`` at once: there is
+nothing to finish. Inside one (a training loop) it only sets the flag :func:`requested`; the loop
+stops after its current step, saves what it has and raises ``KeyboardInterrupt`` itself. A second
+signal ends the process at once (status 130), leaving any run under its ``.NAME.partial`` name.
+Without the command lines' handler (a library call) the flag is never set.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import FrameType
+
+__all__ = ["deferred", "held", "on_signal", "requested", "reset"]
+
+#: The line printed when a second signal ends the process at once.
+AT_ONCE = "interrupted twice: stopped at once; an unfinished run stays in its .NAME.partial folder"
+
+
+class _State:
+    requested = False
+    deferring = 0
+
+
+def requested() -> bool:
+    """Whether a stop was requested (a first Ctrl-C or SIGTERM) since :func:`reset`."""
+    return _State.requested
+
+
+def reset() -> None:
+    """Forget a request (a command line starts)."""
+    _State.requested = False
+
+
+@contextmanager
+def deferred() -> Iterator[None]:
+    """A block whose loop polls :func:`requested`: a first signal only sets the flag there."""
+    _State.deferring += 1
+    try:
+        yield
+    finally:
+        _State.deferring -= 1
+
+
+@contextmanager
+def held() -> Iterator[None]:
+    """A block a first signal does not break into: it is raised as the block ends.
+
+    For imports of compiled code (torch), which a ``KeyboardInterrupt`` may abort, or leave
+    taken for an unhandled one. Inside a :func:`deferred` block the loop still polls it.
+    """
+    with deferred():
+        yield
+    if _State.requested and not _State.deferring:
+        raise KeyboardInterrupt
+
+
+def on_signal(signum: int, frame: FrameType | None) -> None:
+    """Signal handler: request a stop (raise now outside :func:`deferred`); the second: exit."""
+    if _State.requested:
+        try:
+            print(AT_ONCE, file=sys.stderr, flush=True)
+        finally:
+            os._exit(130)
+    _State.requested = True
+    if not _State.deferring:
+        raise KeyboardInterrupt
