@@ -36,7 +36,6 @@ on test targets with ``python -m aftir_rl.evaluate``.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -46,6 +45,8 @@ import torch
 from tqdm import tqdm
 
 import aftir_rl  # noqa: F401
+from aftir_rl.cli.args import OneLineParser, bounded_int, coordinate
+from aftir_rl.cli.guard import cli
 from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import read_json
@@ -110,19 +111,26 @@ def rollout(model, kwargs: dict, targets: np.ndarray) -> tuple[np.ndarray, np.nd
     return success, contact
 
 
+@cli
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", metavar="RUN_DIR", help="an SB3 run of AFTIR-ArmFTL-v0")
-    parser.add_argument("--fresh", type=int, default=200, help="uniform targets (200)")
-    parser.add_argument("--corners", type=int, default=96, help="corner targets (96)")
+    count = bounded_int(1, 4096)
+    parser.add_argument("--fresh", type=count, default=200, help="uniform targets (200; to 4096)")
+    parser.add_argument("--corners", type=count, default=96, help="corner targets (96; to 4096)")
     parser.add_argument(
-        "--extreme", type=int, default=96, help="targets at the innermost corner points (96)"
+        "--extreme",
+        type=count,
+        default=96,
+        help="targets at the innermost corner points (96; to 4096)",
     )
-    parser.add_argument("--seed", type=int, default=3_000_000, help="first seed (3,000,000)")
+    parser.add_argument(
+        "--seed", type=bounded_int(0, 2**31), default=3_000_000, help="first seed (3,000,000)"
+    )
     parser.add_argument(
         "--target",
         nargs=3,
-        type=float,
+        type=coordinate,
         action="append",
         default=[],
         metavar=("X", "Y", "Z"),
@@ -131,12 +139,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if len(args.target) > 64:
         print("error: at most 64 --target", file=sys.stderr)
-        return 2
-    if not all(1 <= n <= 4096 for n in (args.fresh, args.corners, args.extreme)):
-        print("error: --fresh, --corners and --extreme must be in 1..4096", file=sys.stderr)
-        return 2
-    if not 0 <= args.seed <= 2**31:
-        print("error: --seed must be in 0..2**31", file=sys.stderr)
         return 2
     torch.set_num_threads(1)
     try:

@@ -1,17 +1,135 @@
-"""Options shared by the command lines (``train``, ``evaluate``, ``bench``, ``plan``).
+"""Options shared by the command lines, and the one parser class every command line uses.
 
-Each adds one option to an ``argparse`` parser with the same flag, type, metavar and checks in
-every command that has it; the help text is the command's own.
+:class:`OneLineParser` makes every error of a command line one line and exit status 2 (through
+:func:`aftir_rl.cli.guard.cli`). Each ``add_*_option`` adds one option with the same flag, type,
+metavar and checks in every command that has it (the help text is the command's own);
+:func:`bounded_int` and :func:`coordinate` are ``type=`` functions that refuse a number outside
+its bounds, naming them.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+import re
+from collections.abc import Callable
+from typing import NoReturn
 
-from aftir_rl.core.config import DEFAULT_MARGIN
+from aftir_rl.core.config import DEFAULT_MARGIN, shorten
 from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.tank.loading import MAX_COORD, MAX_TARGETS
 
-__all__ = ["add_target_option", "add_margin_option", "add_ray_options", "check_margin"]
+__all__ = [
+    "MAX_EPISODES",
+    "MAX_ENVS",
+    "MAX_SEED",
+    "MAX_TIMESTEPS",
+    "MAX_WORKERS",
+    "CommandLineError",
+    "OneLineParser",
+    "add_margin_option",
+    "add_ray_options",
+    "add_target_option",
+    "bounded_int",
+    "check_margin",
+    "coordinate",
+]
+
+#: The largest seed (numpy's and SB3's seeds are 32-bit).
+MAX_SEED = 2**32 - 1
+#: The most CPUs of ``--ray local`` (``--workers``).
+MAX_WORKERS = 1024
+#: The most training steps of a run or a trial (the largest ``total_timesteps`` of a config).
+MAX_TIMESTEPS = 10**9
+#: The most envs of a run (64 subprocesses, or 4,096 rows of a batched env: the config says).
+MAX_ENVS = 4096
+#: The most Q-learning episodes per target (``--episodes``).
+MAX_EPISODES = 10**6
+
+# argparse takes "-1e3" or "-inf" for an option (it knows only "-1" and "-1.5" as numbers)
+_NEGATIVE_NUMBER = re.compile(
+    r"^-(\d[\d_]*\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE
+)
+
+
+class CommandLineError(ConfigError):
+    """A command line its parser refuses: one line, ``error: ... (see --help)``, and status 2."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose errors are :class:`CommandLineError`, not a usage block.
+
+    The ``main`` of a command line is wrapped in :func:`aftir_rl.cli.guard.cli`, which prints the
+    error as one line and returns 2 (the usage is left to ``--help``). A ``type=`` function's
+    "must be ..." reads "--flag must be ...". Negative numbers such as ``-1e3`` and ``-inf`` are
+    values, not options.
+    """
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._negative_number_matcher = _NEGATIVE_NUMBER
+
+    def error(self, message: str) -> NoReturn:
+        """Raise ``message`` as a :class:`CommandLineError` (one line, status 2 from ``cli``)."""
+        message = re.sub(r"^argument (\S+): must be", r"\1 must be", message)
+        raise CommandLineError(shorten(f"{message} (see --help)"))
+
+
+def bounded_int(lo: int, hi: int) -> Callable[[str], int]:
+    """A ``type=`` function: an integer from ``lo`` to ``hi`` ("1e6" is read as 1000000).
+
+    Its error reads "must be from LO to HI, got VALUE".
+    """
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+            try:
+                number = float(text)
+                value = int(number) if number.is_integer() else None
+            except (ValueError, OverflowError):
+                pass
+        if value is None or not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(
+                f"must be {'' if value is not None else 'an integer '}from {lo:,} to {hi:,}, "
+                f"got {shorten(text, 40)}"
+            )
+        return value
+
+    parse.__name__ = f"integer from {lo} to {hi}"
+    return parse
+
+
+def coordinate(text: str) -> float:
+    """A ``type=`` function: a finite coordinate in cm, at most the tanks' ``MAX_COORD``."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and abs(value) <= MAX_COORD):
+        raise argparse.ArgumentTypeError(
+            f"must be finite numbers of at most {MAX_COORD:,g} cm in magnitude, got "
+            f"{shorten(text, 40)}"
+        )
+    return value
+
+
+class _AppendTarget(argparse.Action):
+    """``append``, at most the tanks' ``MAX_TARGETS`` times."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: object,
+        values: object,
+        option_string: str | None = None,
+    ) -> None:
+        targets = list(getattr(namespace, self.dest, None) or [])
+        if len(targets) >= MAX_TARGETS:
+            parser.error(f"--target may be given at most {MAX_TARGETS:,} times")
+        setattr(namespace, self.dest, [*targets, values])
 
 
 def add_target_option(parser: argparse.ArgumentParser, help: str, required: bool = False) -> None:
@@ -19,9 +137,9 @@ def add_target_option(parser: argparse.ArgumentParser, help: str, required: bool
     parser.add_argument(
         "--target",
         nargs=3,
-        type=float,
+        type=coordinate,
         required=required,
-        action="store" if required else "append",
+        action="store" if required else _AppendTarget,
         metavar=("X", "Y", "Z"),
         help=help,
     )
@@ -38,14 +156,19 @@ def check_margin(margin: float) -> None:
         raise ConfigError(f"--margin must be between 0 and 20 cm, got {margin}")
 
 
-def add_ray_options(parser: argparse.ArgumentParser, what: str) -> None:
-    """``--ray ADDRESS`` and ``--workers N``: ``what`` (e.g. "evaluate the runs") on Ray."""
+def add_ray_options(parser: argparse.ArgumentParser, what: str, default: str | None = None) -> None:
+    """``--ray ADDRESS`` (``default``) and ``--workers N``: ``what`` (e.g. "evaluate the runs")."""
     parser.add_argument(
         "--ray",
+        default=default,
         metavar="ADDRESS",
         help=f"{what} as Ray tasks: local (a Ray on this machine), auto or HOST:PORT (a "
-        "cluster started with ray start); needs aftir_rl[ray]",
+        "cluster started with ray start); needs aftir_rl[ray]"
+        + (f" (default {default})" if default else ""),
     )
     parser.add_argument(
-        "--workers", type=int, metavar="N", help="CPUs of --ray local (default: every core)"
+        "--workers",
+        type=bounded_int(1, MAX_WORKERS),
+        metavar="N",
+        help=f"CPUs of --ray local, 1 to {MAX_WORKERS} (default: every core)",
     )

@@ -16,8 +16,14 @@ from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 
-from aftir_rl.cli.args import add_margin_option, add_ray_options
-from aftir_rl.cli.guard import cli
+from aftir_rl.cli.args import (
+    MAX_SEED,
+    OneLineParser,
+    add_margin_option,
+    add_ray_options,
+    bounded_int,
+)
+from aftir_rl.cli.guard import cli, preload
 from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import write_json
@@ -33,9 +39,13 @@ from aftir_rl.experiments.bench import (
 __all__ = ["main"]
 
 
+#: The most random targets per bay (``--n-random``): each is run by every method.
+MAX_N_RANDOM = 1000
+
+
 def _parser() -> argparse.ArgumentParser:
     """The command line of ``python -m aftir_rl.bench``."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m aftir_rl.bench",
         description="Measure every planner, Q-learning + postures, RRT-Connect and trained SB3 "
         "agents on the same fixed target sets; print one markdown table.",
@@ -50,9 +60,18 @@ def _parser() -> argparse.ArgumentParser:
         "(default: all)",
     )
     parser.add_argument(
-        "--n-random", type=int, default=10, metavar="N", help="random targets per bay (default 10)"
+        "--n-random",
+        type=bounded_int(1, MAX_N_RANDOM),
+        default=10,
+        metavar="N",
+        help=f"random targets per bay, 1 to {MAX_N_RANDOM:,} (default 10)",
     )
-    parser.add_argument("--seed", type=int, default=7, help="seed of the random targets")
+    parser.add_argument(
+        "--seed",
+        type=bounded_int(0, MAX_SEED),
+        default=7,
+        help="seed of the random targets, 0 to 2**32-1 (default 7)",
+    )
     parser.add_argument(
         "--rrt-seconds",
         type=float,
@@ -117,6 +136,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
     _check_numbers(parser, args)
+    if args.model:
+        preload("aftir_rl.rl.sb3")  # torch
     problem = _check_inputs(args.model, args.json)
     if args.ray is not None or args.workers is not None:
         from aftir_rl.experiments.distributed import check_ray_options

@@ -19,8 +19,16 @@ from typing import Any
 
 import numpy as np
 
-from aftir_rl.cli.args import add_margin_option, add_ray_options, add_target_option, check_margin
-from aftir_rl.cli.guard import cli
+from aftir_rl.cli.args import (
+    MAX_SEED,
+    OneLineParser,
+    add_margin_option,
+    add_ray_options,
+    add_target_option,
+    bounded_int,
+    check_margin,
+)
+from aftir_rl.cli.guard import cli, preload
 from aftir_rl.core.config import DEFAULT_MARGIN, EVAL_SEED
 from aftir_rl.core.errors import AftirError, ConfigError
 from aftir_rl.core.files import check_writable_dir
@@ -66,7 +74,7 @@ def _row_name(run: str) -> str:
 
 def _parser() -> argparse.ArgumentParser:
     """The command line of ``python -m aftir_rl.evaluate``."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m aftir_rl.evaluate",
         description="Evaluate trained runs (Q-table or SB3) and print one comparison table.",
     )
@@ -81,17 +89,17 @@ def _parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--random",
-        type=int,
+        type=bounded_int(1, MAX_RANDOM_TARGETS),
         metavar="N",
         help=f"SB3 runs: N targets drawn by the run's env (1..{MAX_RANDOM_TARGETS}), not "
         "its fixed evaluation targets",
     )
     parser.add_argument(
         "--seed",
-        type=int,
+        type=bounded_int(0, MAX_SEED),
         metavar="S",
-        help=f"first seed of --random's targets (default {RANDOM_SEED}, far from training's "
-        f"{EVAL_SEED})",
+        help=f"first seed of --random's targets, 0 to 2**32-1-N (default {RANDOM_SEED}, far "
+        f"from training's {EVAL_SEED})",
     )
     add_margin_option(parser, f"clearance the arm keeps ({DEFAULT_MARGIN:g} cm)")
     add_ray_options(parser, "evaluate the runs")
@@ -166,6 +174,7 @@ def _log_results(logdir: str, results: dict[str, dict[str, Any]]) -> Path:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.evaluate``."""
     args = _parser().parse_args(argv)
+    preload("aftir_rl.rl.sb3")  # torch: SB3 runs and the TensorBoard log need it
     targets = [np.array(t) for t in args.target] if args.target else None
     try:
         draw = _check_draw(args.random, args.seed, targets)

@@ -6,13 +6,12 @@ cannot be reached prints "error: Cannot reach the target: <why>" and exits with 
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
 from collections.abc import Sequence
 
-from aftir_rl.cli.args import add_margin_option, add_target_option, check_margin
+from aftir_rl.cli.args import OneLineParser, add_margin_option, add_target_option, check_margin
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, PlanningError
@@ -50,7 +49,7 @@ def format_table(result: PlannedPosture) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.plan``."""
     methods = "; ".join(f"{m.name}: {m.summary} ({m.paper})" for m in REGISTRY.values())
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m aftir_rl.plan",
         description="Plan a collision-free posture (dis, theta, phi) of the arm reaching a target.",
     )

@@ -9,11 +9,11 @@ status 2.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from collections.abc import Sequence
 
+from aftir_rl.cli.args import OneLineParser
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.tank.loading import load_tank
@@ -24,7 +24,7 @@ __all__ = ["main"]
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.tank`` (and ``aftir tank``)."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m aftir_rl.tank",
         description="Show a tank's raster as z-slices, or export its scene as JSON (units cm).",
     )

@@ -20,21 +20,25 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from aftir_rl.cli.args import add_margin_option, add_target_option, check_margin
+from aftir_rl.cli.args import (
+    MAX_ENVS,
+    MAX_EPISODES,
+    MAX_SEED,
+    MAX_TIMESTEPS,
+    OneLineParser,
+    add_margin_option,
+    add_target_option,
+    bounded_int,
+    check_margin,
+)
 from aftir_rl.cli.guard import cli
+from aftir_rl.core import interrupts
 from aftir_rl.core.config import CONFIG_DIR, DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, ConfigError
 from aftir_rl.experiments.runs import load_q_table_config
-from aftir_rl.rl.sb3.train import train_sb3
-from aftir_rl.rl.tabular.train import train_q_table, train_q_table_all_targets
 
-__all__ = [
-    "main",
-    "train_q_table",
-    "train_q_table_all_targets",
-    "train_sb3",
-    "load_q_table_config",
-]
+# The trainers (torch, numba) are imported when a command runs: Ctrl-C is honoured from then.
+__all__ = ["main", "load_q_table_config"]
 
 ALGOS = ("q_table", "ppo", "sac", "td3")
 
@@ -79,7 +83,7 @@ def _print_summary(s: dict[str, Any]) -> None:
 
 def _parser() -> argparse.ArgumentParser:
     """The command line of ``python -m aftir_rl.train``: one subcommand per algorithm."""
-    parser = argparse.ArgumentParser(
+    parser: argparse.ArgumentParser = OneLineParser(
         prog="python -m aftir_rl.train",
         description="Train an agent on an aftir_rl environment and log the run to TensorBoard.",
     )
@@ -105,13 +109,23 @@ def _add_q_table_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
     add_target_option(
         q, "target point in cm; repeat for several (default: the tank's reference targets)"
     )
-    q.add_argument("--episodes", type=int, help="training episodes per target (overrides config)")
+    q.add_argument(
+        "--episodes",
+        type=bounded_int(1, MAX_EPISODES),
+        metavar="N",
+        help=f"training episodes per target, 1 to {MAX_EPISODES:,} (overrides config)",
+    )
     q.add_argument(
         "--all-targets",
         action="store_true",
         help="one goal-conditioned run (AFTIR-TankGoal-v0) that learns every reachable cell",
     )
-    q.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    q.add_argument(
+        "--seed",
+        type=bounded_int(0, MAX_SEED),
+        default=0,
+        help="random seed (default 0; to 2**32-1)",
+    )
     q.add_argument("--logdir", default="runs", help="parent of the run directories (default runs/)")
     q.add_argument("--resume", help="q_table.npz or run directory to continue training from")
     q.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -153,16 +167,34 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
         help=f"YAML of SB3Config fields (default: configs/{algo}.yaml)",
     )
     p.add_argument("--env", help="environment id (overrides config), e.g. AFTIR-ArmReach-v0")
-    p.add_argument("--total-timesteps", type=int, help="training steps (overrides config)")
-    p.add_argument("--n-envs", type=int, help="parallel subprocess envs (overrides config)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument(
+        "--total-timesteps",
+        type=bounded_int(1, MAX_TIMESTEPS),
+        metavar="T",
+        help=f"training steps, 1 to {MAX_TIMESTEPS:,} (overrides config)",
+    )
+    p.add_argument(
+        "--n-envs",
+        type=bounded_int(1, MAX_ENVS),
+        metavar="N",
+        help="parallel envs (overrides config): up to 64 subprocesses, or up to "
+        f"{MAX_ENVS:,} rows of a batched env",
+    )
+    p.add_argument(
+        "--seed",
+        type=bounded_int(0, MAX_SEED),
+        default=0,
+        help="random seed (default 0; to 2**32-1)",
+    )
     p.add_argument("--logdir", default="runs", help="parent of the run directory")
     p.add_argument("--resume", help="model.zip or run directory to continue training from")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
 def _main_sb3(args: argparse.Namespace) -> int:
-    from aftir_rl.rl.sb3 import load_sb3_config
+    with interrupts.held():  # torch: Ctrl-C is taken once it is imported
+        from aftir_rl.rl.sb3 import load_sb3_config
+        from aftir_rl.rl.sb3.train import train_sb3
 
     config = load_sb3_config(args.config, args.algo)
     overrides = {"env_id": args.env, "total_timesteps": args.total_timesteps, "n_envs": args.n_envs}
@@ -208,6 +240,9 @@ def _q_table_config(args: argparse.Namespace) -> Any:
 
 def _main_all_targets(args: argparse.Namespace, config: Any) -> int:
     """``q_table --all-targets``: one goal-conditioned run; print its summary."""
+    with interrupts.held():  # torch (the logger): Ctrl-C is taken once it is imported
+        from aftir_rl.rl.tabular.train import train_q_table_all_targets
+
     if args.target or args.resume:
         raise ConfigError("--all-targets learns every cell: drop --target and --resume")
     s = train_q_table_all_targets(
@@ -224,10 +259,15 @@ def _main_all_targets(args: argparse.Namespace, config: Any) -> int:
 
 def _main_q_table(args: argparse.Namespace) -> int:
     """``q_table``: one run per target (the tank's reference targets by default), summarised."""
+    with interrupts.held():  # torch (the logger): Ctrl-C is taken once it is imported
+        from aftir_rl.rl.tabular.train import resumed_target, train_q_table
+
     config = _q_table_config(args)
     if args.all_targets:
         return _main_all_targets(args, config)
     targets = args.target
+    if targets is None and args.resume:  # the checkpoint's own target
+        targets = [resumed_target(args.resume)]
     if targets is None:
         from aftir_rl.core.tank import load_tank
 

@@ -14,7 +14,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from aftir_rl.cli.guard import cli
+from aftir_rl.cli.args import (
+    MAX_ENVS,
+    MAX_SEED,
+    MAX_TIMESTEPS,
+    OneLineParser,
+    add_ray_options,
+    bounded_int,
+)
+from aftir_rl.cli.guard import cli, preload
 from aftir_rl.core.config import CONFIG_DIR
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.experiments.search_space import load_search_space
@@ -25,7 +33,7 @@ __all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m aftir_rl.tune",
         description="Hyperparameter sweep of an SB3 algorithm on Ray Tune: Optuna samples the "
         "search space, ASHA stops the trials that trail on eval/success_rate, every trial is a "
@@ -37,43 +45,44 @@ def _parser() -> argparse.ArgumentParser:
         "--env", help="environment id (default: the config's), e.g. AFTIR-ArmReach-v0"
     )
     parser.add_argument(
-        "--trials", type=int, default=8, metavar="N", help="number of trials (default 8)"
+        "--trials",
+        type=bounded_int(1, MAX_TRIALS),
+        default=8,
+        metavar="N",
+        help=f"number of trials, 1 to {MAX_TRIALS:,} (default 8)",
     )
-    parser.add_argument(
-        "--ray",
-        default="local",
-        metavar="ADDRESS",
-        help="local (a Ray on this machine, the default), auto or HOST:PORT (a "
-        "cluster started with ray start)",
-    )
-    parser.add_argument(
-        "--workers", type=int, metavar="N", help="CPUs of --ray local (default: every core)"
-    )
+    add_ray_options(parser, "run the trials", default="local")
     parser.add_argument(
         "--logdir", default="runs", help="parent of the sweep folder (default runs/)"
     )
     parser.add_argument(
         "--total-timesteps",
-        type=int,
+        type=bounded_int(1, MAX_TIMESTEPS),
         metavar="T",
-        help="training steps of each trial (default: the config's)",
+        help=f"training steps of each trial, 1 to {MAX_TIMESTEPS:,} (default: the config's)",
     )
     parser.add_argument(
         "--evaluations",
-        type=int,
+        type=bounded_int(1, MAX_EVALUATIONS),
         default=4,
         metavar="K",
-        help="evaluations per trial, ASHA's rungs (default 4)",
+        help=f"evaluations per trial, ASHA's rungs, 1 to {MAX_EVALUATIONS} (default 4)",
     )
     parser.add_argument(
         "--n-envs",
-        type=int,
+        type=bounded_int(1, MAX_ENVS),
         metavar="N",
-        help="envs (and CPUs) of each trial (default: the config's)",
+        help="envs (and CPUs) of each trial: up to 64 subprocesses, or up to "
+        f"{MAX_ENVS:,} rows of a batched env (default: the config's)",
     )
     parser.add_argument("--config", help="base config (default: configs/ALGO.yaml)")
     parser.add_argument("--space", help="search space (default: configs/search_spaces/ALGO.yaml)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of every trial (default 0)")
+    parser.add_argument(
+        "--seed",
+        type=bounded_int(0, MAX_SEED),
+        default=0,
+        help="seed of every trial, 0 to 2**32-1 (default 0)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no Ray Tune status tables")
     return parser
 
@@ -121,6 +130,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from aftir_rl.experiments.distributed import check_ray_options
 
     check_ray_options(args.ray, args.workers)  # Ray installed, the address well formed
+    preload("aftir_rl.rl.sb3", "ray.tune")  # torch, Ray
     base = _base_config(args)
     space_path = args.space or CONFIG_DIR / "search_spaces" / f"{args.algo}.yaml"
     space = load_search_space(space_path, args.algo, base)

@@ -8,14 +8,17 @@ prints "error: <why>" and exits with status 2. Imports neither torch nor stable-
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections.abc import Sequence
 
+from aftir_rl.cli.args import OneLineParser, bounded_int
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import AftirError
 
 __all__ = ["main"]
+
+#: The most animation frames of a page (``--max-frames``): each repeats the arm's traces.
+MAX_FRAMES = 1000
 
 
 @cli
@@ -23,7 +26,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.cli.view`` (and ``aftir view``)."""
     from aftir_rl.viz.page import DEFAULT_MAX_FRAMES, write_view
 
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m aftir_rl.view",
         description="Write one self-contained HTML page showing runs in 3D: the tank, each run's "
         "cell path and tip route, and the arm moving along its motion (trajectory.json).",
@@ -37,13 +40,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument(
         "--max-frames",
-        type=int,
+        type=bounded_int(2, MAX_FRAMES),
         default=DEFAULT_MAX_FRAMES,
-        help=f"most animation frames per page (default {DEFAULT_MAX_FRAMES})",
+        metavar="N",
+        help=f"most animation frames per page, 2 to {MAX_FRAMES:,} (default {DEFAULT_MAX_FRAMES})",
     )
     args = parser.parse_args(argv)
-    if args.max_frames < 2:
-        parser.error("--max-frames must be at least 2")
     try:
         out = write_view(args.run_dirs, args.output, tank=args.tank, max_frames=args.max_frames)
     except AftirError as exc:

@@ -13,6 +13,7 @@ import math
 import os
 import re
 import reprlib
+import stat
 import types
 import typing
 from pathlib import Path
@@ -81,101 +82,187 @@ def brief(value: Any) -> str:
 
 
 def shorten(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
-    """``text`` cut to ``limit`` characters, with an ellipsis where it was cut."""
-    text = str(text)
+    """``text`` on one line (:func:`one_line`), cut to ``limit`` characters with an ellipsis."""
+    text = one_line(str(text))
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-class _BoundedLoader(yaml.SafeLoader):
-    """PyYAML's SafeLoader (no Python objects) that refuses documents too large once expanded.
+def one_line(text: str) -> str:
+    """``text`` with every run of whitespace made one space and other control characters "?"."""
+    return _CONTROL.sub("?", " ".join(text.split()))
 
-    Every alias is counted with the full size of the node it repeats, so nested aliases (the
-    "billion laughs") are measured without being built.
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
+
+
+#: The deepest nesting read: lists and mappings inside each other, aliases followed.
+MAX_YAML_DEPTH = 64
+_TOO_DEEP = f"not valid YAML: nested too deeply (more than {MAX_YAML_DEPTH} levels)"
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """PyYAML's SafeLoader (no Python objects) that refuses what a tank or config never holds.
+
+    A document larger than :data:`MAX_YAML_NODES` values or deeper than :data:`MAX_YAML_DEPTH`
+    once its aliases are expanded (measured on the composed nodes, without building them), an
+    alias inside its own anchor, and a key given twice in one mapping.
     """
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+        self._keys_checked: set[int] = set()
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        # PyYAML composes recursively: stop at the limit, long before Python's recursion limit
+        self._depth += 1
+        try:
+            if self._depth > MAX_YAML_DEPTH + 1:
+                raise ConfigError(_TOO_DEEP)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
 
     def compose_document(self) -> Any:
         node = super().compose_document()
-        sizes: dict[int, int] = {}
-        # children before parents, without recursion (depth is not bounded by PyYAML)
-        order, stack, seen = [], [node], set()
-        while stack:
-            cur = stack.pop()
-            if id(cur) in seen:
+        _measure(node)
+        return node
+
+    def flatten_mapping(self, node: Any) -> None:
+        # the first call sees the mapping as written; merging ("<<") then changes node.value
+        if id(node) not in self._keys_checked:
+            self._keys_checked.add(id(node))
+            self._check_unique_keys(node)
+        super().flatten_mapping(node)
+
+    def _check_unique_keys(self, node: yaml.MappingNode) -> None:
+        lines: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
                 continue
-            seen.add(id(cur))
-            order.append(cur)
-            if isinstance(cur, yaml.SequenceNode):
-                stack.extend(cur.value)
-            elif isinstance(cur, yaml.MappingNode):
-                for k, v in cur.value:
-                    stack.extend((k, v))
-        for cur in reversed(order):
-            if isinstance(cur, yaml.SequenceNode):
-                children = cur.value
-            elif isinstance(cur, yaml.MappingNode):
-                children = [n for pair in cur.value for n in pair]
-            else:
-                children = []
-            size = 1 + sum(sizes.get(id(c), 1) for c in children)
-            if size > MAX_YAML_NODES:
+            key, line = self.construct_object(key_node, deep=True), key_node.start_mark.line + 1
+            try:
+                first = lines.get(key)
+            except TypeError:  # an unhashable key: PyYAML refuses it when building the mapping
+                continue
+            if first is not None:
+                raise ConfigError(
+                    f"duplicate key {brief(key)} on line {line} (first on line {first}); give "
+                    "each key once"
+                )
+            lines[key] = line
+
+
+def _children(node: Any) -> list[Any]:
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    return []
+
+
+def _measure(root: Any) -> None:
+    """Refuse a composed document too large, too deep or recursive once its aliases are followed.
+
+    Iterative (no recursion however deep), each node visited once: a repeated alias counts the
+    size and depth of the node it repeats.
+    """
+    sizes: dict[int, int] = {}
+    depths: dict[int, int] = {}
+    open_nodes: set[int] = set()  # entered, not finished: the path from the root
+    stack: list[tuple[Any, bool]] = [(root, False)]
+    while stack:
+        node, finished = stack.pop()
+        key, children = id(node), _children(node)
+        if finished:
+            open_nodes.discard(key)
+            sizes[key] = 1 + sum(sizes[id(c)] for c in children)
+            collection = isinstance(node, yaml.CollectionNode)
+            depths[key] = collection + max((depths[id(c)] for c in children), default=0)
+            if sizes[key] > MAX_YAML_NODES:
                 raise ConfigError(
                     f"the document expands to more than {MAX_YAML_NODES:,} values (repeated "
                     "aliases?); a tank or config has a few hundred"
                 )
-            sizes[id(cur)] = size
-        return node
-
-
-#: The deepest nesting read (flow brackets, or indentation and "- " in front of a line).
-MAX_YAML_DEPTH = 64
-
-
-def _too_deep(text: str) -> bool:
-    """A cheap upper bound of the nesting, before PyYAML's recursive parser sees the text."""
-    depth = 0
-    for char in text:
-        if char in "[{":
-            depth += 1
-            if depth > MAX_YAML_DEPTH:
-                return True
-        elif char in "]}":
-            depth -= 1
-    indent = re.compile(r"^[ \t\-?:]*")
-    return any(
-        len(indent.match(line).group()) > 4 * MAX_YAML_DEPTH  # type: ignore[union-attr]
-        for line in text.splitlines()
-    )
+            if depths[key] > MAX_YAML_DEPTH:
+                raise ConfigError(_TOO_DEEP)
+        elif key in open_nodes:
+            raise ConfigError("not valid YAML: an alias inside its own anchor (a recursive value)")
+        elif key not in sizes:
+            open_nodes.add(key)
+            stack.append((node, True))
+            stack.extend((c, False) for c in children)
 
 
 def read_limited(
     path: Path, limit: int, error: type[AftirError], what: str = "file", kind: str = "file"
 ) -> bytes:
-    """The bytes of the file ``path``, refused when larger than ``limit``.
+    """The bytes of the regular file ``path``, refused when larger than ``limit``.
+
+    Opened without blocking (a FIFO with no writer does not hang) and checked before any read:
+    a FIFO, a device, a socket or a folder is refused, as is a file whose size is above
+    ``limit``; at most ``limit + 1`` bytes are read (a file that grows meanwhile is refused).
 
     Raises:
-        error: "cannot read the <what>" (missing, a folder...) or "larger than ... not a <kind>".
+        error: "cannot read the <what>" (missing, not a regular file...) or "larger than ...
+            not a <kind>".
 
     """
+    flags = os.O_RDONLY
+    for name in ("O_NONBLOCK", "O_NOCTTY", "O_CLOEXEC", "O_BINARY"):
+        flags |= getattr(os, name, 0)
     try:
-        with open(path, "rb") as fh:
-            raw = fh.read(limit + 1)
+        fd = os.open(path, flags)
     except OSError as exc:
         raise error(f"{path}: cannot read the {what} ({exc.strerror or exc})") from None
+    try:
+        mode, size = _regular_size(fd)
+        if mode:
+            raise error(f"{path}: cannot read the {what}: not a regular file ({mode})")
+        if size > limit:
+            raise error(f"{path}: larger than {limit:,} bytes; not a {kind}")
+        chunks, left = [], limit + 1
+        while left > 0:
+            chunk = os.read(fd, min(left, 1 << 20))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            left -= len(chunk)
+    except OSError as exc:
+        raise error(f"{path}: cannot read the {what} ({exc.strerror or exc})") from None
+    finally:
+        os.close(fd)
+    raw = b"".join(chunks)
     if len(raw) > limit:
         raise error(f"{path}: larger than {limit:,} bytes; not a {kind}")
     return raw
 
 
+def _regular_size(fd: int) -> tuple[str, int]:
+    """``("", size)`` for a regular file, else ``(what it is, 0)`` ("a folder", "a FIFO"...)."""
+    info = os.fstat(fd)
+    if stat.S_ISREG(info.st_mode):
+        return "", info.st_size
+    kinds = (
+        (stat.S_ISDIR, "a folder"),
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+    )
+    return next((name for test, name in kinds if test(info.st_mode)), "a special file"), 0
+
+
 def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read a YAML file that must hold a mapping.
 
-    Only plain data is built (PyYAML's safe loader); the file must be UTF-8, at most
-    :data:`MAX_YAML_BYTES` long and at most :data:`MAX_YAML_NODES` values once its aliases are
-    expanded.
+    Only plain data is built (PyYAML's safe loader); the file must be a regular file of UTF-8
+    text, at most :data:`MAX_YAML_BYTES` long, :data:`MAX_YAML_NODES` values and
+    :data:`MAX_YAML_DEPTH` levels deep once its aliases are expanded, each key of a mapping once.
 
     Raises:
         ConfigError: the file is missing, too large, not UTF-8, not valid YAML, or does not hold a
-            mapping.
+            mapping (one line, naming the file).
 
     """
     path = Path(path)
@@ -184,19 +271,14 @@ def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
-    if _too_deep(text):
-        raise ConfigError(f"{path}: not valid YAML: nested too deeply")
     try:
         data = yaml.load(text, Loader=_BoundedLoader)  # noqa: S506 (a SafeLoader)
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
     except yaml.YAMLError as exc:
-        where = getattr(exc, "problem_mark", None)
-        line = f" (line {where.line + 1})" if where is not None else ""
-        problem = shorten(str(getattr(exc, "problem", None) or exc), 200)
-        raise ConfigError(f"{path}: not valid YAML{line}: {problem}") from None
+        raise ConfigError(f"{path}: not valid YAML{_yaml_problem(exc, text)}") from None
     except RecursionError:
-        raise ConfigError(f"{path}: not valid YAML: nested too deeply") from None
+        raise ConfigError(f"{path}: {_TOO_DEEP}") from None
     except (ValueError, TypeError, OverflowError) as exc:  # e.g. an int of 5,000 digits
         raise ConfigError(f"{path}: not valid YAML: {shorten(str(exc), 200)}") from None
     if data is None:
@@ -206,6 +288,18 @@ def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
             f"{path}: expected a mapping of keys to values, got {type(data).__name__}"
         )
     return data
+
+
+def _yaml_problem(exc: yaml.YAMLError, text: str) -> str:
+    """`` (line N): <problem>`` of PyYAML's error, on one line."""
+    where = getattr(exc, "problem_mark", None)
+    line = where.line + 1 if where is not None else None
+    if isinstance(exc, yaml.reader.ReaderError) and isinstance(exc.character, int):
+        line = text.count("\n", 0, exc.position) + 1
+        problem = f"unacceptable character #x{exc.character:04x}: {exc.reason}"  # no newline
+    else:
+        problem = str(getattr(exc, "problem", None) or exc)
+    return (f" (line {line})" if line else "") + f": {shorten(problem, 200)}"
 
 
 def to_float(value: Any, where: str, limit: float | None = None) -> float:

@@ -2,9 +2,10 @@
 
 A search space names hyperparameters of the algorithm's constructor, each with one
 distribution (:data:`DISTRIBUTIONS`): ``{loguniform: [LOW, HIGH]}``, ``{uniform: [LOW, HIGH]}``,
-``{randint: [LOW, HIGH]}`` (both included) or ``{choice: [V1, V2, ...]}``. Every bound is checked
-as a config value would be, so no trial can ask for what a config file could not
-(:func:`load_search_space`); :meth:`Dimension.to_tune` gives Ray Tune's domain.
+``{randint: [LOW, HIGH]}`` (both included) or ``{choice: [V1, V2, ...]}``; a hyperparameter that
+takes integers takes ``randint`` or a ``choice`` of integers. Every bound is checked as a config
+value would be, so no trial can ask for what a config file could not (:func:`load_search_space`);
+:meth:`Dimension.to_tune` gives Ray Tune's domain.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from typing import Any
 
 from aftir_rl.core.config import brief, read_yaml, to_float
 from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.shipped import find_config
 
 __all__ = ["DISTRIBUTIONS", "MAX_KEYS", "MAX_CHOICES", "Dimension", "load_search_space"]
 
@@ -104,6 +106,29 @@ def _dimension(key: str, spec: Any, where: str) -> Dimension:
     return Dimension(key, kind, (lo, hi))
 
 
+def _typed(dim: Dimension, where: str, integer: bool) -> Dimension:
+    """``dim`` checked against its hyperparameter's type: integers need whole numbers.
+
+    Raises:
+        ConfigError: ``uniform`` or ``loguniform`` (they draw fractions), or a ``choice`` that is
+            not a whole number, for a hyperparameter that takes integers.
+
+    """
+    if not integer:
+        return dim
+    if dim.kind in ("uniform", "loguniform"):
+        raise ConfigError(
+            f"{where}: {dim.key} takes integers, and {dim.kind} draws fractions; use "
+            "{randint: [LOW, HIGH]} or {choice: [...]} of integers"
+        )
+    if dim.kind != "choice":
+        return dim
+    for i, v in enumerate(dim.values):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not float(v).is_integer():
+            raise ConfigError(f"{where}.choice[{i}]: {dim.key} takes integers, got {brief(v)}")
+    return dataclasses.replace(dim, values=tuple(int(v) for v in dim.values))
+
+
 def load_search_space(path: str | os.PathLike[str], algo: str, base: Any) -> list[Dimension]:
     """Read and check a search space YAML for ``algo`` against the base config ``base``.
 
@@ -115,8 +140,10 @@ def load_search_space(path: str | os.PathLike[str], algo: str, base: Any) -> lis
         ConfigError: naming the file and the key.
 
     """
+    from aftir_rl.rl.sb3.checks import INTEGER_KEYS
     from aftir_rl.rl.sb3.config import OBJECT_KEYS, check_sb3_config, constructor_keys
 
+    path = find_config(path, "search_spaces")
     data = read_yaml(path)
     unknown = sorted(set(data) - {"hyperparameters"}, key=str)
     if unknown:
@@ -132,7 +159,8 @@ def load_search_space(path: str | os.PathLike[str], algo: str, base: Any) -> lis
                 f"{path}: hyperparameters: unknown key {brief(key)} for {algo.upper()}; allowed "
                 f"keys are {', '.join(sorted(allowed))}"
             )
-        dim = _dimension(key, spec, f"{path}: hyperparameters.{key}")
+        where = f"{path}: hyperparameters.{key}"
+        dim = _typed(_dimension(key, spec, where), where, key in INTEGER_KEYS)
         for value in dim.extremes():
             trial = dataclasses.replace(base, hyperparameters={**base.hyperparameters, key: value})
             check_sb3_config(trial, algo, f"{path} ({dim.kind} bound)")

@@ -127,8 +127,8 @@ def test_resume(tmp_path):
         # a subprocess that builds the tank first: the fast tier keeps the other four
         pytest.param(["--target", "0", "60", "50"], "obstructed cell", marks=pytest.mark.slow),
         (["--target", "999", "0", "10"], "outside the tank box"),
-        (["--config", "nope.yaml"], "cannot read"),
-        (["--episodes", "0"], "--episodes must be at least 1"),
+        (["--config", "nope.yaml"], "no shipped config of that name"),
+        (["--episodes", "0"], "--episodes must be from 1 to"),
         (["--bridge-seconds", "-1"], "--bridge-seconds must be a finite 0 or more"),
     ],
 )

@@ -16,6 +16,7 @@ from aftir_rl.core.config import brief
 from aftir_rl.core.errors import ConfigError
 
 __all__ = [
+    "INTEGER_KEYS",
     "LINEAR_PREFIX",
     "OBJECT_KEYS",
     "check_hyperparameters",
@@ -38,6 +39,8 @@ _INT_RANGES: dict[str, tuple[int, int]] = {
     "sde_sample_freq": (-1, 1_000_000),
     "stats_window_size": (1, 100_000),
 }
+#: The hyperparameters that take integers (a search space must draw integers for them).
+INTEGER_KEYS = frozenset(_INT_RANGES)
 _FLOAT_RANGES: dict[str, tuple[float, float]] = {
     "learning_rate": (1e-12, 10.0),
     "gamma": (0.0, 1.0),
