@@ -25,6 +25,9 @@ import numpy as np
 
 from aftir_rl.core.config import DEFAULT_MARGIN, from_mapping, read_yaml
 from aftir_rl.core.errors import CheckpointError
+from aftir_rl.core.files import run_file
+from aftir_rl.core.shipped import find_config
+from aftir_rl.core.tank.loading import resolve_run_tank
 from aftir_rl.rl.tabular.paths import greedy_cells
 
 if TYPE_CHECKING:
@@ -48,9 +51,10 @@ RUN_FILES = {"q_table": "q_table.npz", "q_table_goal": "q_table_goal.npz", "sb3"
 
 
 def load_q_table_config(path: str | Path) -> Any:
-    """Read ``configs/q_table.yaml`` (or another file) into a ``QLearningConfig``."""
+    """Read a config (a path, or a shipped name such as ``q_table``) into a ``QLearningConfig``."""
     from aftir_rl.rl.tabular.q_table import QLearningConfig
 
+    path = find_config(path)
     return from_mapping(QLearningConfig, read_yaml(path), str(path))
 
 
@@ -126,14 +130,14 @@ def load_q_table_run(run_dir: str | Path) -> QTableRun:
 
     from aftir_rl.rl.tabular.q_table import QLearning
 
-    path = Path(run_dir) / RUN_FILES["q_table"]
+    path = run_file(run_dir, RUN_FILES["q_table"])
     _, meta = QLearning.read_checkpoint(path)  # the env id checked (agents.checkpoint)
     target = meta.get("target")
     if target is None:
         raise CheckpointError(f"{run_dir}: the Q-table has no target in its metadata")
     env = gym.make(
         meta.get("env_id", "AFTIR-Tank-v0"),
-        tank=meta.get("tank", "b737_center"),
+        tank=resolve_run_tank(meta.get("tank", "b737_center"), run_dir),
         target=tuple(target),
     )
     return QTableRun(Path(run_dir), QLearning.load(path, env), env, list(target))
@@ -145,11 +149,11 @@ def load_goal_run(run_dir: str | Path) -> GoalRun:
 
     from aftir_rl.rl.tabular.q_table_goal import GoalQLearning
 
-    path = Path(run_dir) / RUN_FILES["q_table_goal"]
+    path = run_file(run_dir, RUN_FILES["q_table_goal"])
     _, _, meta = GoalQLearning.read_checkpoint(path)
     config = meta.get("config")
     tank = meta.get("tank") or (config.get("tank") if isinstance(config, dict) else None)
-    env = gym.make("AFTIR-TankGoal-v0", tank=tank or "b737_center")
+    env = gym.make("AFTIR-TankGoal-v0", tank=resolve_run_tank(tank or "b737_center", run_dir))
     return GoalRun(Path(run_dir), GoalQLearning.load(path, env), env)
 
 

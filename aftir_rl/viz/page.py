@@ -25,7 +25,7 @@ from typing import Any
 from aftir_rl.core.errors import CheckpointError
 from aftir_rl.core.extras import require
 from aftir_rl.core.files import atomic_open
-from aftir_rl.core.tank import Tank, load_tank
+from aftir_rl.core.tank import Tank, load_tank, resolve_run_tank
 from aftir_rl.viz.figure import DEFAULT_MAX_FRAMES, build_figure, tank_traces
 from aftir_rl.viz.runs import RUN_FILES, RunData, read_run, unique_names
 
@@ -43,8 +43,10 @@ __all__ = [
 def _resolve_tank(tank: str | Path | Tank | None, runs: list[RunData]) -> Tank:
     if tank is not None:
         return load_tank(tank)
-    named = [r.tank for r in runs if r.tank]
-    return load_tank(named[0] if named else "b737_center")
+    named = [r for r in runs if r.tank]
+    if not named:
+        return load_tank("b737_center")
+    return load_tank(resolve_run_tank(named[0].tank, named[0].path))
 
 
 def _page(fig: Any, runs: Sequence[RunData], tank: Tank) -> str:

@@ -16,7 +16,6 @@ Only JSON is read (nothing is unpickled or imported). A directory that is missin
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -27,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.core.errors import CheckpointError
+from aftir_rl.core.files import read_json, run_file
 from aftir_rl.core.robot import body_points
 
 __all__ = ["RUN_FILES", "RunData", "read_run", "unique_names"]
@@ -87,15 +87,6 @@ class RunData:
     def tips(self) -> NDArray[np.float64]:
         """Tip of every motion entry [cm], shape ``(M, 3)``."""
         return self.backbones(np.arange(self.n_motion))[:, -1, :]
-
-
-def _read_json(path: Path) -> Any:
-    try:
-        with open(path, encoding="utf-8") as fh:
-            return json.load(fh)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
-        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-        raise CheckpointError(f"{path}: cannot read it as JSON: {why}") from None
 
 
 def _bad(path: Path, what: str) -> CheckpointError:
@@ -170,7 +161,7 @@ def _motion_entries(data: dict[str, Any], path: Path) -> tuple[list[Any], list[i
 
 
 def _read_trajectory(run: RunData, path: Path) -> None:
-    data = _read_json(path)
+    data = read_json(path, path.name)
     if not isinstance(data, dict):
         raise _bad(path, "expected a JSON object")
     for key in ("complete", "method", "margin_cm", "inserting"):
@@ -214,11 +205,11 @@ def read_run(run_dir: str | Path) -> RunData:
     run = RunData(name=path.name or str(path), path=path)
     for name in ("config.json", "summary.json"):
         if name in present:
-            _read_facts(run, path / name)
+            _read_facts(run, run_file(path, name))
     if "path.json" in present:
-        _read_path(run, path / "path.json")
+        _read_path(run, run_file(path, "path.json"))
     if "trajectory.json" in present:
-        _read_trajectory(run, path / "trajectory.json")
+        _read_trajectory(run, run_file(path, "trajectory.json"))
     if run.cells_cm is None and run.cells is None and run.dis is None:
         run.notes.append(
             f"no path.json or trajectory.json (found {', '.join(present)}): no path to draw"
@@ -233,7 +224,7 @@ def _read_facts(run: RunData, file: Path) -> None:
         CheckpointError: the file is not a JSON object.
 
     """
-    data = _read_json(file)
+    data = read_json(file, file.name)
     if not isinstance(data, dict):
         raise _bad(file, "expected a JSON object")
     if isinstance(data.get("tank"), str):
@@ -250,7 +241,7 @@ def _read_path(run: RunData, file: Path) -> None:
         CheckpointError: the file is not a JSON object, or a point list is malformed.
 
     """
-    data = _read_json(file)
+    data = read_json(file, file.name)
     if not isinstance(data, dict):
         raise _bad(file, "expected a JSON object")
     if isinstance(data.get("tank"), str):

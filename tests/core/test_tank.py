@@ -10,7 +10,17 @@ import pytest
 
 from aftir_rl.cli import tank as tank_module
 from aftir_rl.core.errors import ConfigError, TargetError
-from aftir_rl.core.tank import TANK_DIR, Box, Cylinder, SolidStack, Sphere, load_tank
+from aftir_rl.core.tank import (
+    RUN_TANK_FILE,
+    TANK_DIR,
+    Box,
+    Cylinder,
+    SolidStack,
+    Sphere,
+    keep_run_tank,
+    load_tank,
+    resolve_run_tank,
+)
 
 REF_YAML = TANK_DIR / "b737_center.yaml"
 
@@ -232,3 +242,30 @@ def test_python_m_tank_runs_the_cli():
     )
     assert proc.returncode == 0 and proc.stderr == ""
     assert json.loads(proc.stdout)["units"] == "cm"
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["/etc/passwd", "../b737_center.yaml", "../../etc/passwd", "out.yaml", "", "a\x00b", 3, None],
+)
+def test_a_run_names_only_shipped_tanks_or_its_own_files(tmp_path, name):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "out.yaml").symlink_to(TANK_DIR / "b737_center.yaml")  # leads out of the run
+    with pytest.raises(ConfigError, match="neither a shipped tank") as err:
+        resolve_run_tank(name, run)
+    assert "root:" not in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_run_keeps_a_tank_given_by_path(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    assert keep_run_tank("b737_center", run) == "b737_center"
+    assert not (run / RUN_TANK_FILE).exists()
+    own = tmp_path / "mine.yaml"
+    own.write_text((TANK_DIR / "single_cabin.yaml").read_text())
+    assert keep_run_tank(own, run) == RUN_TANK_FILE
+    own.unlink()  # the run no longer needs the original
+    path = resolve_run_tank(RUN_TANK_FILE, run)
+    assert load_tank(path).fingerprint == load_tank("single_cabin").fingerprint
+    assert resolve_run_tank("b737_center", run) == "b737_center"

@@ -124,7 +124,7 @@ def test_old_trajectory_form_pads_sections(tmp_path):
     [
         (None, "no such directory"),
         ({}, "not a run directory"),
-        ({"path.json": "{not json"}, "cannot read it as JSON"),
+        ({"path.json": "{not json"}, "not a valid path.json"),
         ({"trajectory.json": '{"motion": [{"dis": 1}]}'}, "motion[0]"),
         ({"trajectory.json": '{"motion": 3}'}, "motion: expected a list"),
         ({"path.json": '{"points_cm": [[1, 2]]}'}, "points_cm"),
@@ -347,3 +347,27 @@ def test_page_draws_in_headless_chromium(tmp_path, tank):
     # the first run's colour (#1f77b4: the arm, tip route and cell path) is on the screen
     blue = np.all(np.abs(pixels.astype(int) - [31, 119, 180]) < 40, axis=-1)
     assert blue.sum() > 200, f"only {blue.sum()} pixels of the run's colour"
+
+
+@pytest.mark.parametrize(
+    "name, text, message",
+    [
+        ("path.json", '{"tank": "/etc/passwd", "points_cm": [[1, 2, 3]]}', "neither a shipped"),
+        ("config.json", '{"tank": "../../../etc/passwd"}', "neither a shipped"),
+        ("summary.json", None, "leads out of the run directory"),
+        ("path.json", "fifo", "not a run directory"),
+    ],
+)
+def test_a_run_opens_no_file_outside_it(tmp_path, name, text, message):
+    run = tmp_path / "run"
+    run.mkdir()
+    if text is None:
+        (run / name).symlink_to("/etc/passwd")
+    elif text == "fifo":
+        os.mkfifo(run / name)  # would block a plain open() forever
+    else:
+        (run / name).write_text(text)
+    with pytest.raises(AftirError, match=message) as err:
+        write_view([run], tmp_path / "v.html")
+    assert "root:" not in str(err.value) and "\n" not in str(err.value)
+    assert not (tmp_path / "v.html").exists()

@@ -18,7 +18,15 @@ from __future__ import annotations
 
 from aftir_rl.core.tank.distance import SolidStack, TankDistance
 from aftir_rl.core.tank.geometry import Baffle, Enclosure, Hatch, Panel, Tank
-from aftir_rl.core.tank.loading import TANK_DIR, available_tanks, load_tank, tank_from_mapping
+from aftir_rl.core.tank.loading import (
+    RUN_TANK_FILE,
+    TANK_DIR,
+    available_tanks,
+    keep_run_tank,
+    load_tank,
+    resolve_run_tank,
+    tank_from_mapping,
+)
 from aftir_rl.core.tank.raster import Raster
 from aftir_rl.core.tank.solids import Box, Cylinder, Solid, Sphere, Vec3
 
@@ -38,6 +46,9 @@ __all__ = [
     "SolidStack",
     "TANK_DIR",
     "load_tank",
+    "resolve_run_tank",
+    "keep_run_tank",
+    "RUN_TANK_FILE",
     "tank_from_mapping",
     "available_tanks",
 ]

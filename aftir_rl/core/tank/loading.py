@@ -14,14 +14,32 @@ from typing import Any, cast
 
 import numpy as np
 
-from aftir_rl.core.config import CONFIG_DIR, brief, read_yaml, to_float, to_int, to_vector
+from aftir_rl.core.config import (
+    CONFIG_DIR,
+    MAX_YAML_BYTES,
+    brief,
+    read_limited,
+    read_yaml,
+    to_float,
+    to_int,
+    to_vector,
+)
 from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.files import atomic_open
 from aftir_rl.core.robot import ArmSpec
 from aftir_rl.core.tank.geometry import Baffle, Hatch, Panel, Tank
 from aftir_rl.core.tank.raster import format_point
 from aftir_rl.core.tank.solids import Box, Cylinder, Solid, Sphere, Vec3
 
-__all__ = ["TANK_DIR", "load_tank", "available_tanks", "tank_from_mapping"]
+__all__ = [
+    "TANK_DIR",
+    "RUN_TANK_FILE",
+    "load_tank",
+    "available_tanks",
+    "resolve_run_tank",
+    "keep_run_tank",
+    "tank_from_mapping",
+]
 
 TANK_DIR = CONFIG_DIR / "tanks"
 
@@ -340,6 +358,56 @@ def available_tanks() -> list[str]:
 
 
 _CACHE: dict[str, Tank] = {}
+
+#: The file a run directory keeps its tank in when it was trained in a tank that is not shipped.
+RUN_TANK_FILE = "tank.yaml"
+
+
+def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
+    """What a run directory records as its tank: a shipped tank's name, else ``tank.yaml``.
+
+    A tank given as a path is copied into the run directory (:data:`RUN_TANK_FILE`), so the run
+    stays readable wherever it is moved and :func:`resolve_run_tank` never leaves it.
+    """
+    text, source = str(tank), Path(tank)
+    if text in available_tanks() and not source.exists():
+        return text
+    if not (source.suffix in (".yaml", ".yml") or source.exists()):
+        source = TANK_DIR / f"{text}.yaml"
+    raw = read_limited(source, MAX_YAML_BYTES, ConfigError, "tank file", "tank")
+    with atomic_open(Path(run_dir) / RUN_TANK_FILE, "wb") as fh:
+        fh.write(raw)
+    return RUN_TANK_FILE
+
+
+def resolve_run_tank(name: object, run_dir: str | Path) -> str:
+    """The tank a run directory names, as :func:`load_tank` takes it, checked before any read.
+
+    A run may name a shipped tank (``b737_center``) or a YAML file inside its own directory
+    (:data:`RUN_TANK_FILE`); an absolute path, ``..``, or a symlink that leads out of the
+    directory is refused unread, so a run handed over by someone else opens no other file.
+
+    Raises:
+        ConfigError: anything else (the message names the field, never a file's content).
+
+    """
+    shipped = available_tanks()
+    if isinstance(name, str) and name in shipped:
+        return name
+    folder = Path(run_dir)
+    try:
+        if not isinstance(name, str) or not 0 < len(name) <= 255:
+            raise ValueError
+        path = (folder / name).resolve()
+        inside = path.is_relative_to(folder.resolve()) and path.suffix in (".yaml", ".yml")
+    except (ValueError, OSError, RuntimeError):  # a NUL byte, a symlink loop
+        inside = False
+    if not inside:
+        raise ConfigError(
+            f"{folder}: the run names the tank {brief(name)}, which is neither a shipped tank "
+            f"({', '.join(shipped)}) nor a YAML file inside the run directory; pass --tank"
+        )
+    return str(path)
 
 
 def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:

@@ -17,6 +17,7 @@ import math
 import os
 import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -25,6 +26,8 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 
 from aftir_rl.core.config import brief, from_mapping, read_yaml, shorten, to_float
 from aftir_rl.core.errors import CheckpointError, ConfigError
+from aftir_rl.core.shipped import find_config
+from aftir_rl.core.tank.loading import resolve_run_tank
 from aftir_rl.envs.ftl.spec import (
     CONFIG_KWARG_TYPES,
     SHAPING_KINDS,
@@ -86,7 +89,11 @@ class SB3Config:
 
 
 def load_sb3_config(path: str | os.PathLike[str], algo: str) -> SB3Config:
-    """Read and check an SB3 config; numbers written as strings (``3e-4``) are parsed."""
+    """Read and check an SB3 config (a path, or a shipped name such as ``ppo_ftl``).
+
+    Numbers written as strings (``3e-4``) are parsed.
+    """
+    path = find_config(path)
     data = read_yaml(path)
     hyper = data.pop("hyperparameters", None) or {}
     if not isinstance(hyper, dict):
@@ -180,6 +187,9 @@ def sb3_config_from_run(data: Any, source: str) -> tuple[str, SB3Config]:
                 raise ConfigError(f"{source}: hyperparameters: unknown key {brief(key)}")
         config = dataclasses.replace(config, hyperparameters=dict(hyper))
         check_sb3_config(config, algo, source)
+        if "tank" in config.env_kwargs:  # a shipped tank or a file inside the run, unread yet
+            tank = resolve_run_tank(config.env_kwargs["tank"], Path(source).parent)
+            config = dataclasses.replace(config, env_kwargs={**config.env_kwargs, "tank": tank})
     except ConfigError as exc:
         raise CheckpointError(str(exc)) from None
     return algo, config
