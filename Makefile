@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install train test test-all lint bench tensorboard clean
+.PHONY: install train test test-all fuzz lint bench tensorboard clean
 
 install: $(STAMP)
 
@@ -27,6 +27,11 @@ test: $(STAMP)  ## the test suite (fast; long checks are marked slow and run by 
 
 test-all: $(STAMP)
 	$(PYTEST)
+
+# The run-directory fuzzer at full size: 2,000 mutated run directories for each of view,
+# evaluate and rank_checkpoints (test-all runs 150 each). About 20 minutes on 2 cores.
+fuzz: $(STAMP)
+	AFTIR_FUZZ_CASES=2000 OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist load tests/cli/test_fuzz_runs.py
 
 lint: $(STAMP)
 	$(PY) -m ruff check aftir_rl tests benchmarks

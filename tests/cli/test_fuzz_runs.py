@@ -1,0 +1,103 @@
+"""Fuzzing the commands that read run directories: view, evaluate and rank_checkpoints.
+
+Real run directories (a Q-table run with its motion, PPO runs of ``AFTIR-ArmReach-v0`` and
+``AFTIR-ArmFTL-v0`` with checkpoints) are mutated at random by :mod:`tests.fuzz` (JSON fields and
+keys, FIFOs, devices, symlinks out of the run, sparse 5 GB files, truncation, flipped bytes,
+zip and npz members: dropped, extra, corrupt, deflate bombs, sizes that lie) and each command
+runs on every mutated copy. Every case must end in exit 0 or 2, with one line on stderr for 2,
+no traceback, within :data:`tests.fuzz.CASE_SECONDS`, and the process's peak memory must stay
+under :data:`PEAK_MB`. ``AFTIR_FUZZ_CASES`` sets the number of cases per command (150 in
+``make test-all``, 2,000 in ``make fuzz``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.fuzz import CASE_SECONDS
+
+pytestmark = pytest.mark.slow
+
+ROOT = Path(__file__).parents[2]
+CASES = int(os.environ.get("AFTIR_FUZZ_CASES", "150"))  # ``make fuzz``: 2,000
+#: The most memory [MB] one command may use on any mutated run (torch and plotly loaded).
+PEAK_MB = 600
+
+PPO_REACH = (
+    "env_id: AFTIR-ArmReach-v0\neval_freq: 100000\neval_targets: 2\ncheckpoint_freq: 64\n"
+    "hyperparameters:\n  n_steps: 64\n  batch_size: 32\n"
+)
+PPO_FTL = (
+    "env_id: AFTIR-ArmFTL-v0\nn_envs: 8\neval_freq: 100000\neval_targets: 2\n"
+    "checkpoint_freq: 128\npolicy: MultiInputPolicy\nenv_kwargs:\n  bay: 2\n  guide: true\n"
+    "hyperparameters:\n  n_steps: 16\n  batch_size: 64\n  n_epochs: 1\n"
+    "  policy_kwargs:\n    net_arch: [32, 32]\n"
+)
+
+
+def _aftir(*args: str) -> None:
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "aftir_rl.cli", *args, "--no-progress"]
+    subprocess.run(cmd, check=True, capture_output=True, cwd=ROOT, env=env, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def sources(tmp_path_factory) -> dict[str, list[str]]:
+    """Real run directories of every kind, made once."""
+    top = tmp_path_factory.mktemp("sources")
+    _aftir(
+        "train",
+        "q_table",
+        "--target",
+        "230",
+        "140",
+        "90",
+        "--episodes",
+        "300",
+        "--logdir",
+        str(top / "q"),
+    )
+    for name, text in (("reach", PPO_REACH), ("ftl", PPO_FTL)):
+        (top / f"{name}.yaml").write_text(text)
+        _aftir(
+            "train",
+            "ppo",
+            "--config",
+            str(top / f"{name}.yaml"),
+            "--total-timesteps",
+            "256",
+            "--logdir",
+            str(top / name),
+        )
+    runs = {k: [str(p) for p in (top / k).iterdir()] for k in ("q", "reach", "ftl")}
+    return {
+        "view": runs["q"] + runs["reach"] + runs["ftl"],
+        "evaluate": runs["q"] + runs["reach"] + runs["ftl"],
+        "rank": runs["ftl"],
+    }
+
+
+@pytest.mark.parametrize("cli", ["view", "evaluate", "rank"])
+def test_mutated_run_directories(cli, sources, tmp_path):
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT), "TQDM_DISABLE": "1"}
+    cmd = [sys.executable, "-m", "tests.fuzz", cli, "7", str(CASES), str(tmp_path), *sources[cli]]
+    done = subprocess.run(
+        cmd, capture_output=True, text=True, cwd=tmp_path, env=env, timeout=60 + CASES * 12
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    report = json.loads(done.stdout.splitlines()[-1])
+    bad = []
+    for case in report["results"]:
+        lines = [line for line in case["stderr"].splitlines() if line.strip()]
+        ok = case["code"] == 0 and not lines or case["code"] == 2 and len(lines) == 1
+        if not ok or "Traceback" in case["stderr"] or case["s"] > CASE_SECONDS:
+            bad.append(case)
+    assert not bad, json.dumps(bad[:3], indent=1)[:4000]
+    assert report["peak_mb"] <= PEAK_MB, max(report["results"], key=lambda c: c["rss"])
+    assert {c["code"] for c in report["results"]} == {0, 2}  # both kinds of case happen
