@@ -15,6 +15,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from aftir_rl.core import interrupts
 from aftir_rl.core.files import check_writable_dir, staged_dir, unfinished_start, write_json
+from aftir_rl.core.tank.loading import keep_run_tank
 from aftir_rl.rl.common import check_env_id, hyperparameter_text, run_name
 from aftir_rl.rl.logs import run_logger
 
@@ -197,6 +198,9 @@ def _write_config(
         "seed": seed,
         "resume": str(resume_path) if resume_path else None,
     }
+    if "tank" in config.env_kwargs:  # a tank given by path travels with the run
+        tank = keep_run_tank(config.env_kwargs["tank"], partial)
+        params["env_kwargs"] = {**config.env_kwargs, "tank": tank}
     write_json(partial / "config.json", params)
     logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
 

@@ -20,6 +20,7 @@ from aftir_rl.core import interrupts
 from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN, brief
 from aftir_rl.core.errors import CheckpointError
 from aftir_rl.core.files import DISK_ERRNOS, staged_dir, unfinished_start, write_json
+from aftir_rl.core.tank.loading import keep_run_tank
 from aftir_rl.rl.common import check_env_id, hyperparameter_text, run_name
 from aftir_rl.rl.logs import run_logger
 from aftir_rl.rl.tabular.path_logs import MotionOptions, log_greedy_path
@@ -305,9 +306,14 @@ def _save_target_run(
     trajectory: Any,
     extra: dict[str, Any],
 ) -> None:
-    """Write the Q-table, ``path.json`` and (if any) ``trajectory.json`` into ``partial``."""
-    agent.save(partial / "q_table.npz", extra=extra)
-    write_json(partial / "path.json", summary)
+    """Write the Q-table, ``path.json`` and (if any) ``trajectory.json`` into ``partial``.
+
+    A tank given by path is copied into the run, which names it ``tank.yaml``
+    (:func:`~aftir_rl.core.tank.keep_run_tank`).
+    """
+    tank = keep_run_tank(extra["tank"], partial)
+    agent.save(partial / "q_table.npz", extra={**extra, "tank": tank})
+    write_json(partial / "path.json", {**summary, "tank": tank})
     if trajectory is not None:
         write_json(partial / "trajectory.json", trajectory.to_json())
 
@@ -334,7 +340,12 @@ def train_q_table_all_targets(
         logger.record("eval/success_rate", summary["n_reached"] / summary["n_goals"])
         logger.record("eval/bfs_optimal_rate", summary["n_optimal"] / summary["n_goals"])
         logger.dump(step=agent.num_timesteps)
-        agent.save(partial / "q_table_goal.npz", extra={"config": dataclasses.asdict(config)})
+        tank = keep_run_tank(config.tank, partial)
+        agent.save(
+            partial / "q_table_goal.npz",
+            extra={"config": dataclasses.asdict(config), "tank": tank},
+        )
+        summary["tank"] = tank
         write_json(partial / "summary.json", summary)
     summary["run_dir"] = str(run_dir)
     return summary
