@@ -25,6 +25,12 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("aftir_rl.cli.bench", "every method on the same fixed target sets"),
     "view": ("aftir_rl.cli.view", "an interactive 3D HTML page of one or more runs"),
     "tune": ("aftir_rl.cli.tune", "a hyperparameter sweep on Ray Tune (needs aftir_rl[ray])"),
+    "rollout": ("aftir_rl.cli.rollout", "a trained policy's motions as trajectory.json, for view"),
+    "record": ("aftir_rl.cli.record", "a trained policy's episodes as an animated GIF"),
+    "configs": (
+        "aftir_rl.cli.configs",
+        "the shipped configs and tanks, by the names --config takes",
+    ),
 }
 
 

@@ -1,6 +1,6 @@
 """Stable-Baselines3 baselines (PPO, SAC, TD3) on the arm envs, logged like the Q-table runs.
 
-One import for the SB3 side of the package, which lives in three modules:
+One import for the SB3 side of the package, which lives in four modules:
 
 - :mod:`aftir_rl.rl.sb3.config`: ``configs/{ppo,sac,td3}.yaml`` load into a checked
   :class:`SB3Config`, and :func:`build_model` makes the model;
@@ -9,7 +9,9 @@ One import for the SB3 side of the package, which lives in three modules:
   runs (docs/design.md §10); checkpoints are written atomically (:class:`AtomicCheckpoint`,
   :func:`save_model`);
 - :mod:`aftir_rl.rl.sb3.loading`: a saved model is loaded without unpickling anything from the
-  file (:func:`load_model`, :func:`load_run`).
+  file (:func:`load_model`, :func:`load_run`);
+- :mod:`aftir_rl.rl.sb3.vec_adapter`: :func:`make_sb3_vec_env`, the SB3 ``VecEnv`` of any env of
+  the package (the batched one where it has one), for code of your own.
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from aftir_rl.rl.sb3.evaluation import (
     save_model,
 )
 from aftir_rl.rl.sb3.loading import MAX_MODEL_BYTES, load_model, load_run, newest_model
+from aftir_rl.rl.sb3.vec_adapter import SB3VectorEnv, make_sb3_vec_env
 
 __all__ = [
     "ALGORITHMS",
@@ -52,6 +55,7 @@ __all__ = [
     "ArmEvalCallback",
     "AtomicCheckpoint",
     "Period",
+    "SB3VectorEnv",
     "build_model",
     "check_goal_settings",
     "check_sb3_config",
@@ -62,6 +66,7 @@ __all__ = [
     "load_model",
     "load_run",
     "load_sb3_config",
+    "make_sb3_vec_env",
     "newest_model",
     "save_model",
     "sb3_config_from_run",

@@ -17,6 +17,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
+from stable_baselines3.common.vec_env import VecMonitor
 from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnv,
     VecEnvIndices,
@@ -25,8 +26,9 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 )
 
 from aftir_rl.core.errors import ConfigError
+from aftir_rl.envs.registration import registered_env_id
 
-__all__ = ["SB3VectorEnv"]
+__all__ = ["SB3VectorEnv", "make_batched_vec_env", "make_sb3_vec_env"]
 
 
 class SB3VectorEnv(VecEnv):
@@ -163,8 +165,6 @@ def make_batched_vec_env(
     None when ``env_id`` has no ``vector_entry_point`` (or ``n_envs`` is 1): the caller makes
     per-env copies as usual. ``running_info_keys``: see :class:`SB3VectorEnv`.
     """
-    from stable_baselines3.common.vec_env import VecMonitor
-
     spec = gym.spec(env_id.split(":")[-1])  # the "aftir_rl:" module prefix is for make only
     if spec.vector_entry_point is None or n_envs < 2:
         return None
@@ -181,3 +181,32 @@ def make_batched_vec_env(
     out = VecMonitor(SB3VectorEnv(venv, running_info_keys))
     out.seed(seed)
     return out
+
+
+def make_sb3_vec_env(
+    env_id: str, n_envs: int = 1, seed: int | None = None, **env_kwargs: Any
+) -> VecEnv:
+    """The SB3 ``VecEnv`` of ``n_envs`` copies of one of this package's envs, for other code.
+
+    An env with a batched version (``AFTIR-ArmFTL-v0``) gives one batched env of ``n_envs``
+    rows (one numpy pass for all rows, reset within the step as SB3 expects); the others give
+    ``n_envs`` copies in a ``DummyVecEnv``; either logs its episodes (``VecMonitor``,
+    ``Monitor``)::
+
+        venv = make_sb3_vec_env("AFTIR-ArmFTL-v0", n_envs=64, seed=0, bay=2, guide=True)
+        PPO("MultiInputPolicy", venv).learn(100_000)
+
+    Raises:
+        ConfigError: ``env_id`` is not one of this package's envs, or ``n_envs`` is below 1.
+
+    """
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    if not isinstance(n_envs, int) or n_envs < 1:
+        raise ConfigError(f"n_envs must be a whole number of at least 1, got {n_envs!r}")
+    env_id = f"aftir_rl:{registered_env_id(env_id, 'make_sb3_vec_env')}"
+    venv = make_batched_vec_env(env_id, n_envs, seed, env_kwargs)
+    if venv is None:  # each copy in SB3's Monitor
+        venv = make_vec_env(env_id, n_envs, seed, vec_env_cls=DummyVecEnv, env_kwargs=env_kwargs)
+    return venv

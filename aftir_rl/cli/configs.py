@@ -1,0 +1,52 @@
+"""``aftir configs [FOLDER]``: the configs shipped with the package, by the name ``--config`` takes.
+
+A thin command line over :func:`~aftir_rl.core.shipped.shipped_configs`: one row per config, its
+name and the first line of its leading comment.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from aftir_rl.cli.args import OneLineParser
+from aftir_rl.cli.guard import cli
+from aftir_rl.core.config import CONFIG_DIR, MAX_YAML_BYTES, read_limited
+from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.shipped import find_config, shipped_configs
+
+__all__ = ["main"]
+
+
+def _summary(name: str) -> str:
+    """The first comment line of a shipped config (its purpose), or ``""``."""
+    raw = read_limited(find_config(name), MAX_YAML_BYTES, ConfigError)
+    for line in raw.decode("utf-8", "replace").splitlines():
+        if line.startswith("#"):
+            return line.lstrip("# ").strip()
+        if line.strip():
+            break
+    return ""
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``aftir configs``."""
+    parser = OneLineParser(
+        prog="aftir configs",
+        description="List the configs shipped with the package: give a name to --config "
+        "(e.g. aftir train ppo --config ppo_ftl) or to --tank (tanks/NAME without tanks/).",
+    )
+    parser.add_argument(
+        "folder",
+        nargs="?",
+        default="",
+        choices=["", "tanks", "search_spaces"],
+        help="only the tanks or the search spaces (default: everything)",
+    )
+    args = parser.parse_args(argv)
+    names = shipped_configs(args.folder)
+    width = max(map(len, names), default=0)
+    for name in names:
+        print(f"{name:<{width}}  {_summary(f'{args.folder}/{name}' if args.folder else name)}")
+    print(f"({len(names)} in {CONFIG_DIR / args.folder})")
+    return 0

@@ -1,0 +1,63 @@
+"""``aftir record RUN_DIR --target X Y Z -o arm.gif``: a policy's episode as an animated picture.
+
+A thin command line over :func:`aftir_rl.experiments.rollout.record_frames`: the env's
+``rgb_array`` frames of one deterministic episode per target, written as one GIF (Pillow), every
+``--every``-th frame, with a progress bar.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from tqdm import tqdm
+
+from aftir_rl.cli.args import bounded_int
+from aftir_rl.cli.guard import cli
+from aftir_rl.cli.rollout import policy_parser, policy_targets
+from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.files import atomic_open
+
+__all__ = ["main"]
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``aftir record``."""
+    from PIL import Image
+
+    from aftir_rl.experiments.rollout import record_frames
+    from aftir_rl.rl.sb3 import load_run
+
+    parser = policy_parser("aftir record", "Record an SB3 run's policy going to targets as a GIF.")
+    parser.add_argument("-o", "--output", required=True, metavar="FILE.gif", help="the GIF")
+    parser.add_argument(
+        "--every",
+        type=bounded_int(1, 100),
+        default=2,
+        metavar="K",
+        help="keep every K-th frame (default 2)",
+    )
+    parser.add_argument("--fps", type=bounded_int(1, 60), default=20, help="frames per second")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    args = parser.parse_args(argv)
+    if not args.output.lower().endswith(".gif"):
+        raise ConfigError(f"-o {args.output}: write a .gif")
+    _, config, env_id, model = load_run(args.run)
+    frames = []
+    for target in tqdm(
+        policy_targets(args, env_id, config.env_kwargs), desc="episodes", disable=args.no_progress
+    ):
+        episode = record_frames(model, env_id, config.env_kwargs, target)
+        frames += episode[:: args.every] + [episode[-1]] * 10  # hold the end a moment
+    images = [Image.fromarray(f) for f in frames]
+    with atomic_open(args.output, "wb") as fh:
+        images[0].save(
+            fh,
+            format="GIF",
+            save_all=True,
+            append_images=images[1:],
+            duration=round(1000 / args.fps),
+            loop=0,
+        )
+    print(f"wrote {args.output} ({len(images)} frames)")
+    return 0

@@ -1,0 +1,103 @@
+"""``aftir rollout RUN_DIR --target X Y Z -o DIR``: a policy's motions, drawn like the planner's.
+
+A thin command line over :func:`aftir_rl.experiments.rollout.rollout`: for each target, the
+deterministic policy of an SB3 run (loaded without unpickling) runs once and
+``DIR/<target>/trajectory.json`` (the planner's contract) and ``summary.json`` (tank, env, result)
+are written, so ``aftir view DIR/<target>`` shows the arm moving, beside a planner's run if given
+too. ``--random N`` draws N targets with the run's env instead (seeds from ``--seed``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+
+from aftir_rl.cli.args import OneLineParser, add_target_option, bounded_int
+from aftir_rl.cli.guard import cli
+from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.files import check_writable_dir, write_json
+from aftir_rl.core.tank.loading import keep_run_tank
+
+__all__ = ["main", "policy_parser", "policy_targets"]
+
+#: The most targets one command rolls out.
+MAX_TARGETS = 1000
+
+
+def policy_parser(prog: str, what: str) -> argparse.ArgumentParser:
+    """The options ``rollout`` and ``record`` share: the run, and ``--target`` or ``--random``."""
+    parser = OneLineParser(prog=prog, description=what)
+    parser.add_argument("run", metavar="RUN_DIR", help="an SB3 run directory (or its best/)")
+    add_target_option(parser, "a target [cm] (repeatable)")
+    parser.add_argument(
+        "--random",
+        type=bounded_int(1, MAX_TARGETS),
+        metavar="N",
+        help=f"N targets drawn by the run's env (1..{MAX_TARGETS}) instead of --target",
+    )
+    parser.add_argument(
+        "--seed", type=bounded_int(0, 2**31), default=0, metavar="S", help="first seed of --random"
+    )
+    return parser
+
+
+def policy_targets(args: argparse.Namespace, env_id: str, env_kwargs: dict[str, Any]) -> list[Any]:
+    """The targets of ``--target`` or ``--random`` (one of them, not both)."""
+    from aftir_rl.rl.sb3 import evaluation_targets
+
+    if bool(args.target) == bool(args.random):
+        raise ConfigError("give --target X Y Z (repeatable) or --random N")
+    if args.random:
+        return evaluation_targets(env_id, args.random, args.seed, env_kwargs)
+    return [tuple(t) for t in args.target]
+
+
+def _name(target: Any) -> str:
+    return "target_" + "_".join(f"{v:.1f}" for v in target)
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``aftir rollout``."""
+    from aftir_rl.experiments.rollout import rollout
+    from aftir_rl.rl.sb3 import load_run
+
+    parser = policy_parser(
+        "aftir rollout",
+        "Roll out an SB3 run's policy to targets; write each "
+        "motion as trajectory.json for aftir view.",
+    )
+    parser.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+    args = parser.parse_args(argv)
+    algo, config, env_id, model = load_run(args.run)
+    targets = policy_targets(args, env_id, config.env_kwargs)
+    out = check_writable_dir(args.output, "--output")
+    tank = config.env_kwargs.get("tank") or gym.spec(env_id.split(":")[-1]).kwargs.get(
+        "tank", "b737_center"
+    )
+    reached = 0
+    for target in targets:
+        folder = out / _name(target)
+        folder.mkdir(exist_ok=True)
+        result = rollout(model, env_id, config.env_kwargs, target)
+        write_json(folder / "trajectory.json", result)
+        summary = {k: v for k, v in result.items() if k != "motion"}
+        summary.update(
+            tank=keep_run_tank(tank, folder),
+            algo=algo,
+            env_id=config.env_id,
+            run=str(Path(args.run).resolve()),
+        )
+        write_json(folder / "summary.json", summary)
+        reached += result["complete"]
+        print(
+            f"{folder.name}: {'reached' if result['complete'] else 'missed'}, tip error "
+            f"{result['tip_error_cm']:.2f} cm, clearance {result['min_clearance_cm']:.2f} cm, "
+            f"{result['steps']} steps"
+        )
+    print(f"{reached}/{len(targets)} reached; aftir view {out}/<target> -o view.html shows one")
+    return 0
