@@ -29,7 +29,7 @@ test-all: $(STAMP)
 	$(PYTEST)
 
 # The run-directory fuzzer at full size: 2,000 mutated run directories for each of view,
-# evaluate and rank_checkpoints (test-all runs 150 each). About 20 minutes on 2 cores.
+# evaluate and rank_checkpoints (test-all runs 30 each). About 20 minutes on 2 cores.
 fuzz: $(STAMP)
 	AFTIR_FUZZ_CASES=2000 OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist load tests/cli/test_fuzz_runs.py
 

@@ -114,7 +114,7 @@ def mutate_json(rng: random.Random, run: Path) -> str:
     path = rng.choice(files)
     try:
         data = json.loads(path.read_text())
-    except (ValueError, UnicodeDecodeError):
+    except (ValueError, UnicodeDecodeError, RecursionError):
         return "json: unreadable"
     if rng.random() < 0.1:
         path.write_text(_deep(rng.choice([100, 5000, 200_000])))
@@ -186,8 +186,8 @@ def _bomb(size: int) -> tuple[bytes, int]:
     """``size`` zero bytes raw-deflated (a few MB for 2 GB) and their CRC, made once."""
     if size not in _BOMB:
         comp = zlib.compressobj(9, zlib.DEFLATED, -15)
-        chunk, crc, parts = bytes(1 << 24), 0, []
-        for _ in range(size >> 24):
+        chunk, crc, parts = bytes(1 << 20), 0, []
+        for _ in range(size >> 20):
             parts.append(comp.compress(chunk))
             crc = zlib.crc32(chunk, crc)
         _BOMB[size] = (b"".join(parts) + comp.flush(), crc)
@@ -347,6 +347,18 @@ def _commands(cli: str, out: Path) -> Callable[[Path], int]:
     return lambda run: module.main([str(run), "--fresh", "2", "--corners", "1", "--extreme", "1"])
 
 
+def peak_mb() -> float:
+    """This process's peak resident memory [MB] since it started its program.
+
+    ``VmHWM`` of ``/proc/self/status``, not ``getrusage``'s ``ru_maxrss``: that one keeps the
+    peak of the process it was forked from (a pytest worker of 1 GB), not only its own.
+    """
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def _on_alarm(signum: int, frame: Any) -> None:
     raise Hang
 
@@ -384,13 +396,12 @@ def main(argv: list[str]) -> int:
         shutil.copytree(rng.choice(sources), run, symlinks=True)
         done = [rng.choice(MUTATIONS)(rng, run) for _ in range(rng.choice([1, 1, 2, 3]))]
         code, err, seconds = run_case(command, run)
-        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024
+        rss = round(peak_mb())
         results.append(
             {"case": case, "code": code, "stderr": err, "s": seconds, "mut": done, "rss": rss}
         )
         shutil.rmtree(run.parent, ignore_errors=True)
-    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(json.dumps({"cli": cli, "peak_mb": peak_mb, "results": results}))
+    print(json.dumps({"cli": cli, "peak_mb": peak_mb(), "results": results}))
     return 0
 
 

@@ -6,7 +6,7 @@ keys, FIFOs, devices, symlinks out of the run, sparse 5 GB files, truncation, fl
 zip and npz members: dropped, extra, corrupt, deflate bombs, sizes that lie) and each command
 runs on every mutated copy. Every case must end in exit 0 or 2, with one line on stderr for 2,
 no traceback, within :data:`tests.fuzz.CASE_SECONDS`, and the process's peak memory must stay
-under :data:`PEAK_MB`. ``AFTIR_FUZZ_CASES`` sets the number of cases per command (150 in
+under :data:`PEAK_MB`. ``AFTIR_FUZZ_CASES`` sets the number of cases per command (30 in
 ``make test-all``, 2,000 in ``make fuzz``).
 """
 
@@ -20,12 +20,13 @@ from pathlib import Path
 
 import pytest
 
+from aftir_rl.core.config import CONFIG_DIR
 from tests.fuzz import CASE_SECONDS
 
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).parents[2]
-CASES = int(os.environ.get("AFTIR_FUZZ_CASES", "150"))  # ``make fuzz``: 2,000
+CASES = int(os.environ.get("AFTIR_FUZZ_CASES", "30"))  # ``make fuzz``: 2,000
 #: The most memory [MB] one command may use on any mutated run (torch and plotly loaded).
 PEAK_MB = 600
 
@@ -51,30 +52,25 @@ def _aftir(*args: str) -> None:
 def sources(tmp_path_factory) -> dict[str, list[str]]:
     """Real run directories of every kind, made once."""
     top = tmp_path_factory.mktemp("sources")
+    target = ["--target", "230", "140", "90", "--episodes", "300"]
+    _aftir("train", "q_table", *target, "--logdir", str(top / "q"))
+    # a tank given by path: the run keeps it as tank.yaml
+    (top / "mine.yaml").write_text((CONFIG_DIR / "tanks" / "b737_center.yaml").read_text())
+    (top / "q_mine.yaml").write_text(f"tank: {top / 'mine.yaml'}\n")
     _aftir(
         "train",
         "q_table",
-        "--target",
-        "230",
-        "140",
-        "90",
-        "--episodes",
-        "300",
+        *target,
+        "--config",
+        str(top / "q_mine.yaml"),
+        "--no-postures",
         "--logdir",
         str(top / "q"),
     )
     for name, text in (("reach", PPO_REACH), ("ftl", PPO_FTL)):
         (top / f"{name}.yaml").write_text(text)
-        _aftir(
-            "train",
-            "ppo",
-            "--config",
-            str(top / f"{name}.yaml"),
-            "--total-timesteps",
-            "256",
-            "--logdir",
-            str(top / name),
-        )
+        config = ["--config", str(top / f"{name}.yaml"), "--total-timesteps", "256"]
+        _aftir("train", "ppo", *config, "--logdir", str(top / name))
     runs = {k: [str(p) for p in (top / k).iterdir()] for k in ("q", "reach", "ftl")}
     return {
         "view": runs["q"] + runs["reach"] + runs["ftl"],

@@ -273,7 +273,7 @@ def test_hostile_models_refused_fast(model_zip, tmp_path, make, message):
 
 
 _PEAK = """
-import resource, sys
+import sys
 from aftir_rl.core.errors import CheckpointError
 from aftir_rl.rl.sb3 import load_model
 from aftir_rl.rl.tabular.checkpoint import read_q_table
@@ -282,7 +282,9 @@ try:
     load_model("ppo", path) if kind == "sb3" else read_q_table(path)
 except CheckpointError as exc:
     print(exc)
-print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+# VmHWM: this program's own peak (ru_maxrss keeps the forking pytest worker's too)
+hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM:")][0].split()[1]
+print(int(hwm) * 1024)
 """
 
 

@@ -357,7 +357,10 @@ def available_tanks() -> list[str]:
     return sorted(p.stem for p in TANK_DIR.glob("*.yaml"))
 
 
+#: Tanks loaded lately, by resolved path, newest last (a few: a process that reads many run
+#: directories, each with its own ``tank.yaml``, keeps memory bounded).
 _CACHE: dict[str, Tank] = {}
+_CACHE_SIZE = 8
 
 #: The file a run directory keeps its tank in when it was trained in a tank that is not shipped.
 RUN_TANK_FILE = "tank.yaml"
@@ -413,7 +416,7 @@ def resolve_run_tank(name: object, run_dir: str | Path) -> str:
 def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
     """Load a tank by name (``configs/tanks/NAME.yaml``) or by path to a YAML file.
 
-    Loaded tanks are cached by resolved path, so envs share one raster.
+    The last few tanks loaded are cached by resolved path, so envs share one raster.
 
     Raises:
         ConfigError: the tank does not exist or its file is malformed.
@@ -430,6 +433,8 @@ def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
                 f"unknown tank {text!r}: give a YAML path or one of {', '.join(available_tanks())}"
             )
     key = str(path.resolve())
-    if key not in _CACHE:
-        _CACHE[key] = tank_from_mapping(read_yaml(path), str(path))
-    return _CACHE[key]
+    tank = _CACHE.pop(key, None) or tank_from_mapping(read_yaml(path), str(path))
+    _CACHE[key] = tank
+    while len(_CACHE) > _CACHE_SIZE:
+        del _CACHE[next(iter(_CACHE))]
+    return tank

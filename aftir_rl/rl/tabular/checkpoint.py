@@ -137,6 +137,9 @@ def read_npz_checkpoint(
             ) from None
     if not isinstance(meta, dict) or meta.get("format") != fmt:
         raise CheckpointError(f"{path}: not an aftir_rl {what} checkpoint; {hint}")
+    for name, array in arrays.items():  # numbers only: no strings, records or objects
+        if array.dtype.kind not in "biuf":
+            raise CheckpointError(f"{path}: {name} holds {array.dtype} values, not numbers; {hint}")
     return arrays, meta
 
 
