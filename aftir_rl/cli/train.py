@@ -163,10 +163,14 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
     )
     p.add_argument(
         "--config",
-        default=str(CONFIG_DIR / f"{algo}.yaml"),
-        help=f"YAML of SB3Config fields (default: configs/{algo}.yaml)",
+        help="YAML of SB3Config fields: a path or a shipped name (aftir configs lists them); "
+        f"default: the shipped one for --env, else {algo}",
     )
-    p.add_argument("--env", help="environment id (overrides config), e.g. AFTIR-ArmReach-v0")
+    p.add_argument(
+        "--env",
+        help="environment id, e.g. AFTIR-ArmFTL-v0: without --config, the shipped config for it; "
+        "with --config, overrides its env_id",
+    )
     p.add_argument(
         "--total-timesteps",
         type=bounded_int(1, MAX_TIMESTEPS),
@@ -194,15 +198,18 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
 def _main_sb3(args: argparse.Namespace) -> int:
     with interrupts.held():  # torch: Ctrl-C is taken once it is imported
         from aftir_rl.rl.sb3 import load_sb3_config
+        from aftir_rl.rl.sb3.config import env_config_name
         from aftir_rl.rl.sb3.train import train_sb3
 
-    config = load_sb3_config(args.config, args.algo)
+    name = args.config or (env_config_name(args.algo, args.env) if args.env else args.algo)
+    config = load_sb3_config(name, args.algo)
     overrides = {"env_id": args.env, "total_timesteps": args.total_timesteps, "n_envs": args.n_envs}
     for key, value in overrides.items():
         if value is not None:
             if isinstance(value, int) and value < 1:
                 raise ConfigError(f"--{key.replace('_', '-')} must be at least 1, got {value}")
             config = dataclasses.replace(config, **{key: value})
+    _say_rollout(args.algo, config)
     s = train_sb3(
         args.algo,
         config,
@@ -218,6 +225,19 @@ def _main_sb3(args: argparse.Namespace) -> int:
     )
     print(f"  run dir: {s['run_dir']}")
     return 0
+
+
+def _say_rollout(algo: str, config: Any) -> None:
+    """Say so when the steps asked are not a whole number of the updates' rollouts."""
+    from aftir_rl.rl.sb3.config import rollout_steps
+
+    rollout, asked = rollout_steps(algo, config), config.total_timesteps
+    if asked % rollout:
+        trained = -(-asked // rollout) * rollout
+        print(
+            f"note: {algo.upper()} collects {rollout:,} steps per update ({config.n_envs} envs), "
+            f"so {trained:,} steps are trained for --total-timesteps {asked:,}"
+        )
 
 
 def _q_table_config(args: argparse.Namespace) -> Any:

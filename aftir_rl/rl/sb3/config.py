@@ -39,6 +39,9 @@ from aftir_rl.rl.sb3.checks import OBJECT_KEYS, check_hyperparameters, check_ran
 from aftir_rl.rl.sb3.checks import linear_start as linear_start
 
 __all__ = [
+    "ENV_CONFIGS",
+    "env_config_name",
+    "rollout_steps",
     "ALGORITHMS",
     "SB3Config",
     "ENV_KWARGS",
@@ -86,6 +89,41 @@ class SB3Config:
     hyperparameters: dict[str, Any] = field(default_factory=dict)
     her: bool = False
     env_kwargs: dict[str, Any] = field(default_factory=dict)
+
+
+#: The shipped config each algorithm trains an env with when only ``--env`` is given.
+ENV_CONFIGS: dict[str, dict[str, str]] = {
+    "ppo": {
+        "AFTIR-ArmReach-v0": "ppo",
+        "AFTIR-ArmFull-v0": "ppo_full",
+        "AFTIR-ArmFTL-v0": "ppo_ftl",
+    },
+    "sac": {"AFTIR-ArmReach-v0": "sac", "AFTIR-ArmFTL-v0": "sac_ftl"},
+    "td3": {"AFTIR-ArmReach-v0": "td3", "AFTIR-ArmFTL-v0": "td3_ftl"},
+}
+
+
+def env_config_name(algo: str, env_id: str) -> str:
+    """The shipped config of :data:`ENV_CONFIGS` for ``algo`` on ``env_id`` (its bare id).
+
+    Raises:
+        ConfigError: none ships; the message names the envs that have one.
+
+    """
+    bare = registered_env_id(env_id, "--env")
+    known = ENV_CONFIGS.get(algo, {})
+    if bare not in known:
+        raise ConfigError(
+            f"no shipped {algo} config for {bare}; one ships for {', '.join(known)} "
+            f"(or give --config FILE with env_id: {bare})"
+        )
+    return known[bare]
+
+
+def rollout_steps(algo: str, config: SB3Config) -> int:
+    """The steps an update of ``algo`` collects: ``n_steps × n_envs`` for PPO, else ``n_envs``."""
+    n_steps = int(config.hyperparameters.get("n_steps", 2048)) if algo == "ppo" else 1
+    return n_steps * config.n_envs
 
 
 def load_sb3_config(path: str | os.PathLike[str], algo: str) -> SB3Config:
