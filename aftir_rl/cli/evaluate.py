@@ -4,8 +4,8 @@ Each run directory is loaded and measured by :func:`aftir_rl.experiments.runs.ev
 Q-learning run on the target it was trained for (its greedy cells made into a motion), an SB3 run
 on its env's evaluation targets, ``--target`` or ``--random N --seed S``. One row per run:
 success rate, tip error, tip path length, least clearance and seconds per target, also logged to
-TensorBoard under ``compare/<run>/...``. What success and each column mean: docs/reference.md,
-"Evaluating runs".
+TensorBoard as ``eval/<metric>``, one folder per run (and ``results.json``). What success and
+each column mean: docs/reference.md, "Evaluating runs".
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from aftir_rl.cli.args import (
 from aftir_rl.cli.guard import cli, preload
 from aftir_rl.core.config import DEFAULT_MARGIN, EVAL_SEED
 from aftir_rl.core.errors import AftirError, ConfigError
-from aftir_rl.core.files import check_writable_dir
+from aftir_rl.core.files import check_writable_dir, write_json
 from aftir_rl.experiments.runs import evaluate_run
 
 __all__ = ["main", "evaluate_run"]
@@ -145,8 +145,21 @@ def _print_table(results: dict[str, dict[str, Any]]) -> None:
         print(head + body + tail)
 
 
+#: The metrics each evaluated run logs, as ``eval/<metric>`` (the tags training logs too).
+LOGGED = (
+    "success_rate",
+    "tip_error_cm",
+    "path_length_cm",
+    "min_clearance_cm",
+    "seconds_per_target",
+)
+
+
 def _log_results(logdir: str, results: dict[str, dict[str, Any]]) -> Path:
-    """Log every run's metrics under ``compare/<run>/...`` to ``logdir/evaluate__<time>/``.
+    """Log each run's metrics to ``logdir/evaluate__<time>/<run>/`` as ``eval/<metric>``.
+
+    One folder per run, the same tags for all, so TensorBoard draws every run on one card per
+    metric; ``results.json`` holds the table's rows.
 
     Returns:
         The folder logged to.
@@ -155,18 +168,17 @@ def _log_results(logdir: str, results: dict[str, dict[str, Any]]) -> Path:
     from stable_baselines3.common.logger import configure
 
     out = Path(logdir) / f"evaluate__{datetime.now().strftime('%Y%m%d-%H%M%S-%f')}"
-    logger = configure(str(out), ["tensorboard", "csv"])
     for name, r in results.items():
-        for key in (
-            "success_rate",
-            "tip_error_cm",
-            "path_length_cm",
-            "min_clearance_cm",
-            "seconds_per_target",
-        ):
-            logger.record(f"compare/{name}/{key}", float(r[key]))
-    logger.dump(0)
-    logger.close()
+        logger = configure(str(out / name), ["tensorboard", "csv"])
+        for key in LOGGED:
+            logger.record(f"eval/{key}", float(r[key]))
+        logger.dump(0)
+        logger.close()
+    rows = {
+        name: {k: v if isinstance(v, (str, int, float)) else str(v) for k, v in r.items()}
+        for name, r in results.items()
+    }
+    write_json(out / "results.json", rows)
     return out
 
 

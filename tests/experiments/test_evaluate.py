@@ -51,7 +51,17 @@ def test_compare_q_table_and_ppo_runs(tmp_path, capsys):
     assert trajectory["complete"] and "| 1 | 100% |" in row
     clearance = float(row.split("|")[7])
     assert clearance == pytest.approx(trajectory["min_clearance_cm"], abs=0.01) and clearance >= 1
-    assert any(p.name.startswith("evaluate__") for p in (tmp_path / "eval").iterdir())
+    (logged,) = [p for p in (tmp_path / "eval").iterdir() if p.name.startswith("evaluate__")]
+    # one folder per run, the same eval/* tags: TensorBoard overlays the runs on one card
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    rows = json.loads((logged / "results.json").read_text())
+    assert set(rows) == {p.name for p in logged.iterdir() if p.is_dir()} and len(rows) == 2
+    for name, r in rows.items():
+        events = EventAccumulator(str(logged / name))
+        events.Reload()
+        assert "eval/success_rate" in events.Tags()["scalars"]
+        assert events.Scalars("eval/success_rate")[0].value == pytest.approx(r["success_rate"])
 
 
 def test_not_a_run_dir_exits_2(tmp_path):
