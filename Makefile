@@ -28,10 +28,12 @@ test: $(STAMP)  ## the test suite (fast; long checks are marked slow and run by 
 test-all: $(STAMP)
 	$(PYTEST)
 
-# The run-directory fuzzer at full size: 2,000 mutated run directories for each of view,
-# evaluate and rank_checkpoints (test-all runs 30 each). About 20 minutes on 2 cores.
+# The run-directory fuzzer: FUZZ_CASES mutated run directories for each of view, evaluate,
+# rollout and rank_checkpoints (test-all runs 30 each; .ci/run 300; 2,000 take about an hour on
+# 2 cores).
+FUZZ_CASES ?= 2000
 fuzz: $(STAMP)
-	AFTIR_FUZZ_CASES=2000 OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist load tests/cli/test_fuzz_runs.py
+	AFTIR_FUZZ_CASES=$(FUZZ_CASES) OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist load tests/cli/test_fuzz_runs.py
 
 lint: $(STAMP)
 	$(PY) -m ruff check aftir_rl tests benchmarks

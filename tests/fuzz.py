@@ -2,7 +2,7 @@
 
 ``python -m tests.fuzz CLI SEED CASES WORKDIR RUN_DIR...`` copies a random ``RUN_DIR`` for every
 case, applies one to three random mutations (JSON fields and keys, file types, sizes, symlinks,
-bytes, zip and npz members), runs the command line ``CLI`` (view, evaluate or rank) in this process
+bytes, zip and npz members), runs the command line ``CLI`` (view, evaluate, rollout or rank) in this process
 on it with a time limit, and prints one JSON object: every case's exit status, stderr, seconds
 and mutations, and the process's peak memory. ``tests/cli/test_fuzz_runs.py`` asserts on it.
 """
@@ -339,6 +339,10 @@ def _commands(cli: str, out: Path) -> Callable[[Path], int]:
         from aftir_rl.cli import evaluate
 
         return lambda run: evaluate.main([str(run), "--logdir", str(out)])
+    if cli == "rollout":
+        from aftir_rl.cli import rollout
+
+        return lambda run: rollout.main([str(run), "--random", "1", "-o", str(out / "r")])
     spec = importlib.util.spec_from_file_location(
         "rank_checkpoints", Path(__file__).parents[1] / "benchmarks" / "rank_checkpoints.py"
     )

@@ -1,4 +1,4 @@
-"""Fuzzing the commands that read run directories: view, evaluate and rank_checkpoints.
+"""Fuzzing the commands that read run directories: view, evaluate, rollout, rank_checkpoints.
 
 Real run directories (a Q-table run with its motion, PPO runs of ``AFTIR-ArmReach-v0`` and
 ``AFTIR-ArmFTL-v0`` with checkpoints) are mutated at random by :mod:`tests.fuzz` (JSON fields and
@@ -7,7 +7,7 @@ zip and npz members: dropped, extra, corrupt, deflate bombs, sizes that lie) and
 runs on every mutated copy. Every case must end in exit 0 or 2, with one line on stderr for 2,
 no traceback, within :data:`tests.fuzz.CASE_SECONDS`, and the process's peak memory must stay
 under :data:`PEAK_MB`. ``AFTIR_FUZZ_CASES`` sets the number of cases per command (30 in
-``make test-all``, 2,000 in ``make fuzz``).
+``make test-all``, 300 in CI, 2,000 in ``make fuzz``).
 """
 
 from __future__ import annotations
@@ -75,11 +75,12 @@ def sources(tmp_path_factory) -> dict[str, list[str]]:
     return {
         "view": runs["q"] + runs["reach"] + runs["ftl"],
         "evaluate": runs["q"] + runs["reach"] + runs["ftl"],
+        "rollout": runs["reach"] + runs["ftl"],
         "rank": runs["ftl"],
     }
 
 
-@pytest.mark.parametrize("cli", ["view", "evaluate", "rank"])
+@pytest.mark.parametrize("cli", ["view", "evaluate", "rollout", "rank"])
 def test_mutated_run_directories(cli, sources, tmp_path):
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT), "TQDM_DISABLE": "1"}
     cmd = [sys.executable, "-m", "tests.fuzz", cli, "7", str(CASES), str(tmp_path), *sources[cli]]

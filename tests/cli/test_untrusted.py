@@ -194,6 +194,8 @@ def test_malicious_model_one_line_in_a_subprocess(ppo_run, tmp_path):
         ({"env_id": "somemodule:AFTIR-ArmReach-v0"}, "env_id"),
         ({"env_id": "aftir_rl.evil:AFTIR-ArmReach-v0"}, "env_id"),
         ({"algo": "dqn"}, "algo"),
+        ({"algo": ["ppo"]}, "algo"),
+        ({"algo": {"ppo": 1}}, "algo"),
         ({"extra": 1}, "unknown key"),
         ({"policy": "Evil"}, "policy"),
         ({"eval_targets": 10**9}, "eval_targets"),

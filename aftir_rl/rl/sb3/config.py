@@ -206,7 +206,7 @@ def sb3_config_from_run(data: Any, source: str) -> tuple[str, SB3Config]:
     if not isinstance(data, dict):
         raise CheckpointError(f"{source}: expected a JSON object")
     algo = data.get("algo")
-    if algo not in ALGORITHMS:
+    if not isinstance(algo, str) or algo not in ALGORITHMS:
         raise CheckpointError(f"{source}: algo must be one of {', '.join(ALGORITHMS)}")
     fields = {f.name for f in dataclasses.fields(SB3Config)}
     written = fields | {"algo", "seed", "resume"}

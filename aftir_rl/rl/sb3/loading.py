@@ -319,7 +319,7 @@ def load_model(
         CheckpointError: saying what is wrong.
 
     """
-    if algo not in ALGORITHMS:
+    if not isinstance(algo, str) or algo not in ALGORITHMS:
         raise CheckpointError(
             f"unknown algorithm {brief(algo)}; use one of {', '.join(ALGORITHMS)}"
         )
