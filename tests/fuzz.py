@@ -2,9 +2,10 @@
 
 ``python -m tests.fuzz CLI SEED CASES WORKDIR RUN_DIR...`` copies a random ``RUN_DIR`` for every
 case, applies one to three random mutations (JSON fields and keys, file types, sizes, symlinks,
-bytes, zip and npz members), runs the command line ``CLI`` (view, evaluate, rollout or rank) in this process
-on it with a time limit, and prints one JSON object: every case's exit status, stderr, seconds
-and mutations, and the process's peak memory. ``tests/cli/test_fuzz_runs.py`` asserts on it.
+bytes, zip and npz members), runs the command line ``CLI`` (view, evaluate, rollout or rank)
+in this process on it with a time limit, and prints one JSON object: every case's exit status,
+stderr, seconds and mutations, and the process's peak memory (``tests/cli/test_fuzz_runs.py``
+asserts on it).
 """
 
 from __future__ import annotations
