@@ -26,7 +26,7 @@ def test_an_env_without_a_shipped_config_is_one_line(capsys):
     assert train.main(["sac", "--env", "AFTIR-ArmFull-v0"]) == 2
     err = capsys.readouterr().err.strip()
     assert "no shipped sac config for AFTIR-ArmFull-v0" in err and "\n" not in err
-    with pytest.raises(ConfigError, match="not one of"):
+    with pytest.raises(ConfigError, match="ppo cannot train on 'CartPole-v1'; use one of"):
         env_config_name("ppo", "CartPole-v1")
 
 

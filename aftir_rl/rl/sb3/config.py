@@ -34,6 +34,7 @@ from aftir_rl.envs.ftl.spec import (
     STEER_MODES,
 )
 from aftir_rl.envs.registration import registered_env_id
+from aftir_rl.rl.common import check_env_id
 from aftir_rl.rl.sb3.checks import LINEAR_PREFIX as LINEAR_PREFIX
 from aftir_rl.rl.sb3.checks import OBJECT_KEYS, check_hyperparameters, check_range
 from aftir_rl.rl.sb3.checks import linear_start as linear_start
@@ -110,7 +111,7 @@ def env_config_name(algo: str, env_id: str) -> str:
         ConfigError: none ships; the message names the envs that have one.
 
     """
-    bare = registered_env_id(env_id, "--env")
+    bare = check_env_id(env_id, SB3_ENV_IDS, algo)
     known = ENV_CONFIGS.get(algo, {})
     if bare not in known:
         raise ConfigError(
