@@ -253,8 +253,8 @@ def _regular_size(fd: int) -> tuple[str, int]:
     return next((name for test, name in kinds if test(info.st_mode)), "a special file"), 0
 
 
-def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Read a YAML file that must hold a mapping.
+def read_yaml(path: str | os.PathLike[str], raw: bytes | None = None) -> dict[str, Any]:
+    """Read a YAML file that must hold a mapping (``raw``: its bytes, if read already).
 
     Only plain data is built (PyYAML's safe loader); the file must be a regular file of UTF-8
     text, at most :data:`MAX_YAML_BYTES` long, :data:`MAX_YAML_NODES` values and
@@ -266,7 +266,8 @@ def read_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
 
     """
     path = Path(path)
-    raw = read_limited(path, MAX_YAML_BYTES, ConfigError, "file", "tank or config")
+    if raw is None:
+        raw = read_limited(path, MAX_YAML_BYTES, ConfigError, "file", "tank or config")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -7,6 +7,7 @@ negative size, a hatch outside its baffle or an obstacle outside the box is a
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -357,10 +358,11 @@ def available_tanks() -> list[str]:
     return sorted(p.stem for p in TANK_DIR.glob("*.yaml"))
 
 
-#: Tanks loaded lately, by resolved path, newest last (a few: a process that reads many run
-#: directories, each with its own ``tank.yaml``, keeps memory bounded).
+#: Tanks loaded lately, by the SHA-256 of their file, newest last: the same tank read from many
+#: places (every run directory's ``tank.yaml``) is one tank, with one raster; a few, so a
+#: process that reads many different tanks keeps its memory bounded.
 _CACHE: dict[str, Tank] = {}
-_CACHE_SIZE = 8
+_CACHE_SIZE = 4
 
 #: The file a run directory keeps its tank in when it was trained in a tank that is not shipped.
 RUN_TANK_FILE = "tank.yaml"
@@ -416,7 +418,7 @@ def resolve_run_tank(name: object, run_dir: str | Path) -> str:
 def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
     """Load a tank by name (``configs/tanks/NAME.yaml``) or by path to a YAML file.
 
-    The last few tanks loaded are cached by resolved path, so envs share one raster.
+    The last few tanks loaded are cached by their file's content, so envs share one raster.
 
     Raises:
         ConfigError: the tank does not exist or its file is malformed.
@@ -432,8 +434,9 @@ def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
             raise ConfigError(
                 f"unknown tank {text!r}: give a YAML path or one of {', '.join(available_tanks())}"
             )
-    key = str(path.resolve())
-    tank = _CACHE.pop(key, None) or tank_from_mapping(read_yaml(path), str(path))
+    raw = read_limited(path, MAX_YAML_BYTES, ConfigError, "file", "tank or config")
+    key = hashlib.sha256(raw).hexdigest()
+    tank = _CACHE.pop(key, None) or tank_from_mapping(read_yaml(path, raw), str(path))
     _CACHE[key] = tank
     while len(_CACHE) > _CACHE_SIZE:
         del _CACHE[next(iter(_CACHE))]
