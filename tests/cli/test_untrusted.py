@@ -403,7 +403,8 @@ def _bytes(tmp_path: Path) -> Path:
 def test_plan_does_not_build_the_raster(tmp_path):
     from aftir_rl.planning.posture.planner import Planner
 
-    path = _tank(tmp_path, REF_YAML.read_text(), "ref_copy.yaml")
+    # a tank of its own (tanks are cached by content): the reference with one more comment
+    path = _tank(tmp_path, REF_YAML.read_text() + "\n# a copy\n", "ref_copy.yaml")
     tank = load_tank(path)
     assert "raster" not in tank.__dict__
     Planner(tank).plan((30.0, 0.0, 60.0))
