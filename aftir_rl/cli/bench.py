@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import platform
 import sys
 import time
 from collections.abc import Sequence
@@ -32,18 +31,19 @@ from aftir_rl.experiments.bench import (
     SETS,
     Row,
     format_table,
+    machine_facts,
     run_benchmark,
     target_sets,
 )
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
 #: The most random targets per bay (``--n-random``): each is run by every method.
 MAX_N_RANDOM = 1000
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m aftir_rl.bench``."""
     parser = OneLineParser(
         prog="python -m aftir_rl.bench",
@@ -133,7 +133,7 @@ def _run_benchmark(args: argparse.Namespace) -> list[Row]:
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.bench``."""
-    parser = _parser()
+    parser = build_parser()
     args = parser.parse_args(argv)
     _check_numbers(parser, args)
     if args.model:
@@ -153,15 +153,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     seconds = time.perf_counter() - start
+    facts = machine_facts()
     print(
-        f"machine: {platform.machine()}, {platform.system()}, {_cores()} cores, "
-        f"Python {platform.python_version()}; {seconds:.0f} s in all"
+        f"machine: {facts['cpu']}, {facts['system']}, {facts['cores']} cores, "
+        f"Python {facts['python']}; {seconds:.0f} s in all"
     )
     print()
     print(format_table(rows))
     if args.json:
+        rows_out = [{**r.summary(), "outcomes": [asdict(o) for o in r.outcomes]} for r in rows]
+        options = {k: getattr(args, k) for k in ("sets", "n_random", "seed", "margin")}
         write_json(
-            args.json, [{**r.summary(), "outcomes": [asdict(o) for o in r.outcomes]} for r in rows]
+            args.json, {"machine": facts, "seconds": seconds, "options": options, "rows": rows_out}
         )
     return 0
 
@@ -189,10 +192,6 @@ def _check_inputs(models: Sequence[str], json_path: str | None) -> str:
         if not folder.is_dir() or not os.access(folder, os.W_OK):
             return f"--json {json_path}: cannot write in {folder}"
     return ""
-
-
-def _cores() -> int:
-    return os.cpu_count() or 1
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ name and the first line of its leading comment.
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Sequence
 
 from aftir_rl.cli.args import OneLineParser
@@ -14,7 +15,7 @@ from aftir_rl.core.config import CONFIG_DIR, MAX_YAML_BYTES, read_limited
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.shipped import find_config, shipped_configs
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
 def _summary(name: str) -> str:
@@ -28,9 +29,8 @@ def _summary(name: str) -> str:
     return ""
 
 
-@cli
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``aftir configs``."""
+def build_parser() -> argparse.ArgumentParser:
+    """The options of ``aftir configs``."""
     parser = OneLineParser(
         prog="aftir configs",
         description="List the configs shipped with the package: give a name to --config "
@@ -43,7 +43,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         choices=["", "tanks", "search_spaces"],
         help="only the tanks or the search spaces (default: everything)",
     )
-    args = parser.parse_args(argv)
+    return parser
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``aftir configs``."""
+    args = build_parser().parse_args(argv)
     names = shipped_configs(args.folder)
     width = max(map(len, names), default=0)
     for name in names:

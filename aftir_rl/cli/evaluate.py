@@ -34,7 +34,7 @@ from aftir_rl.core.errors import AftirError, ConfigError
 from aftir_rl.core.files import check_writable_dir, write_json
 from aftir_rl.experiments.runs import evaluate_run
 
-__all__ = ["main", "evaluate_run"]
+__all__ = ["build_parser", "main", "evaluate_run"]
 
 
 #: Most targets ``--random`` may draw, and the first seed it draws them with by default.
@@ -72,7 +72,7 @@ def _row_name(run: str) -> str:
     return f"{path.parent.name}/best" if path.name == "best" else path.name
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m aftir_rl.evaluate``."""
     parser = OneLineParser(
         prog="python -m aftir_rl.evaluate",
@@ -185,7 +185,7 @@ def _log_results(logdir: str, results: dict[str, dict[str, Any]]) -> Path:
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.evaluate``."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     preload("aftir_rl.rl.sb3")  # torch: SB3 runs and the TensorBoard log need it
     targets = [np.array(t) for t in args.target] if args.target else None
     try:

@@ -6,6 +6,7 @@ cannot be reached prints "error: Cannot reach the target: <why>" and exits with 
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
@@ -19,7 +20,7 @@ from aftir_rl.planning.posture.context import PlannedPosture
 from aftir_rl.planning.posture.planner import Planner
 from aftir_rl.planning.posture.registry import AUTO, METHOD_NAMES, REGISTRY
 
-__all__ = ["main", "format_table"]
+__all__ = ["build_parser", "main", "format_table"]
 
 
 def format_table(result: PlannedPosture) -> str:
@@ -45,9 +46,8 @@ def format_table(result: PlannedPosture) -> str:
     return "\n".join(lines)
 
 
-@cli
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m aftir_rl.plan``."""
+def build_parser() -> argparse.ArgumentParser:
+    """The options of ``aftir plan``."""
     methods = "; ".join(f"{m.name}: {m.summary} ({m.paper})" for m in REGISTRY.values())
     parser = OneLineParser(
         prog="python -m aftir_rl.plan",
@@ -67,7 +67,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_margin_option(
         parser, f"clearance the arm's surface keeps from the tank (default {DEFAULT_MARGIN:g} cm)"
     )
-    args = parser.parse_args(argv)
+    return parser
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m aftir_rl.plan``."""
+    args = build_parser().parse_args(argv)
     try:
         check_margin(args.margin)
         result = Planner(args.tank).plan(args.target, method=args.method)

@@ -7,6 +7,7 @@ A thin command line over :func:`aftir_rl.experiments.rollout.record_frames`: the
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Sequence
 
 from tqdm import tqdm
@@ -17,17 +18,11 @@ from aftir_rl.cli.rollout import policy_parser, policy_targets
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import atomic_open
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
-@cli
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``aftir record``."""
-    from PIL import Image
-
-    from aftir_rl.experiments.rollout import record_frames
-    from aftir_rl.rl.sb3 import load_run
-
+def build_parser() -> argparse.ArgumentParser:
+    """The options of ``aftir record``."""
     parser = policy_parser("aftir record", "Record an SB3 run's policy going to targets as a GIF.")
     parser.add_argument("-o", "--output", required=True, metavar="FILE.gif", help="the GIF")
     parser.add_argument(
@@ -39,7 +34,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--fps", type=bounded_int(1, 60), default=20, help="frames per second")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    args = parser.parse_args(argv)
+    return parser
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``aftir record``."""
+    from PIL import Image
+
+    from aftir_rl.experiments.rollout import record_frames
+    from aftir_rl.rl.sb3 import load_run
+
+    args = build_parser().parse_args(argv)
     if not args.output.lower().endswith(".gif"):
         raise ConfigError(f"-o {args.output}: write a .gif")
     _, config, env_id, model = load_run(args.run)

@@ -22,7 +22,7 @@ from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import check_writable_dir, write_json
 from aftir_rl.core.tank.loading import keep_run_tank
 
-__all__ = ["main", "policy_parser", "policy_targets"]
+__all__ = ["build_parser", "main", "policy_parser", "policy_targets"]
 
 #: The most targets one command rolls out.
 MAX_TARGETS = 1000
@@ -60,19 +60,24 @@ def _name(target: Any) -> str:
     return "target_" + "_".join(f"{v:.1f}" for v in target)
 
 
-@cli
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``aftir rollout``."""
-    from aftir_rl.experiments.rollout import rollout
-    from aftir_rl.rl.sb3 import load_run
-
+def build_parser() -> argparse.ArgumentParser:
+    """The options of ``aftir rollout``."""
     parser = policy_parser(
         "aftir rollout",
         "Roll out an SB3 run's policy to targets; write each "
         "motion as trajectory.json for aftir view.",
     )
     parser.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
-    args = parser.parse_args(argv)
+    return parser
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``aftir rollout``."""
+    from aftir_rl.experiments.rollout import rollout
+    from aftir_rl.rl.sb3 import load_run
+
+    args = build_parser().parse_args(argv)
     algo, config, env_id, model = load_run(args.run)
     targets = policy_targets(args, env_id, config.env_kwargs)
     out = check_writable_dir(args.output, "--output")

@@ -9,6 +9,7 @@ status 2.
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from collections.abc import Sequence
@@ -18,12 +19,11 @@ from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.tank.loading import load_tank
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
-@cli
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m aftir_rl.tank`` (and ``aftir tank``)."""
+def build_parser() -> argparse.ArgumentParser:
+    """The options of ``aftir tank``."""
     parser = OneLineParser(
         prog="python -m aftir_rl.tank",
         description="Show a tank's raster as z-slices, or export its scene as JSON (units cm).",
@@ -32,7 +32,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--tank", default="b737_center", help="tank name in configs/tanks or a YAML path"
     )
     parser.add_argument("--json", action="store_true", help="print the scene export as JSON")
-    args = parser.parse_args(argv)
+    return parser
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m aftir_rl.tank`` (and ``aftir tank``)."""
+    args = build_parser().parse_args(argv)
     try:
         tank = load_tank(args.tank)
         print(json.dumps(tank.scene_dict()) if args.json else tank.ascii())

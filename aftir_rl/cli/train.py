@@ -38,7 +38,7 @@ from aftir_rl.core.errors import AftirError, ConfigError
 from aftir_rl.experiments.runs import load_q_table_config
 
 # The trainers (torch, numba) are imported when a command runs: Ctrl-C is honoured from then.
-__all__ = ["main", "load_q_table_config"]
+__all__ = ["build_parser", "main", "load_q_table_config"]
 
 ALGOS = ("q_table", "ppo", "sac", "td3")
 
@@ -81,7 +81,7 @@ def _print_summary(s: dict[str, Any]) -> None:
     print(f"  run dir: {s['run_dir']}")
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m aftir_rl.train``: one subcommand per algorithm."""
     parser: argparse.ArgumentParser = OneLineParser(
         prog="python -m aftir_rl.train",
@@ -312,7 +312,7 @@ def _main_q_table(args: argparse.Namespace) -> int:
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.train``."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     if not 0 <= args.seed < 2**32:
         print(f"error: --seed must be from 0 to 2**32 - 1, got {args.seed}", file=sys.stderr)
         return 2

@@ -29,10 +29,11 @@ from aftir_rl.experiments.search_space import load_search_space
 from aftir_rl.experiments.tune import ALGOS, MAX_EVALUATIONS, MAX_TRIALS, run_sweep
 from aftir_rl.rl.common import check_env_id
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
+    """The options of ``aftir tune``."""
     parser = OneLineParser(
         prog="python -m aftir_rl.tune",
         description="Hyperparameter sweep of an SB3 algorithm on Ray Tune: Optuna samples the "
@@ -126,7 +127,7 @@ def _base_config(args: argparse.Namespace) -> Any:
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``aftir tune``."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     from aftir_rl.experiments.distributed import check_ray_options
 
     check_ray_options(args.ray, args.workers)  # Ray installed, the address well formed

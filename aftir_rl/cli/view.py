@@ -8,6 +8,7 @@ prints "error: <why>" and exits with status 2. Imports neither torch nor stable-
 
 from __future__ import annotations
 
+import argparse
 import sys
 from collections.abc import Sequence
 
@@ -15,16 +16,15 @@ from aftir_rl.cli.args import OneLineParser, bounded_int
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import AftirError
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 #: The most animation frames of a page (``--max-frames``): each repeats the arm's traces.
 MAX_FRAMES = 1000
 
 
-@cli
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m aftir_rl.cli.view`` (and ``aftir view``)."""
-    from aftir_rl.viz.page import DEFAULT_MAX_FRAMES, write_view
+def build_parser() -> argparse.ArgumentParser:
+    """The options of ``aftir view``."""
+    from aftir_rl.viz.page import DEFAULT_MAX_FRAMES
 
     parser = OneLineParser(
         prog="python -m aftir_rl.view",
@@ -45,7 +45,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         metavar="N",
         help=f"most animation frames per page, 2 to {MAX_FRAMES:,} (default {DEFAULT_MAX_FRAMES})",
     )
-    args = parser.parse_args(argv)
+    return parser
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m aftir_rl.cli.view`` (and ``aftir view``)."""
+    from aftir_rl.viz.page import write_view
+
+    args = build_parser().parse_args(argv)
     try:
         out = write_view(args.run_dirs, args.output, tank=args.tank, max_frames=args.max_frames)
     except AftirError as exc:

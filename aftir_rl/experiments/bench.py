@@ -13,6 +13,9 @@ docs/benchmarks.md, "Comparing every method".
 from __future__ import annotations
 
 import math
+import os
+import platform
+import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -33,6 +36,7 @@ __all__ = [
     "method_outcome",
     "run_benchmark",
     "format_table",
+    "machine_facts",
 ]
 
 POSTURE_METHODS = tuple(REGISTRY)
@@ -164,3 +168,32 @@ def format_table(rows: Sequence[Row]) -> str:
             f"{_fmt(s['seconds'], '.3f')} | {s['notes']} |"
         )
     return "\n".join(lines)
+
+
+def machine_facts() -> dict[str, Any]:
+    """What a measurement ran on: CPU model, cores, Python, the package's version, torch threads.
+
+    Written beside every benchmark's numbers (``--json``), since the same run is up to five
+    times faster on one machine than on another. ``torch_threads`` only when torch is loaded.
+    """
+    from aftir_rl import __version__
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            cpu = next(
+                (ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")), cpu
+            )
+    except OSError:
+        pass
+    facts: dict[str, Any] = {
+        "cpu": cpu,
+        "machine": platform.machine(),
+        "system": platform.system(),
+        "cores": os.cpu_count() or 1,
+        "python": platform.python_version(),
+        "aftir_rl": __version__,
+    }
+    if "torch" in sys.modules:
+        facts["torch_threads"] = sys.modules["torch"].get_num_threads()
+    return facts

@@ -89,7 +89,8 @@ def test_bench_cli(tmp_path):
         "obstacle_clipping",
     ]
     data = json.loads(out.read_text())
-    tga = next(r for r in data if r["method"] == "tga")
+    assert data["machine"]["cores"] >= 1 and data["seconds"] > 0
+    tga = next(r for r in data["rows"] if r["method"] == "tga")
     assert tga["success_rate"] == 1.0 and len(tga["outcomes"]) == 3
     # Every TGA posture of the run is re-checked here, independently of the bench.
     scene = CollisionScene(load_tank("open_space"))
