@@ -4,14 +4,14 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install train test test-all fuzz lint bench tensorboard clean
+.PHONY: install train test test-all fuzz lint docs bench tensorboard clean
 
 install: $(STAMP)
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,all]" -c constraints.txt
+	$(PY) -m pip install --quiet -e ".[dev,all,docs]" -c constraints.txt
 	$(PY) -m ipykernel install --sys-prefix --name python3 >/dev/null
 	touch $(STAMP)
 
@@ -36,9 +36,15 @@ fuzz: $(STAMP)
 	AFTIR_FUZZ_CASES=$(FUZZ_CASES) OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist load tests/cli/test_fuzz_runs.py
 
 lint: $(STAMP)
-	$(PY) -m ruff check aftir_rl tests benchmarks
-	$(PY) -m ruff format --check aftir_rl tests benchmarks
+	$(PY) -m ruff check aftir_rl tests benchmarks scripts
+	$(PY) -m ruff format --check aftir_rl tests benchmarks scripts
 	$(PY) -m mypy
+
+# The documentation site into docs/_build/html, offline, warnings as errors; the env pages and
+# the CLI reference are generated from the package as it builds (docs/_ext/aftir_docs.py).
+docs: $(STAMP)
+	OMP_NUM_THREADS=1 $(VENV)/bin/sphinx-build -W --keep-going -q -b html docs docs/_build/html
+	@echo "open docs/_build/html/index.html"
 
 bench: $(STAMP)  ## every benchmark table of docs/benchmarks.md (about 20 minutes)
 	$(PY) benchmarks/bench_tank.py
@@ -56,4 +62,4 @@ tensorboard: $(STAMP)
 	$(VENV)/bin/tensorboard --logdir runs
 
 clean:
-	rm -rf runs .pytest_cache build *.egg-info
+	rm -rf runs .pytest_cache build *.egg-info docs/_build

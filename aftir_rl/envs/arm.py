@@ -25,17 +25,20 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     """The arm in the tank, moved by bounded increments of its joint variables.
 
     ## Description
+
     The linear module and the ``n_sections`` bending sections of the AFTIR arm, in the reference
     tank. Each step changes ``dis`` and every ``θ_i``, ``φ_i`` by a bounded increment; the task is
     to bring the tip within ``success_tolerance`` of a target without touching the tank.
 
     ## Action Space
+
     ``Box(-1, 1, (1 + 2N,), float32)``: increments of ``dis``, ``θ_1..θ_N``, ``φ_1..φ_N``, scaled
     inside the env by ``dis_step`` [cm] and ``angle_step`` [rad]. ``θ`` is clipped to
     ``±θ_max`` and ``dis`` to ``[-N·l, 0]`` (the linear module stays outside the tank). Sections
     that end below the floor are inside the panel's guide and stay straight.
 
     ## Observation Space
+
     ``Box(-20, 20, (6N + 15,), float32)``: ``dis/l``, ``θ/θ_max``, ``sin φ``, ``cos φ``, the tip,
     the target and their difference (cm / 100), the body clearance (cm / 10, capped at 1) and the
     distance to the target (cm / 100), then ``sin θ``, ``cos θ``, the section ends' heights
@@ -43,17 +46,21 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     centimetres.
 
     ## Starting State
+
     The arm straight along the panel axis, its tip ``start_height`` [cm] above the floor.
 
     ## Rewards
+
     ``(d_prev − d) / 10`` for progress towards the target [per cm], ``+10`` on success, ``−10`` on
     a collision (python-fcl through :class:`~aftir_rl.core.collision.CollisionScene`, or the panel
     rule).
 
     ## Episode End
+
     Terminated on success or collision; truncated by ``max_episode_steps`` (registration).
 
     ## Arguments
+
     - ``tank``: tank name or YAML path.
     - ``n_sections``: sections of the arm.
     - ``target``: a fixed target [cm], or None to draw one per episode from ``self.np_random``:
@@ -69,6 +76,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ``reset(options={"target": (x, y, z)})`` sets the target for that episode.
 
     ## Version History
+
     - v0: initial version.
     """
 

@@ -34,36 +34,44 @@ class TankGoalEnv(TankGridEnv):
     """Goal-conditioned ``AFTIR-Tank-v0``: reach a target cell drawn per episode.
 
     ## Description
+
     The grid world of :class:`~aftir_rl.envs.tank_grid.TankGridEnv` (same tank, moves, rewards
     and terminations) with the target as part of the observation, for goal-conditioned agents
     (HER, tabular goal-conditioned Q-learning) that learn every target in one run.
 
     ## Action Space
+
     ``Discrete(6)``, :class:`~aftir_rl.envs.tank_grid.Action`: ±x, ±y, ±z, one cell each.
 
     ## Observation Space
+
     ``Dict`` of three ``MultiDiscrete(raster shape)`` (``int64``) cells: ``observation`` and
     ``achieved_goal`` the tip's cell ``(a, b, c)``, ``desired_goal`` the target cell.
 
     ## Starting State
+
     The tip in the start cell (the one holding ``(0, 0, 10)`` cm); the goal drawn uniformly among
     :attr:`goal_cells` with ``np_random`` unless fixed by keyword or ``reset`` options.
 
     ## Rewards
+
     +100 entering the goal cell, −100 entering an obstructed cell or leaving the box
     (``info["hit"]``), else ``-step_penalty``; :meth:`compute_reward` reproduces it in batches.
 
     ## Episode End
+
     Terminated when the goal is reached or on a hit (:meth:`compute_terminated`); truncated by
     ``max_episode_steps`` (100 at registration).
 
     ## Arguments
+
     - ``tank``: tank name in ``configs/tanks`` or a YAML path (default ``"b737_center"``).
     - ``target`` (cm) or ``target_cell``: a fixed goal for every episode; default random goals.
     - ``step_penalty``: reward subtracted on every move into a free cell (default 0).
     - ``render_mode``: ``"ansi"`` or ``"rgb_array"``, as the base env.
 
     ## Version History
+
     - v0: initial version.
     """
 

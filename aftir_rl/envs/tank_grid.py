@@ -59,30 +59,37 @@ class TankGridEnv(gym.Env[int, int]):
     """The arm's tip moving cell by cell through the rasterised tank (filomat2018 §2–3).
 
     ## Description
+
     The interior of the reference Boeing 737 center tank (two bays joined by a hatch in the
     spanwise beam) is split into 20 cm cubes, 15 × 10 × 5 cells. The agent moves the tip of the
     continuum arm from the cell just inside the access panel to the cell of a target, through free
     cells. The learned cell path is what the posture generators turn into joint variables.
 
     ## Action Space
+
     ``Discrete(6)``, :class:`Action`: 0 +x, 1 −x, 2 +y, 3 −y, 4 +z, 5 −z, one cell each.
 
     ## Observation Space
+
     ``Discrete(nx·ny·nz)`` (750 for the reference tank): the tip's cell ``(a, b, c)`` as
     ``ravel_multi_index((a, b, c), (nx, ny, nz))``.
 
     ## Starting State
+
     The cell containing the tank's ``start_point`` (``(0, 0, 10)`` cm: just inside the panel).
 
     ## Rewards
+
     filomat2018 eq. 2: +100 for entering the target cell, −100 for entering an obstructed cell or
     leaving the box, otherwise ``-step_penalty`` (default 0).
 
     ## Episode End
+
     Terminated when the target is reached or an obstructed cell / the crust is hit (the tip then
     stays where it was). Truncated by ``max_episode_steps`` (500 at registration).
 
     ## Arguments
+
     - ``tank``: tank name in ``configs/tanks`` or a YAML path (default ``"b737_center"``).
     - ``target``: target point ``(x, y, z)`` [cm]; or
     - ``target_cell``: target cell ``(a, b, c)``. With neither, the tank's first reference target.
@@ -94,6 +101,7 @@ class TankGridEnv(gym.Env[int, int]):
     as in FrozenLake, for planners and value iteration.
 
     ## Version History
+
     - v0: initial version.
     """
 

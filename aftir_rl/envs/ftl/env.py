@@ -34,6 +34,7 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
     """The whole arm, deployed through the panel by follow-the-leader, reaching targets.
 
     ## Description
+
     The AFTIR arm (``n_sections`` sections, default the tank's maximum, 12 × 50 cm in the
     reference tank) on its linear module. The agent steers the section the tip is tracing and
     pushes or pulls the module; the body follows the traced route (docs/envs/armftl.md). The task:
@@ -41,6 +42,7 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
     by default), through the hatch for bay-2 targets, without contact.
 
     ## Action Space
+
     ``Box(-1, 1, (3,), float32)``: the steering (two components) and the insertion (scaled by
     ``push_step`` [cm], ``s`` clipped to ``[0, N·l]``). With ``steer="increment"`` (the default)
     the steering is the change of the steered ``κ`` (scaled by ``kappa_step`` [rad], ``|κ|``
@@ -50,6 +52,7 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
     rather than a rate, and holds a bend by holding its action.
 
     ## Observation Space
+
     ``Dict``: ``achieved_goal`` (tip) and ``desired_goal`` (target), ``Box(float32, (3,))`` in cm
     (the tank box grown by 100 cm); ``observation``, ``Box(-10, 10, float32)``: ``dis/(N·l)``,
     ``k/N``, the steered ``κ/θ_max``, every section's ``θ/θ_max``, ``sin φ``, ``cos φ``, the tip
@@ -58,18 +61,22 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
     the heights of the last three section ends (cm/100).
 
     ## Starting State
+
     Straight, the tip ``start_height`` (10 cm) above the floor.
 
     ## Rewards
+
     Progress ``(d_prev − d)/10`` [per cm], the raster-detour potential term when ``shaping``,
     ``+10`` on success, ``−10`` on contact, ``−step_cost`` per step: :meth:`compute_reward`
     (docs/envs/armftl.md).
 
     ## Episode End
+
     Terminated on success (tip within ``success_tolerance`` and no contact) or contact (surface
     clearance below ``margin``); truncated by ``max_episode_steps`` (300 at registration).
 
     ## Arguments
+
     - ``tank``: tank name or YAML path; ``n_sections``: default the tank arm's maximum.
     - ``target``: fixed target [cm] for every episode; default drawn per episode with
       ``np_random``, uniformly among points ``target_clearance`` (10 cm) from every surface and
@@ -111,7 +118,7 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
     - ``slack`` (0 cm): training demands this much more than the success rule: the tip within
       ``success_tolerance − slack``, the surface clearance at least ``margin + slack``, so that
       a policy measured by the rule itself has that much in hand rather than ending its
-      episodes exactly at the 2 cm tolerance or the 1 cm margin (docs/benchmarks.md measures
+      episodes exactly at the 2 cm tolerance or the 1 cm margin (docs/experiments.md measures
       it). Training-only, like ``detour_bias``: evaluations drop it.
     - ``steer`` (``"increment"``): what the two steering actions command, a change of ``κ``
       or ``"target"``, the bend itself (Action Space).
@@ -125,6 +132,7 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
     ``reset(options={"target": (x, y, z)})`` sets the target of one episode.
 
     ## Version History
+
     - v0: initial version.
     """
 

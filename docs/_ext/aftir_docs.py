@@ -1,0 +1,128 @@
+"""Pages of the documentation generated from the package itself when Sphinx starts.
+
+- ``envs/<id>.md`` for every id of :data:`aftir_rl.ENV_IDS`: the env's registration, its spaces
+  as ``gym.make`` builds them, a picture from its ``rgb_array`` render after a few random steps,
+  and its class docstring (description, spaces, rewards, episode end, arguments, version
+  history), Gymnasium's layout.
+- ``cli.md``: one section per ``aftir`` subcommand of :data:`aftir_rl.cli.main.SUBCOMMANDS`, its
+  options read from the subcommand's ``build_parser()`` by sphinx-argparse.
+
+The generated files are not kept in git (``.gitignore``); each build writes them again.
+"""
+
+from __future__ import annotations
+
+import inspect
+import re
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import aftir_rl
+from aftir_rl.cli.main import SUBCOMMANDS
+from aftir_rl.envs.registration import REGISTRATIONS
+
+ROLE = re.compile(r":(\w+):`([^`]+)`")
+
+
+def _write(path: Path, text: str) -> None:
+    """Write ``text`` unless the file already holds it (keeps Sphinx's incremental builds)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not path.exists() or path.read_text(encoding="utf-8") != text:
+        path.write_text(text, encoding="utf-8")
+
+
+def _entry_class(entry_point: str) -> Any:
+    module, name = entry_point.split(":")
+    return getattr(__import__(module, fromlist=[name]), name)
+
+
+def _docstring(cls: Any) -> str:
+    """The class docstring as MyST: RST roles become MyST roles; the summary line dropped."""
+    doc = inspect.getdoc(cls) or ""
+    body = doc.split("\n", 1)[1] if "\n" in doc else ""
+    return ROLE.sub(r"{\1}`\2`", body).strip()
+
+
+def _picture(env_id: str, static: Path) -> str:
+    """Render the env after 20 random steps (seed 0) into ``_static/envs/<id>.png``."""
+    from PIL import Image
+
+    env = gym.make(env_id, render_mode="rgb_array")
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    for _ in range(20):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            break
+    frame = np.asarray(env.render())
+    env.close()
+    out = static / "envs" / f"{env_id}.png"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(frame).save(out)
+    return f"../_static/envs/{env_id}.png"
+
+
+def _env_page(env_id: str, static: Path) -> str:
+    spec: dict[str, Any] = REGISTRATIONS[env_id]
+    cls = _entry_class(spec["entry_point"])
+    env = gym.make(env_id)
+    rows = [
+        ("Import", f'`gym.make("aftir_rl:{env_id}")`'),
+        ("Class", f"{{class}}`{cls.__module__}.{cls.__name__}`"),
+        ("Action space", f"`{env.action_space}`"),
+        ("Observation space", f"`{env.observation_space}`"),
+        ("Registered keyword arguments", f"`{spec.get('kwargs', {})}`"),
+        ("Truncation", f"{spec['max_episode_steps']} steps"),
+    ]
+    env.close()
+    if "vector_entry_point" in spec:
+        vector = (
+            f'`gym.make_vec("aftir_rl:{env_id}", num_envs=B, '
+            'vectorization_mode="vector_entry_point")`'
+        )
+        rows.append(("Vector env", vector))
+    table = "\n".join(f"| {k} | {v} |" for k, v in rows)
+    summary = (inspect.getdoc(cls) or "").split("\n", 1)[0]
+    picture = _picture(env_id, static)
+    return (
+        f"# `{env_id}`\n\n{summary}\n\n"
+        f"![{env_id} after 20 random steps]({picture})\n\n"
+        f"| | |\n|---|---|\n{table}\n\n{_docstring(cls)}\n"
+    )
+
+
+def write_env_pages(docs: Path) -> None:
+    """``envs/<id>.md`` and its picture for every registered id."""
+    for env_id in aftir_rl.ENV_IDS:
+        _write(docs / "envs" / f"{env_id}.md", _env_page(env_id, docs / "_static"))
+
+
+def write_cli_page(docs: Path) -> None:
+    """``cli.md``: every subcommand's options, from its parser."""
+    parts = [
+        "# The `aftir` command\n",
+        "One command, one subcommand per tool (`python -m aftir_rl.<module>` works the same). "
+        "The options below are read from each subcommand's parser when the site is built.\n",
+    ]
+    for name, (module, text) in SUBCOMMANDS.items():
+        parts.append(
+            f"## `aftir {name}`\n\n{text[0].upper()}{text[1:]}.\n\n"
+            f"```{{argparse}}\n:module: {module}\n:func: build_parser\n:prog: aftir {name}\n"
+            ":nodescription:\n```\n"
+        )
+    _write(docs / "cli.md", "\n".join(parts))
+
+
+def _generate(app: Any) -> None:
+    docs = Path(app.srcdir)
+    write_env_pages(docs)
+    write_cli_page(docs)
+
+
+def setup(app: Any) -> dict[str, Any]:
+    """Sphinx extension entry point."""
+    app.connect("builder-inited", _generate)
+    return {"parallel_read_safe": True, "version": "1"}
