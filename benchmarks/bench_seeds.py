@@ -1,0 +1,129 @@
+"""An RL recipe from several seeds, measured on the same held-out targets: mean ± std per metric.
+
+Run: ``python benchmarks/bench_seeds.py ppo --config ppo --seeds 0 1 2 --json OUT.json``.
+A recipe is one shipped config (or several: ``--config A --config B`` trains A, then B resumed
+from A's model, a curriculum). Each seed trains the whole recipe, then its final model plays one
+deterministic episode per target on ``--random N`` targets its env draws from ``--eval-seed``
+(seeds training never evaluated on). Written to ``--json``: the machine, a FrozenLake 8x8
+yardstick (steps/s measured in the same run), every seed's numbers and their mean and standard
+deviation; ``benchmarks/results_page.py`` turns the file into the docs' results page.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from aftir_rl.core.files import write_json
+from aftir_rl.experiments.bench import machine_facts
+from aftir_rl.experiments.runs import evaluate_run
+from aftir_rl.rl.sb3 import load_sb3_config
+from aftir_rl.rl.sb3.train import train_sb3
+
+METRICS = ("success_rate", "tip_error_cm", "collision_rate", "min_clearance_cm")
+
+
+def yardstick(steps: int = 50_000) -> float:
+    """FrozenLake 8x8 (not slippery) random steps per second on this machine, now."""
+    env = gym.make("FrozenLake-v1", map_name="8x8", is_slippery=False)
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    actions = [env.action_space.sample() for _ in range(steps)]
+    start = time.perf_counter()
+    for a in actions:
+        _, _, term, trunc, _ = env.step(a)
+        if term or trunc:
+            env.reset()
+    return steps / (time.perf_counter() - start)
+
+
+def train_seed(algo: str, configs: list[Any], seed: int, logdir: Path) -> dict[str, Any]:
+    """Train every stage from ``seed``; the last stage's run directory, steps and seconds."""
+    resume, steps, seconds = None, 0, 0.0
+    for k, config in enumerate(configs):
+        summary = train_sb3(
+            algo,
+            config,
+            seed=seed,
+            logdir=logdir / f"seed{seed}" / f"stage{k}",
+            resume=resume,
+            progress_bar=False,
+        )
+        resume, steps = summary["run_dir"], int(summary["timesteps"])
+        seconds += float(summary["seconds"])
+    return {"run_dir": resume, "timesteps": steps, "train_seconds": seconds}
+
+
+def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Mean and standard deviation (ddof 1) over seeds of each metric."""
+    out = {}
+    for key in (*METRICS, "train_seconds", "timesteps"):
+        values = np.array([r[key] for r in rows], dtype=float)
+        std = float(values.std(ddof=1)) if len(values) > 1 else 0.0
+        out[key] = {"mean": float(values.mean()), "std": std}
+    return out
+
+
+def main() -> None:
+    """Train and measure every seed; write the JSON."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    parser.add_argument("algo", choices=("ppo", "sac", "td3"))
+    parser.add_argument("--config", action="append", required=True, help="stage config(s)")
+    parser.add_argument("--name", help="the recipe's name on the results page")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--total-timesteps", type=int, help="steps of the last stage")
+    parser.add_argument("--random", type=int, default=100, help="held-out targets")
+    parser.add_argument("--eval-seed", type=int, default=3_000_000)
+    parser.add_argument("--logdir", default="runs/seeds")
+    parser.add_argument("--json", required=True, help="where the results go")
+    args = parser.parse_args()
+
+    configs = [load_sb3_config(name, args.algo) for name in args.config]
+    if args.total_timesteps:
+        configs[-1] = dataclasses.replace(configs[-1], total_timesteps=args.total_timesteps)
+    name = args.name or " → ".join(args.config)
+    logdir = Path(args.logdir) / name.replace(" ", "_").replace("→", "then")
+    lake = yardstick()
+    rows = []
+    for seed in args.seeds:
+        row = {"seed": seed, **train_seed(args.algo, configs, seed, logdir)}
+        start = time.perf_counter()
+        measured = evaluate_run(row["run_dir"], draw=(args.random, args.eval_seed))
+        row["eval_seconds"] = time.perf_counter() - start
+        row.update({k: float(measured[k]) for k in METRICS})
+        rows.append(row)
+        print(
+            f"seed {seed}: {row['timesteps']:,} steps in {row['train_seconds'] / 60:.1f} min; "
+            + ", ".join(f"{k} {row[k]:.3g}" for k in METRICS),
+            flush=True,
+        )
+    write_json(
+        args.json,
+        {
+            "recipe": name,
+            "algo": args.algo,
+            "env_id": configs[-1].env_id,
+            "configs": args.config,
+            "total_timesteps": [c.total_timesteps for c in configs],
+            "eval": {
+                "targets": args.random,
+                "seed": args.eval_seed,
+                "env_kwargs": configs[-1].env_kwargs,
+            },
+            "machine": machine_facts(),
+            "frozenlake_8x8_steps_per_s": lake,
+            "runs": [{k: v for k, v in r.items() if k != "run_dir"} for r in rows],
+            "summary": summarize(rows),
+        },
+    )
+    print(f"wrote {args.json}")
+
+
+if __name__ == "__main__":
+    main()

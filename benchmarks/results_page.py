@@ -1,0 +1,190 @@
+"""Write ``docs/results.md`` from the benchmark scripts' JSON in ``benchmarks/results/``.
+
+Run: ``python benchmarks/results_page.py [--results benchmarks/results] [-o docs/results.md]``.
+Reads ``bench.json`` (``python -m aftir_rl.bench --json``: every method on the fixed target
+sets) and every ``seeds_*.json`` (``benchmarks/bench_seeds.py``: an RL recipe from several
+seeds on the same held-out targets), and writes one page of tables and the README's short table
+(between its ``results`` markers); no number is typed by hand. ``--check`` exits 1 when either
+differs from what the JSON gives.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+HEADER = """# Results
+
+Every number on this page is read from the JSON the benchmark scripts wrote
+(`benchmarks/results/`) by `python benchmarks/results_page.py`; rerun a script, then this, to
+update it. The history of the runs that led to the shipped configs is in the
+[experiments journal](experiments.md); the speed tables in [benchmarks](benchmarks.md).
+"""
+
+
+START, END = "<!-- results:start -->", "<!-- results:end -->"
+
+
+def _num(value: Any, fmt: str) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    return format(value, fmt)
+
+
+def _machine(m: dict[str, Any]) -> str:
+    threads = f", {m['torch_threads']} torch thread(s)" if "torch_threads" in m else ""
+    cpu, cores, python = m.get("cpu", "?"), m.get("cores", "?"), m.get("python", "?")
+    return f"{cpu}, {cores} cores{threads}, Python {python}, aftir_rl {m.get('aftir_rl', '?')}"
+
+
+def bench_section(data: dict[str, Any]) -> str:
+    """Every method on every fixed target set (``aftir bench``)."""
+    o = data["options"]
+    lines = [
+        "## Every method on the fixed target sets\n",
+        f"`python -m aftir_rl.bench --json benchmarks/results/bench.json`: sets "
+        f"{', '.join(o['sets'])}; {o['n_random']} random targets per bay (seed {o['seed']}); "
+        f"margin {o['margin']:g} cm. One run on {_machine(data['machine'])}; "
+        f"{data['seconds'] / 60:.1f} minutes in all. What success means for each method: "
+        "[the benchmark](reference.md#the-benchmark).\n",
+        "| set | method | targets | success | median tip error (cm) | least clearance (cm) | "
+        "median path (cm) | median s / target |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in data["rows"]:
+        not_run = f" (+{r['not_run']} not run)" if r["not_run"] else ""
+        lines.append(
+            f"| {r['set']} | {r['method']} | {r['targets']}{not_run} | "
+            f"{_num(r['success_rate'] * 100, '.0f')}% | {_num(r['tip_error_cm'], '.2g')} | "
+            f"{_num(r['min_clearance_cm'], '.2f')} | {_num(r['path_cm'], '.0f')} | "
+            f"{_num(r['seconds'], '.3f')} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _clearance(runs: list[dict[str, Any]]) -> str:
+    """The least clearance of the runs' motions, or "contact" (python-fcl reports -1)."""
+    least = min(r["min_clearance_cm"] for r in runs)
+    return "contact" if least < 0 else f"{least:.2f}"
+
+
+def _pm(summary: dict[str, Any], key: str, scale: float, fmt: str) -> str:
+    s = summary[key]
+    return f"{format(s['mean'] * scale, fmt)} ± {format(s['std'] * scale, fmt)}"
+
+
+def seeds_section(files: list[dict[str, Any]]) -> str:
+    """One row per RL recipe: mean ± std over its seeds, then one row per seed."""
+    lines = [
+        "## RL recipes over seeds\n",
+        "`python benchmarks/bench_seeds.py ALGO --config NAME --seeds ... --json ...`: each seed "
+        "trains the recipe from scratch; its final model plays one deterministic episode per "
+        "target on held-out targets its env draws (seeds training never evaluated on). Success: "
+        "the tip within 2 cm without contact. Mean ± standard deviation over the seeds.\n",
+        "| recipe | env | seeds | steps per seed | held-out targets | success (%) | "
+        "tip error (cm) | contacts (%) | least clearance over seeds (cm) | minutes per seed |",
+        "|---|---|---:|---:|---|---:|---:|---:|---:|---:|",
+    ]
+    for d in files:
+        s, e = d["summary"], d["eval"]
+        lines.append(
+            f"| {d['recipe']} | {d['env_id']} | {len(d['runs'])} | "
+            f"{s['timesteps']['mean']:,.0f} | {e['targets']} (seeds {e['seed']}..) | "
+            f"{_pm(s, 'success_rate', 100, '.0f')} | {_pm(s, 'tip_error_cm', 1, '.1f')} | "
+            f"{_pm(s, 'collision_rate', 100, '.0f')} | {_clearance(d['runs'])} | "
+            f"{_pm(s, 'train_seconds', 1 / 60, '.1f')} |"
+        )
+    lines += ["", "Each seed, and the machine it trained on:", ""]
+    lines += [
+        "| recipe | seed | steps | minutes | success | tip error (cm) | contacts | least "
+        "clearance (cm) | machine | "
+        "FrozenLake 8x8 steps/s (same run) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|",
+    ]
+    for d in files:
+        for r in d["runs"]:
+            lines.append(
+                f"| {d['recipe']} | {r['seed']} | {r['timesteps']:,} | "
+                f"{r['train_seconds'] / 60:.1f} | {r['success_rate']:.0%} | "
+                f"{r['tip_error_cm']:.1f} | {r['collision_rate']:.0%} | {_clearance([r])} | "
+                f"{_machine(d['machine'])} | {d['frozenlake_8x8_steps_per_s']:,.0f} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
+def readme_table(results: Path) -> str:
+    """The README's short table: the motion methods through the hatch, and each RL recipe."""
+    lines = [
+        "| method | task | success | time | runs |",
+        "|---|---|---:|---:|---|",
+    ]
+    bench = results / "bench.json"
+    if bench.exists():
+        data = json.loads(bench.read_text())
+        for r in data["rows"]:
+            if r["set"] == "bay2":
+                lines.append(
+                    f"| `{r['method']}` | bay 2, {r['targets']} random targets | "
+                    f"{_num(r['success_rate'] * 100, '.0f')}% | {_num(r['seconds'], '.2f')} s "
+                    "per target | one run |"
+                )
+    for path in sorted(results.glob("seeds_*.json")):
+        d = json.loads(path.read_text())
+        s = d["summary"]
+        lines.append(
+            f"| {d['recipe']} | {d['env_id']}, {d['eval']['targets']} held-out targets | "
+            f"{_pm(s, 'success_rate', 100, '.0f')}% | "
+            f"{_pm(s, 'train_seconds', 1 / 60, '.0f')} min training | {len(d['runs'])} seeds |"
+        )
+    return "\n".join(lines)
+
+
+def with_readme_table(readme: str, table: str) -> str:
+    """The README with the text between its results markers replaced by ``table``."""
+    head, rest = readme.split(START, 1)
+    _, tail = rest.split(END, 1)
+    return f"{head}{START}\n{table}\n{END}{tail}"
+
+
+def render(results: Path) -> str:
+    """The page's text from the JSON files in ``results``."""
+    parts = [HEADER]
+    bench = results / "bench.json"
+    if bench.exists():
+        parts.append(bench_section(json.loads(bench.read_text())))
+    seeds = [json.loads(p.read_text()) for p in sorted(results.glob("seeds_*.json"))]
+    if seeds:
+        parts.append(seeds_section(seeds))
+    return "\n".join(parts)
+
+
+def main() -> int:
+    """Write (or ``--check``) the page."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    here = Path(__file__).resolve().parent
+    parser.add_argument("--results", type=Path, default=here / "results")
+    parser.add_argument("-o", "--output", type=Path, default=here.parent / "docs" / "results.md")
+    parser.add_argument("--check", action="store_true", help="exit 1 if the page is stale")
+    args = parser.parse_args()
+    text = render(args.results)
+    readme_path = here.parent / "README.md"
+    readme = readme_path.read_text()
+    new_readme = with_readme_table(readme, readme_table(args.results))
+    if args.check:
+        current = args.output.read_text() if args.output.exists() else ""
+        if current != text or readme != new_readme:
+            print(f"{args.output} or README.md is stale: run {sys.argv[0]}", file=sys.stderr)
+            return 1
+        return 0
+    args.output.write_text(text)
+    readme_path.write_text(new_readme)
+    print(f"wrote {args.output} and README.md's results table")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
