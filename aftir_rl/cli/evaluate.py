@@ -33,6 +33,7 @@ from aftir_rl.core.config import DEFAULT_MARGIN, EVAL_SEED
 from aftir_rl.core.errors import AftirError, ConfigError
 from aftir_rl.core.files import check_writable_dir, write_json
 from aftir_rl.experiments.runs import evaluate_run
+from aftir_rl.rl.pretrained import policy_dir
 
 __all__ = ["build_parser", "main", "evaluate_run"]
 
@@ -78,7 +79,15 @@ def build_parser() -> argparse.ArgumentParser:
         prog="python -m aftir_rl.evaluate",
         description="Evaluate trained runs (Q-table or SB3) and print one comparison table.",
     )
-    parser.add_argument("runs", nargs="+", metavar="RUN_DIR", help="run directories")
+    parser.add_argument("runs", nargs="*", metavar="RUN_DIR", help="run directories")
+    parser.add_argument(
+        "--pretrained",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="a policy shipped with the package, evaluated like a run (repeatable; "
+        "aftir pretrained lists them)",
+    )
     add_target_option(parser, "evaluation target for SB3 runs (repeatable)")
     parser.add_argument("--logdir", default="runs", help="where the evaluate__<time> logs go")
     parser.add_argument(
@@ -192,6 +201,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         draw = _check_draw(args.random, args.seed, targets)
         check_margin(args.margin)
         check_writable_dir(args.logdir)
+        args.runs = [*args.runs, *map(str, map(policy_dir, args.pretrained))]
+        if not args.runs:
+            raise ConfigError("give RUN_DIR... or --pretrained NAME")
         results = _evaluate_runs(args, targets, draw)
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -14,7 +14,7 @@ from tqdm import tqdm
 
 from aftir_rl.cli.args import bounded_int
 from aftir_rl.cli.guard import cli
-from aftir_rl.cli.rollout import policy_parser, policy_targets
+from aftir_rl.cli.rollout import policy_parser, policy_run, policy_targets
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import atomic_open
 
@@ -48,7 +48,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if not args.output.lower().endswith(".gif"):
         raise ConfigError(f"-o {args.output}: write a .gif")
-    _, config, env_id, model = load_run(args.run)
+    _, config, env_id, model = load_run(policy_run(args))
     frames = []
     for target in tqdm(
         policy_targets(args, env_id, config.env_kwargs), desc="episodes", disable=args.no_progress

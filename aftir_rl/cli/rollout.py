@@ -22,7 +22,7 @@ from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import check_writable_dir, write_json
 from aftir_rl.core.tank.loading import keep_run_tank
 
-__all__ = ["build_parser", "main", "policy_parser", "policy_targets"]
+__all__ = ["build_parser", "main", "policy_parser", "policy_run", "policy_targets"]
 
 #: The most targets one command rolls out.
 MAX_TARGETS = 1000
@@ -31,7 +31,14 @@ MAX_TARGETS = 1000
 def policy_parser(prog: str, what: str) -> argparse.ArgumentParser:
     """The options ``rollout`` and ``record`` share: the run, and ``--target`` or ``--random``."""
     parser = OneLineParser(prog=prog, description=what)
-    parser.add_argument("run", metavar="RUN_DIR", help="an SB3 run directory (or its best/)")
+    parser.add_argument(
+        "run", nargs="?", metavar="RUN_DIR", help="an SB3 run directory (or its best/)"
+    )
+    parser.add_argument(
+        "--pretrained",
+        metavar="NAME",
+        help="a policy shipped with the package instead of RUN_DIR (aftir pretrained lists them)",
+    )
     add_target_option(parser, "a target [cm] (repeatable)")
     parser.add_argument(
         "--random",
@@ -43,6 +50,15 @@ def policy_parser(prog: str, what: str) -> argparse.ArgumentParser:
         "--seed", type=bounded_int(0, 2**31), default=0, metavar="S", help="first seed of --random"
     )
     return parser
+
+
+def policy_run(args: argparse.Namespace) -> Path:
+    """The run directory of ``RUN_DIR`` or ``--pretrained NAME`` (one of them, not both)."""
+    from aftir_rl.rl.pretrained import policy_dir
+
+    if (args.run is None) == (args.pretrained is None):
+        raise ConfigError("give RUN_DIR or --pretrained NAME (aftir pretrained lists them)")
+    return Path(args.run) if args.pretrained is None else policy_dir(args.pretrained)
 
 
 def policy_targets(args: argparse.Namespace, env_id: str, env_kwargs: dict[str, Any]) -> list[Any]:
@@ -78,7 +94,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from aftir_rl.rl.sb3 import load_run
 
     args = build_parser().parse_args(argv)
-    algo, config, env_id, model = load_run(args.run)
+    run = policy_run(args)
+    algo, config, env_id, model = load_run(run)
     targets = policy_targets(args, env_id, config.env_kwargs)
     out = check_writable_dir(args.output, "--output")
     tank = config.env_kwargs.get("tank") or gym.spec(env_id.split(":")[-1]).kwargs.get(
@@ -95,7 +112,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             tank=keep_run_tank(tank, folder),
             algo=algo,
             env_id=config.env_id,
-            run=str(Path(args.run).resolve()),
+            run=args.pretrained or str(run.resolve()),
         )
         write_json(folder / "summary.json", summary)
         reached += result["complete"]
