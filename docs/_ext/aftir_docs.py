@@ -4,6 +4,7 @@
   as ``gym.make`` builds them, a picture from its ``rgb_array`` render after a few random steps,
   and its class docstring (description, spaces, rewards, episode end, arguments, version
   history), Gymnasium's layout.
+- ``pretrained.md``: the policies shipped with the package, from their cards.
 - ``cli.md``: one section per ``aftir`` subcommand of :data:`aftir_rl.cli.main.SUBCOMMANDS`, its
   options read from the subcommand's ``build_parser()`` by sphinx-argparse.
 
@@ -116,10 +117,48 @@ def write_cli_page(docs: Path) -> None:
     _write(docs / "cli.md", "\n".join(parts))
 
 
+def write_pretrained_page(docs: Path) -> None:
+    """``pretrained.md``: the policies shipped with the package, from their cards."""
+    from aftir_rl.rl.pretrained import card, names
+
+    rows = []
+    for name in names():
+        c = card(name)
+        t, train = c["test"], c["training"]
+        kwargs = ", ".join(f"`{k}={v}`" for k, v in c.get("env_kwargs", {}).items()) or "–"
+        rows.append(
+            f"| `{name}` | {c['algo'].upper()} | `{c['env_id']}` | {kwargs} | "
+            f"{train['timesteps']:,} | {train['minutes']:.1f} | "
+            f"{t['targets']} (seed {t['seed']}..) | {t['success_rate']:.1%} | "
+            f"{t['tip_error_cm']:.2f} | {t['collision_rate']:.1%} |"
+        )
+    text = (
+        "# Pretrained policies\n\n"
+        "Trained policies shipped inside the package, by name. Each is a run directory read by the "
+        "safe loader (nothing unpickled) with a card: the recipe, how it was chosen among the "
+        "candidates (validation targets), and what it measured on held-out test targets that "
+        "neither training nor the choice used. This table is generated from the cards "
+        "(`benchmarks/pretrained_card.py` writes them; a slow test measures each card's check set "
+        "again).\n\n"
+        "```bash\naftir pretrained                 # the list\naftir pretrained NAME            "
+        "# one card as JSON\naftir evaluate --pretrained NAME --random 200 --seed 4000000\n"
+        "aftir rollout --pretrained NAME --target X Y Z -o DIR\n```\n\n"
+        "```python\nimport gymnasium as gym\nfrom aftir_rl.rl.pretrained import load\n\n"
+        'model, env_id, env_kwargs = load("ppo-armreach")\n'
+        "env = gym.make(env_id, **env_kwargs)\n```"
+        "\n\n| name | algorithm | env | env arguments | steps | training minutes | test targets "
+        "| success | tip error (cm) | contacts |\n|---|---|---|---|---:|---:|---|---:|---:|---:|\n"
+        + "\n".join(rows)
+        + "\n"
+    )
+    _write(docs / "pretrained.md", text)
+
+
 def _generate(app: Any) -> None:
     docs = Path(app.srcdir)
     write_env_pages(docs)
     write_cli_page(docs)
+    write_pretrained_page(docs)
 
 
 def setup(app: Any) -> dict[str, Any]:
