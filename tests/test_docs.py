@@ -54,6 +54,9 @@ def _slug(heading: str) -> str:
     return text.replace(" ", "-")
 
 
+#: Pages the docs build writes (docs/_ext/aftir_docs.py), absent from a fresh clone.
+GENERATED = {"docs/cli.md", "docs/pretrained.md"}
+
 DOCS = ["README.md", *sorted(f"docs/{p.name}" for p in (ROOT / "docs").glob("*.md"))]
 
 
@@ -69,6 +72,8 @@ def test_doc_links_resolve(name):
             continue
         file, _, anchor = link.partition("#")
         target = (path.parent / file).resolve() if file else path
+        if target.relative_to(ROOT).as_posix() in GENERATED and not target.exists():
+            continue  # written by the docs build; test_site_builds... follows these links
         assert target.exists(), f"{name}: {link} names no file"
         if anchor:
             body = re.sub(r"```.*?```", "", target.read_text(), flags=re.S)
