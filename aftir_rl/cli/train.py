@@ -190,6 +190,22 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
         default=0,
         help="random seed (default 0; to 2**32-1)",
     )
+    p.add_argument(
+        "--env-kwargs",
+        nargs="+",
+        default=[],
+        metavar="KEY:VALUE",
+        help="env keyword arguments over the config's, RL Zoo's spelling (e.g. bay:1 guide:true; "
+        "values read as YAML)",
+    )
+    p.add_argument(
+        "--hyperparams",
+        nargs="+",
+        default=[],
+        metavar="KEY:VALUE",
+        help=f"{algo.upper()} hyperparameters over the config's (e.g. learning_rate:1e-4 "
+        "n_epochs:5)",
+    )
     p.add_argument("--logdir", default="runs", help="parent of the run directory")
     p.add_argument("--resume", help="model.zip or run directory to continue training from")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -199,6 +215,7 @@ def _main_sb3(args: argparse.Namespace) -> int:
     with interrupts.held():  # torch: Ctrl-C is taken once it is imported
         from aftir_rl.rl.sb3 import load_sb3_config
         from aftir_rl.rl.sb3.config import env_config_name
+        from aftir_rl.rl.sb3.overrides import with_overrides
         from aftir_rl.rl.sb3.train import train_sb3
 
     name = args.config or (env_config_name(args.algo, args.env) if args.env else args.algo)
@@ -209,6 +226,7 @@ def _main_sb3(args: argparse.Namespace) -> int:
             if isinstance(value, int) and value < 1:
                 raise ConfigError(f"--{key.replace('_', '-')} must be at least 1, got {value}")
             config = dataclasses.replace(config, **{key: value})
+    config = with_overrides(config, args.algo, args.env_kwargs, args.hyperparams)
     _say_rollout(args.algo, config)
     s = train_sb3(
         args.algo,

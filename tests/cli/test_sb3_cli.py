@@ -37,3 +37,19 @@ def test_steps_below_a_rollout_are_said(capsys):
     assert "so 16,384 steps are trained for --total-timesteps 4,096" in capsys.readouterr().out
     train._say_rollout("ppo", dataclasses.replace(config, total_timesteps=2 * 16_384))
     assert capsys.readouterr().out == ""
+
+
+@pytest.mark.parametrize(
+    "extra, says",
+    [
+        (["--env-kwargs", "nope:1"], "unknown key 'nope'"),
+        (["--hyperparams", "n_epochs:0"], "n_epochs"),
+        (["--env-kwargs", "bay"], "KEY:VALUE"),
+    ],
+)
+def test_bad_overrides_are_one_line_before_training(extra, says, tmp_path, capsys):
+    args = ["ppo", "--env", "AFTIR-ArmFTL-v0", "--logdir", str(tmp_path), *extra]
+    assert train.main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert says in err and "\n" not in err
+    assert list(tmp_path.iterdir()) == []  # nothing written

@@ -51,6 +51,7 @@ __all__ = [
     "HER_KWARGS",
     "OBJECT_KEYS",
     "load_sb3_config",
+    "parse_hyperparameters",
     "check_sb3_config",
     "check_goal_settings",
     "sb3_config_from_run",
@@ -127,6 +128,32 @@ def rollout_steps(algo: str, config: SB3Config) -> int:
     return n_steps * config.n_envs
 
 
+def parse_hyperparameters(hyper: dict[str, Any], algo: str, source: str) -> dict[str, Any]:
+    """``hyper`` with its keys checked against ``algo``'s constructor, ``3e-4`` strings parsed.
+
+    The values are checked by :func:`check_sb3_config`.
+
+    Raises:
+        ConfigError: a key the algorithm does not take, naming ``source``.
+
+    """
+    allowed = constructor_keys(algo)
+    parsed = {}
+    for key, value in hyper.items():
+        if key not in allowed:
+            raise ConfigError(
+                f"{source}: hyperparameters: unknown key {brief(key)} for {algo.upper()}; allowed "
+                f"keys are {', '.join(sorted(allowed))}"
+            )
+        if isinstance(value, str):
+            try:
+                value = to_float(value, f"{source}: hyperparameters.{key}")
+            except ConfigError:
+                pass
+        parsed[key] = value
+    return parsed
+
+
 def load_sb3_config(path: str | os.PathLike[str], algo: str) -> SB3Config:
     """Read and check an SB3 config (a path, or a shipped name such as ``ppo_ftl``).
 
@@ -141,20 +168,7 @@ def load_sb3_config(path: str | os.PathLike[str], algo: str) -> SB3Config:
         if not isinstance(key, str):
             raise ConfigError(f"{path}: hyperparameters: unknown key {brief(key)}")
     config = from_mapping(SB3Config, data, str(path))
-    allowed = constructor_keys(algo)
-    parsed = {}
-    for key, value in hyper.items():
-        if key not in allowed:
-            raise ConfigError(
-                f"{path}: hyperparameters: unknown key {brief(key)} for {algo.upper()}; allowed "
-                f"keys are {', '.join(sorted(allowed))}"
-            )
-        if isinstance(value, str):
-            try:
-                value = to_float(value, f"{path}: hyperparameters.{key}")
-            except ConfigError:
-                pass
-        parsed[key] = value
+    parsed = parse_hyperparameters(hyper, algo, str(path))
     config = SB3Config(**{**config.__dict__, "hyperparameters": parsed})
     check_sb3_config(config, algo, str(path))
     return config
