@@ -24,6 +24,7 @@ from aftir_rl.core.files import write_json
 from aftir_rl.experiments.bench import machine_facts
 from aftir_rl.experiments.runs import evaluate_run
 from aftir_rl.rl.sb3 import load_sb3_config
+from aftir_rl.rl.sb3.curriculum import train_curriculum
 from aftir_rl.rl.sb3.train import train_sb3
 
 METRICS = ("success_rate", "tip_error_cm", "collision_rate", "min_clearance_cm")
@@ -45,19 +46,14 @@ def yardstick(steps: int = 50_000) -> float:
 
 def train_seed(algo: str, configs: list[Any], seed: int, logdir: Path) -> dict[str, Any]:
     """Train every stage from ``seed``; the last stage's run directory, steps and seconds."""
-    resume, steps, seconds = None, 0, 0.0
-    for k, config in enumerate(configs):
-        summary = train_sb3(
-            algo,
-            config,
-            seed=seed,
-            logdir=logdir / f"seed{seed}" / f"stage{k}",
-            resume=resume,
-            progress_bar=False,
-        )
-        resume, steps = summary["run_dir"], int(summary["timesteps"])
-        seconds += float(summary["seconds"])
-    return {"run_dir": resume, "timesteps": steps, "train_seconds": seconds}
+    stages = train_curriculum(
+        train_sb3, algo, configs, seed, logdir / f"seed{seed}", progress_bar=False
+    )
+    return {
+        "run_dir": stages[-1]["run_dir"],
+        "timesteps": int(stages[-1]["timesteps"]),
+        "train_seconds": sum(float(s["seconds"]) for s in stages),
+    }
 
 
 def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:

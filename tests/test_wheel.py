@@ -134,13 +134,13 @@ def test_readme_first_steps_run_from_a_wheel(installed) -> None:
     env = {**env, "PATH": f"{bin_dir}{os.pathsep}{env['PATH']}", "OMP_NUM_THREADS": "1"}
     lines = [ln for block in _blocks("First steps", "bash") for ln in block.splitlines()]
     commands = [_small(ln) for ln in lines if ln.startswith("aftir ")]
-    assert len(commands) >= 8, commands
+    assert len(commands) >= 9, commands
     for command in commands:
         out = _run(["bash", "-c", command], cwd, env)
         assert out.returncode == 0, f"{command}\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}"
     assert (cwd / "view.html").stat().st_size > 100_000
     assert (cwd / "arm.gif").read_bytes()[:6] == b"GIF89a"
-    assert list((cwd / "runs" / "stage2").glob("ppo__*/best/model.zip"))
+    assert list((cwd / "runs" / "best" / "stage1").glob("ppo__*/best/model.zip"))
 
 
 def test_readme_python_examples_run_from_a_wheel(installed) -> None:

@@ -211,37 +211,56 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def _main_sb3(args: argparse.Namespace) -> int:
-    with interrupts.held():  # torch: Ctrl-C is taken once it is imported
-        from aftir_rl.rl.sb3 import load_sb3_config
-        from aftir_rl.rl.sb3.config import env_config_name
-        from aftir_rl.rl.sb3.overrides import with_overrides
-        from aftir_rl.rl.sb3.train import train_sb3
+def _sb3_configs(args: argparse.Namespace) -> list[Any]:
+    """The configs to train: one, or a stage file's stages, with the command line's overrides.
+
+    ``--total-timesteps``, ``--n-envs``, ``--env-kwargs`` and ``--hyperparams`` apply to every
+    stage (a short try of a whole curriculum); ``--env`` names the config, or the env of one.
+    """
+    from aftir_rl.rl.sb3 import load_sb3_config
+    from aftir_rl.rl.sb3.config import env_config_name
+    from aftir_rl.rl.sb3.curriculum import is_curriculum, load_curriculum
+    from aftir_rl.rl.sb3.overrides import with_overrides
 
     name = args.config or (env_config_name(args.algo, args.env) if args.env else args.algo)
-    config = load_sb3_config(name, args.algo)
-    overrides = {"env_id": args.env, "total_timesteps": args.total_timesteps, "n_envs": args.n_envs}
-    for key, value in overrides.items():
-        if value is not None:
-            if isinstance(value, int) and value < 1:
-                raise ConfigError(f"--{key.replace('_', '-')} must be at least 1, got {value}")
-            config = dataclasses.replace(config, **{key: value})
-    config = with_overrides(config, args.algo, args.env_kwargs, args.hyperparams)
-    _say_rollout(args.algo, config)
-    s = train_sb3(
-        args.algo,
-        config,
-        seed=args.seed,
-        logdir=args.logdir,
-        resume=args.resume,
-        progress_bar=not args.no_progress,
-    )
-    print(
-        f"{args.algo.upper()} on {s['env_id']}: {s['timesteps']} steps in {s['seconds']:.0f} s; "
-        f"evaluation: success {s['success_rate']:.0%}, tip error {s['tip_error_cm']:.1f} cm, "
-        f"path {s['path_length_cm']:.0f} cm, collisions {s['collision_rate']:.0%}"
-    )
-    print(f"  run dir: {s['run_dir']}")
+    staged = is_curriculum(name)
+    if staged and args.env:
+        raise ConfigError(f"--env: {name} is a stage file; its stages name their env")
+    configs = load_curriculum(name, args.algo) if staged else [load_sb3_config(name, args.algo)]
+    changes = {"env_id": args.env, "n_envs": args.n_envs, "total_timesteps": args.total_timesteps}
+    for k, config in enumerate(configs):
+        config = dataclasses.replace(config, **{a: v for a, v in changes.items() if v is not None})
+        configs[k] = with_overrides(config, args.algo, args.env_kwargs, args.hyperparams)
+    return configs
+
+
+def _main_sb3(args: argparse.Namespace) -> int:
+    with interrupts.held():  # torch: Ctrl-C is taken once it is imported
+        from aftir_rl.rl.sb3.curriculum import train_curriculum
+        from aftir_rl.rl.sb3.train import train_sb3
+
+    configs = _sb3_configs(args)
+    for config in configs:
+        _say_rollout(args.algo, config)
+    options = {"progress_bar": not args.no_progress}
+    if len(configs) == 1:
+        summaries = [
+            train_sb3(args.algo, configs[0], args.seed, args.logdir, args.resume, **options)
+        ]
+    else:
+        print(f"{len(configs)} stages, each resumed from the one before: {args.logdir}/stage<k>/")
+        summaries = train_curriculum(
+            train_sb3, args.algo, configs, args.seed, args.logdir, args.resume, **options
+        )
+    for k, s in enumerate(summaries):
+        stage = f"stage {k}: " if len(summaries) > 1 else ""
+        print(
+            f"{stage}{args.algo.upper()} on {s['env_id']}: {s['timesteps']} steps in "
+            f"{s['seconds']:.0f} s; evaluation: success {s['success_rate']:.0%}, tip error "
+            f"{s['tip_error_cm']:.1f} cm, path {s['path_length_cm']:.0f} cm, collisions "
+            f"{s['collision_rate']:.0%}"
+        )
+        print(f"  run dir: {s['run_dir']}")
     return 0
 
 
