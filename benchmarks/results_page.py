@@ -66,6 +66,12 @@ def bench_section(data: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _task(d: dict[str, Any]) -> str:
+    """The env and its bay, if the recipe names one."""
+    bay = d["eval"].get("env_kwargs", {}).get("bay")
+    return f"{d['env_id']}" + (f" bay {bay}" if bay else "")
+
+
 def _clearance(runs: list[dict[str, Any]]) -> str:
     """The least clearance of the runs' motions, or "contact" (python-fcl reports -1)."""
     least = min(r["min_clearance_cm"] for r in runs)
@@ -116,6 +122,15 @@ def seeds_section(files: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: What each benchmark method is, for the README's table.
+METHODS = {
+    "tsm": "a posture (three-segment method), no motion",
+    "q_table+ftl": "Q-learning's cells, then a follow-the-leader motion (1 cm margin)",
+    "q_table+postures": "the papers' chain of postures along the cells",
+    "rrt_connect": "RRT-Connect in joint space (OMPL)",
+}
+
+
 def readme_table(results: Path) -> str:
     """The README's short table: the motion methods through the hatch, and each RL recipe."""
     lines = [
@@ -127,8 +142,9 @@ def readme_table(results: Path) -> str:
         data = json.loads(bench.read_text())
         for r in data["rows"]:
             if r["set"] == "bay2":
+                what = METHODS.get(r["method"], "")
                 lines.append(
-                    f"| `{r['method']}` | bay 2, {r['targets']} random targets | "
+                    f"| `{r['method']}`: {what} | bay 2, {r['targets']} random targets | "
                     f"{_num(r['success_rate'] * 100, '.0f')}% | {_num(r['seconds'], '.2f')} s "
                     "per target | one run |"
                 )
@@ -136,7 +152,7 @@ def readme_table(results: Path) -> str:
         d = json.loads(path.read_text())
         s = d["summary"]
         lines.append(
-            f"| {d['recipe']} | {d['env_id']}, {d['eval']['targets']} held-out targets | "
+            f"| {d['recipe']} | {_task(d)}, {d['eval']['targets']} held-out targets | "
             f"{_pm(s, 'success_rate', 100, '.0f')}% | "
             f"{_pm(s, 'train_seconds', 1 / 60, '.0f')} min training | {len(d['runs'])} seeds |"
         )
