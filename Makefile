@@ -29,7 +29,7 @@ test-all: $(STAMP)
 	$(PYTEST)
 
 # The run-directory fuzzer: FUZZ_CASES mutated run directories for each of view, evaluate,
-# rollout and rank_checkpoints (test-all runs 10 each; .ci/run 300; 2,000 take about an hour on
+# rollout and rank_checkpoints (test-all runs 5 each; .ci/run 300; 2,000 take about an hour on
 # 2 cores).
 FUZZ_CASES ?= 2000
 fuzz: $(STAMP)

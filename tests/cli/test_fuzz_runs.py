@@ -6,7 +6,7 @@ keys, FIFOs, devices, symlinks out of the run, sparse 5 GB files, truncation, fl
 zip and npz members: dropped, extra, corrupt, deflate bombs, sizes that lie) and each command
 runs on every mutated copy. Every case must end in exit 0 or 2, with one line on stderr for 2,
 no traceback, within :data:`tests.fuzz.CASE_SECONDS`, and the process's peak memory must stay
-under :data:`PEAK_MB`. ``AFTIR_FUZZ_CASES`` sets the number of cases per command (10 in
+under :data:`PEAK_MB`. ``AFTIR_FUZZ_CASES`` sets the number of cases per command (5 in
 ``make test-all``, 300 in CI, 2,000 in ``make fuzz``).
 """
 
@@ -26,7 +26,7 @@ from tests.fuzz import CASE_SECONDS
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).parents[2]
-CASES = int(os.environ.get("AFTIR_FUZZ_CASES", "10"))  # ``make fuzz``: 2,000
+CASES = int(os.environ.get("AFTIR_FUZZ_CASES", "5"))  # ``make fuzz``: 2,000
 #: The most memory [MB] the fuzzing process may reach over all its cases. One command alone peaks
 #: at 360-460 MB (evaluate of a Q-table, ArmReach or ArmFTL run, torch loaded); the process runs
 #: every case in turn and keeps what they cache (tanks, guide fields, torch's pools), so its peak
