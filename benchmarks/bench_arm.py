@@ -15,19 +15,7 @@ import numpy as np
 from stable_baselines3 import PPO
 
 import aftir_rl  # noqa: F401
-
-
-def rate(env_id: str, steps: int, **kwargs) -> float:
-    env = gym.make(env_id, **kwargs)
-    env.reset(seed=0)
-    env.action_space.seed(0)
-    actions = [env.action_space.sample() for _ in range(steps)]
-    start = time.perf_counter()
-    for a in actions:
-        _, _, term, trunc, _ = env.step(a)
-        if term or trunc:
-            env.reset()
-    return steps / (time.perf_counter() - start)
+from aftir_rl.experiments.bench import env_steps_per_second
 
 
 def ppo_rate(env_id: str, steps: int) -> float:
@@ -43,12 +31,12 @@ def main() -> None:
         f"{platform.python_version()}, numpy {np.__version__}"
     )
     print()
-    lake = rate("FrozenLake-v1", 50_000, map_name="8x8", is_slippery=False)
+    lake = env_steps_per_second("FrozenLake-v1", 50_000, map_name="8x8", is_slippery=False)
     print("| env | env steps/s | vs FrozenLake 8x8 | PPO steps/s | env share of PPO's step |")
     print("|---|---:|---:|---:|---:|")
     print(f"| FrozenLake-v1 8x8 | {lake:,.0f} | 1.00x | | |")
     for env_id in ("AFTIR-ArmReach-v0", "AFTIR-Arm-v0"):
-        env_rate = rate(env_id, 5_000)
+        env_rate = env_steps_per_second(env_id, 5_000)
         train_rate = ppo_rate(env_id, 4_096)
         share = train_rate / env_rate
         print(

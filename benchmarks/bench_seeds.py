@@ -17,31 +17,16 @@ import time
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from aftir_rl.core.files import write_json
-from aftir_rl.experiments.bench import machine_facts
+from aftir_rl.experiments.bench import env_steps_per_second, machine_facts
 from aftir_rl.experiments.runs import evaluate_run
 from aftir_rl.rl.sb3 import load_sb3_config
 from aftir_rl.rl.sb3.curriculum import train_curriculum
 from aftir_rl.rl.sb3.train import train_sb3
 
 METRICS = ("success_rate", "tip_error_cm", "collision_rate", "min_clearance_cm")
-
-
-def yardstick(steps: int = 50_000) -> float:
-    """FrozenLake 8x8 (not slippery) random steps per second on this machine, now."""
-    env = gym.make("FrozenLake-v1", map_name="8x8", is_slippery=False)
-    env.reset(seed=0)
-    env.action_space.seed(0)
-    actions = [env.action_space.sample() for _ in range(steps)]
-    start = time.perf_counter()
-    for a in actions:
-        _, _, term, trunc, _ = env.step(a)
-        if term or trunc:
-            env.reset()
-    return steps / (time.perf_counter() - start)
 
 
 def train_seed(algo: str, configs: list[Any], seed: int, logdir: Path) -> dict[str, Any]:
@@ -85,7 +70,7 @@ def main() -> None:
         configs[-1] = dataclasses.replace(configs[-1], total_timesteps=args.total_timesteps)
     name = args.name or " → ".join(args.config)
     logdir = Path(args.logdir) / name.replace(" ", "_").replace("→", "then")
-    lake = yardstick()
+    lake = env_steps_per_second("FrozenLake-v1", 50_000, map_name="8x8", is_slippery=False)
     rows = []
     for seed in args.seeds:
         row = {"seed": seed, **train_seed(args.algo, configs, seed, logdir)}

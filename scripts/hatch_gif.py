@@ -12,13 +12,11 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from PIL import Image
 
-from aftir_rl.core.files import atomic_open
 from aftir_rl.core.robot import body_points
 from aftir_rl.core.tank import load_tank
 from aftir_rl.planning.ftl.plan import plan_motion
-from aftir_rl.viz.plotting import PathRenderer
+from aftir_rl.viz.plotting import PathRenderer, save_gif
 
 
 def frames(target: list[float], count: int) -> list[np.ndarray]:
@@ -47,18 +45,8 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=60)
     parser.add_argument("--fps", type=int, default=12)
     args = parser.parse_args()
-    images = [Image.fromarray(f).quantize(colors=64) for f in frames(args.target, args.frames)]
-    with atomic_open(args.output, "wb") as fh:
-        images[0].save(
-            fh,
-            format="GIF",
-            save_all=True,
-            append_images=images[1:],
-            duration=round(1000 / args.fps),
-            loop=0,
-            optimize=True,
-        )
-    print(f"wrote {args.output} ({len(images)} frames)")
+    count = save_gif(args.output, frames(args.target, args.frames), args.fps)
+    print(f"wrote {args.output} ({count} frames)")
 
 
 if __name__ == "__main__":

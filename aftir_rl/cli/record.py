@@ -16,7 +16,6 @@ from aftir_rl.cli.args import bounded_int
 from aftir_rl.cli.guard import cli
 from aftir_rl.cli.rollout import policy_parser, policy_run, policy_targets
 from aftir_rl.core.errors import ConfigError
-from aftir_rl.core.files import atomic_open
 
 __all__ = ["build_parser", "main"]
 
@@ -40,10 +39,9 @@ def build_parser() -> argparse.ArgumentParser:
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``aftir record``."""
-    from PIL import Image
-
     from aftir_rl.experiments.rollout import record_frames
     from aftir_rl.rl.sb3 import load_run
+    from aftir_rl.viz.plotting import save_gif
 
     args = build_parser().parse_args(argv)
     if not args.output.lower().endswith(".gif"):
@@ -55,15 +53,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     ):
         episode = record_frames(model, env_id, config.env_kwargs, target)
         frames += episode[:: args.every] + [episode[-1]] * 10  # hold the end a moment
-    images = [Image.fromarray(f) for f in frames]
-    with atomic_open(args.output, "wb") as fh:
-        images[0].save(
-            fh,
-            format="GIF",
-            save_all=True,
-            append_images=images[1:],
-            duration=round(1000 / args.fps),
-            loop=0,
-        )
-    print(f"wrote {args.output} ({len(images)} frames)")
+    count = save_gif(args.output, frames, args.fps)
+    print(f"wrote {args.output} ({count} frames)")
     return 0

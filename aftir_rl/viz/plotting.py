@@ -12,6 +12,7 @@ artists are drawn after the tank's spheres rather than depth-sorted with them.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, cast
 
@@ -26,7 +27,7 @@ if TYPE_CHECKING:
     from mpl_toolkits.mplot3d.art3d import Path3DCollection
     from mpl_toolkits.mplot3d.axes3d import Axes3D
 
-__all__ = ["draw_tank", "path_figure", "figure_to_rgb", "render_path", "PathRenderer"]
+__all__ = ["draw_tank", "path_figure", "figure_to_rgb", "render_path", "PathRenderer", "save_gif"]
 
 #: Wireframe style of each kind of solid.
 _SOLID_STYLE: dict[str, dict[str, Any]] = {
@@ -209,3 +210,25 @@ class PathRenderer:
         marker.set_3d_properties(point[2:3], "z")
         marker.do_3d_projection()
         self._ax.draw_artist(marker)
+
+
+def save_gif(path: str | os.PathLike[str], frames: Sequence[NDArray[np.uint8]], fps: int) -> int:
+    """Write RGB ``frames`` as a looping animated GIF (Pillow), atomically; the frame count."""
+    from PIL import Image
+
+    from aftir_rl.core.files import atomic_open
+
+    images = [Image.fromarray(np.asarray(f)) for f in frames]
+    if not images:
+        raise ValueError("no frames to write")
+    with atomic_open(path, "wb") as fh:
+        images[0].save(
+            fh,
+            format="GIF",
+            save_all=True,
+            append_images=images[1:],
+            duration=round(1000 / fps),
+            loop=0,
+            optimize=True,
+        )
+    return len(images)
