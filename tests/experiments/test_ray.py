@@ -291,7 +291,7 @@ def test_bench_on_ray_gives_the_serial_table():
 
 @pytest.fixture(scope="module")
 def sweep(tmp_path_factory):
-    """A sweep of 8 PPO trials of 256 steps on AFTIR-ArmReach-v0, on a local Ray of 2 CPUs."""
+    """A sweep of 4 PPO trials of 256 steps on AFTIR-ArmReach-v0, on a local Ray of 2 CPUs."""
     pytest.importorskip("ray")
     tmp = tmp_path_factory.mktemp("tune")
     (tmp / "base.yaml").write_text(BASE_PPO)
@@ -303,7 +303,7 @@ def sweep(tmp_path_factory):
         "--env",
         "AFTIR-ArmReach-v0",
         "--trials",
-        "8",
+        "4",
         "--workers",
         "2",
         "--total-timesteps",
@@ -327,7 +327,7 @@ def test_sweep_writes_runs_and_a_best_config(sweep):
     tmp, folder, stdout = sweep
     with open(folder / "trials.csv") as fh:
         trials = list(csv.DictReader(fh))
-    assert len(trials) == 8 and not any(t["error"] for t in trials)
+    assert len(trials) == 4 and not any(t["error"] for t in trials)
     for t in trials:
         run = Path(t["run_dir"])
         assert run.parent == folder and (run / "model.zip").exists()
