@@ -35,7 +35,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.name is not None:
         print(json.dumps(card(args.name), indent=2))
         return 0
-    for name in names():
+    shipped = names()
+    for name in shipped:
         c = card(name)
         test = c["test"]
         kwargs = ", ".join(f"{k}={v}" for k, v in c.get("env_kwargs", {}).items())
@@ -45,5 +46,5 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{test['collision_rate']:.1%} contacts on {test['targets']} held-out targets "
             f"(seed {test['seed']}..)"
         )
-    print(f"({len(names())} in {POLICY_DIR})")
+    print(f"({len(shipped)} in {POLICY_DIR})")
     return 0

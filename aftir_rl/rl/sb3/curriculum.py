@@ -105,8 +105,7 @@ def train_curriculum(
     """
     summaries = []
     for k, config in enumerate(configs):
-        stage_dir = Path(logdir) / f"stage{k}"
-        stage_dir.mkdir(parents=True, exist_ok=True)
+        stage_dir = Path(logdir) / f"stage{k}"  # made and checked by ``train`` (one line if not)
         summary = train(algo, config, seed=seed, logdir=stage_dir, resume=resume, **kwargs)
         summaries.append(summary)
         resume = summary["run_dir"]
