@@ -117,7 +117,7 @@ def main() -> None:
     )
     parser.add_argument(
         "--config",
-        default="configs/ppo_ftl_cost.yaml",
+        default="experiments/configs/ppo_ftl_cost.yaml",
         help="training config of the PPO row and of the 'as trained' env rows",
     )
     args = parser.parse_args()

@@ -1,12 +1,13 @@
 """An RL recipe from several seeds, measured on the same held-out targets: mean ± std per metric.
 
-Run: ``python benchmarks/bench_seeds.py ppo --config ppo --seeds 0 1 2 --json OUT.json``.
-A recipe is one shipped config (or several: ``--config A --config B`` trains A, then B resumed
-from A's model, a curriculum). Each seed trains the whole recipe, then its final model plays one
-deterministic episode per target on ``--random N`` targets its env draws from ``--eval-seed``
-(seeds training never evaluated on). Written to ``--json``: the machine, a FrozenLake 8x8
-yardstick (steps/s measured in the same run), every seed's numbers and their mean and standard
-deviation; ``benchmarks/results_page.py`` turns the file into the docs' results page.
+Run: ``python benchmarks/bench_seeds.py ppo --config AFTIR-ArmReach-v0 --seeds 0 1 2 --json
+OUT.json``. A recipe is one config, named or the entry of an env id (or several: ``--config A
+--config B`` trains A, then B resumed from A's model, a curriculum). Each seed trains the whole
+recipe, then its final model plays one deterministic episode per target on ``--random N``
+targets its env draws from ``--eval-seed`` (seeds training never evaluated on). Written to
+``--json``: the machine, a FrozenLake 8x8 yardstick (steps/s measured in the same run), every
+seed's numbers and their mean and standard deviation; ``benchmarks/results_page.py`` turns the
+file into the docs' results page.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 from aftir_rl.core.files import write_json
 from aftir_rl.experiments.bench import env_steps_per_second, machine_facts
 from aftir_rl.experiments.runs import evaluate_run
-from aftir_rl.rl.sb3 import load_sb3_config
+from aftir_rl.rl.sb3 import entry_config, load_sb3_config
 from aftir_rl.rl.sb3.curriculum import train_curriculum
 from aftir_rl.rl.sb3.train import train_sb3
 
@@ -55,7 +56,12 @@ def main() -> None:
     """Train and measure every seed; write the JSON."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("algo", choices=("ppo", "sac", "td3"))
-    parser.add_argument("--config", action="append", required=True, help="stage config(s)")
+    parser.add_argument(
+        "--config",
+        action="append",
+        required=True,
+        help="stage config(s): a named config, or an env id for its hyperparameter entry",
+    )
     parser.add_argument("--name", help="the recipe's name on the results page")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--total-timesteps", type=int, help="steps of the last stage")
@@ -65,7 +71,12 @@ def main() -> None:
     parser.add_argument("--json", required=True, help="where the results go")
     args = parser.parse_args()
 
-    configs = [load_sb3_config(name, args.algo) for name in args.config]
+    configs = [
+        entry_config(args.algo, name)
+        if name.startswith("AFTIR-")
+        else load_sb3_config(name, args.algo)
+        for name in args.config
+    ]
     if args.total_timesteps:
         configs[-1] = dataclasses.replace(configs[-1], total_timesteps=args.total_timesteps)
     name = args.name or " → ".join(args.config)

@@ -40,8 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
         "folder",
         nargs="?",
         default="",
-        choices=["", "tanks", "search_spaces"],
-        help="only the tanks or the search spaces (default: everything)",
+        choices=["", "hyperparams", "tanks", "search_spaces"],
+        help="only the hyperparameter files, the tanks or the search spaces (default: everything)",
     )
     return parser
 

@@ -36,6 +36,7 @@ from aftir_rl.core import interrupts
 from aftir_rl.core.config import CONFIG_DIR, DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, ConfigError
 from aftir_rl.experiments.runs import load_q_table_config
+from aftir_rl.rl.common import DEFAULT_SB3_ENV_ID
 
 # The trainers (torch, numba) are imported when a command runs: Ctrl-C is honoured from then.
 __all__ = ["build_parser", "main", "load_q_table_config"]
@@ -163,13 +164,15 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
     )
     p.add_argument(
         "--config",
-        help="YAML of SB3Config fields: a path or a shipped name (aftir configs lists them); "
-        f"default: the shipped one for --env, else {algo}",
+        help="YAML of SB3Config fields over the env's hyperparameters, or a stage file: a path or "
+        "a shipped name (aftir configs lists them); default: the entry of --env in "
+        f"configs/hyperparams/{algo}.yml",
     )
     p.add_argument(
         "--env",
-        help="environment id, e.g. AFTIR-ArmFTL-v0: without --config, the shipped config for it; "
-        "with --config, overrides its env_id",
+        help="environment id, e.g. AFTIR-ArmFTL-v0: without --config, its entry in "
+        f"configs/hyperparams/{algo}.yml (default {DEFAULT_SB3_ENV_ID}); with --config, overrides "
+        "its env_id",
     )
     p.add_argument(
         "--total-timesteps",
@@ -206,28 +209,64 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
         help=f"{algo.upper()} hyperparameters over the config's (e.g. learning_rate:1e-4 "
         "n_epochs:5)",
     )
+    _add_run_numbers(p)
     p.add_argument("--logdir", default="runs", help="parent of the run directory")
     p.add_argument("--resume", help="model.zip or run directory to continue training from")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
+def _add_run_numbers(p: argparse.ArgumentParser) -> None:
+    """Add RL Zoo's ``--eval-freq``, ``--eval-episodes`` and ``--save-freq`` to ``p``."""
+    p.add_argument(
+        "--eval-freq",
+        type=bounded_int(1, MAX_TIMESTEPS),
+        metavar="T",
+        help="steps between evaluations (overrides config; default: every 5%% of the run)",
+    )
+    p.add_argument(
+        "--eval-episodes",
+        type=bounded_int(1, 1000),
+        metavar="N",
+        help="fixed evaluation targets, up to 1,000 (overrides config's eval_targets)",
+    )
+    p.add_argument(
+        "--save-freq",
+        type=bounded_int(1, MAX_TIMESTEPS),
+        metavar="T",
+        help="steps between checkpoints (overrides config; default: every 10%% of the run)",
+    )
+
+
 def _sb3_configs(args: argparse.Namespace) -> list[Any]:
     """The configs to train: one, or a stage file's stages, with the command line's overrides.
 
-    ``--total-timesteps``, ``--n-envs``, ``--env-kwargs`` and ``--hyperparams`` apply to every
-    stage (a short try of a whole curriculum); ``--env`` names the config, or the env of one.
+    The numbers of the command line, ``--env-kwargs`` and ``--hyperparams`` apply to every stage
+    (a short try of a whole curriculum); ``--env`` alone trains the env's entry in the
+    hyperparameter file (or in ``--config``'s, if it is one), with a named config it replaces the
+    config's env.
     """
-    from aftir_rl.rl.sb3 import load_sb3_config
-    from aftir_rl.rl.sb3.config import env_config_name
     from aftir_rl.rl.sb3.curriculum import is_curriculum, load_curriculum
+    from aftir_rl.rl.sb3.hyperparams import entry_config, is_hyperparams_file, load_sb3_config
     from aftir_rl.rl.sb3.overrides import with_overrides
 
-    name = args.config or (env_config_name(args.algo, args.env) if args.env else args.algo)
-    staged = is_curriculum(name)
-    if staged and args.env:
-        raise ConfigError(f"--env: {name} is a stage file; its stages name their env")
-    configs = load_curriculum(name, args.algo) if staged else [load_sb3_config(name, args.algo)]
-    changes = {"env_id": args.env, "n_envs": args.n_envs, "total_timesteps": args.total_timesteps}
+    if args.config is None:
+        configs = [entry_config(args.algo, args.env or DEFAULT_SB3_ENV_ID)]
+    elif is_curriculum(args.config):
+        if args.env:
+            raise ConfigError(f"--env: {args.config} is a stage file; its stages name their env")
+        configs = load_curriculum(args.config, args.algo)
+    elif is_hyperparams_file(args.config):  # RL Zoo's -conf: the entry of --env
+        configs = [entry_config(args.algo, args.env or DEFAULT_SB3_ENV_ID, args.config)]
+    else:
+        configs = [load_sb3_config(args.config, args.algo)]
+    changes = {
+        "env_id": args.env,
+        "n_envs": args.n_envs,
+        "total_timesteps": args.total_timesteps,
+        "eval_freq": args.eval_freq,
+        "eval_targets": args.eval_episodes,
+        "checkpoint_freq": args.save_freq,
+    }
     for k, config in enumerate(configs):
         config = dataclasses.replace(config, **{a: v for a, v in changes.items() if v is not None})
         configs[k] = with_overrides(config, args.algo, args.env_kwargs, args.hyperparams)

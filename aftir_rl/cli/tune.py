@@ -27,7 +27,7 @@ from aftir_rl.core.config import CONFIG_DIR
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.experiments.search_space import load_search_space
 from aftir_rl.experiments.tune import ALGOS, MAX_EVALUATIONS, MAX_TRIALS, run_sweep
-from aftir_rl.rl.common import check_env_id
+from aftir_rl.rl.common import DEFAULT_SB3_ENV_ID, check_env_id
 
 __all__ = ["build_parser", "main"]
 
@@ -43,7 +43,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("algo", choices=ALGOS, metavar="ALGO", help="ppo, sac or td3")
     parser.add_argument(
-        "--env", help="environment id (default: the config's), e.g. AFTIR-ArmReach-v0"
+        "--env",
+        help="environment id, e.g. AFTIR-ArmReach-v0: without --config, the base is its entry in "
+        "configs/hyperparams/ALGO.yml (default AFTIR-ArmReach-v0); with --config, replaces the "
+        "config's",
     )
     parser.add_argument(
         "--trials",
@@ -76,7 +79,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="envs (and CPUs) of each trial: up to 64 subprocesses, or up to "
         f"{MAX_ENVS:,} rows of a batched env (default: the config's)",
     )
-    parser.add_argument("--config", help="base config (default: configs/ALGO.yaml)")
+    parser.add_argument(
+        "--config", help="base config: a named config or a path (default: the entry of --env)"
+    )
     parser.add_argument("--space", help="search space (default: configs/search_spaces/ALGO.yaml)")
     parser.add_argument(
         "--seed",
@@ -89,10 +94,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _base_config(args: argparse.Namespace) -> Any:
-    """The config every trial starts from: ``--config`` with the command line's overrides."""
-    from aftir_rl.rl.sb3 import check_sb3_config, load_sb3_config
+    """The config every trial starts from: ``--config`` or ``--env``'s entry, with overrides."""
+    from aftir_rl.rl.sb3 import check_sb3_config, entry_config, load_sb3_config
 
-    config = load_sb3_config(args.config or CONFIG_DIR / f"{args.algo}.yaml", args.algo)
+    if args.config is None:
+        config = entry_config(args.algo, args.env or DEFAULT_SB3_ENV_ID)
+    else:
+        config = load_sb3_config(args.config, args.algo)
     for flag, value in (
         ("--trials", args.trials),
         ("--evaluations", args.evaluations),

@@ -10,7 +10,10 @@ from aftir_rl.core.config import brief
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.envs.registration import registered_env_id
 
-__all__ = ["check_env_id", "target_tag", "run_name", "hyperparameter_text"]
+__all__ = ["DEFAULT_SB3_ENV_ID", "check_env_id", "target_tag", "run_name", "hyperparameter_text"]
+
+#: The env ``aftir train ppo|sac|td3`` trains when neither ``--env`` nor ``--config`` is given.
+DEFAULT_SB3_ENV_ID = "AFTIR-ArmReach-v0"
 
 
 def target_tag(target: Sequence[float]) -> str:

@@ -17,7 +17,6 @@ from pathlib import Path
 import pytest
 
 from aftir_rl.cli.args import OneLineParser, add_target_option, bounded_int
-from aftir_rl.core.config import CONFIG_DIR
 from aftir_rl.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -127,9 +126,9 @@ def test_negative_numbers_are_values():
 
 @pytest.fixture(scope="module")
 def ppo_base():
-    from aftir_rl.rl.sb3 import load_sb3_config
+    from aftir_rl.rl.sb3 import entry_config
 
-    return load_sb3_config(CONFIG_DIR / "ppo.yaml", "ppo")
+    return entry_config("ppo", "AFTIR-ArmReach-v0")
 
 
 @pytest.mark.parametrize(

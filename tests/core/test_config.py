@@ -179,7 +179,7 @@ def test_a_path_wins_and_unknown_names_list_the_shipped(tmp_path, monkeypatch):
     (tmp_path / "ppo_ftl.yaml").write_text("env_id: AFTIR-ArmReach-v0\n")
     assert find_config("ppo_ftl.yaml") == Path("ppo_ftl.yaml")
     for name in ("nope", "../configs/ppo", "/etc/passwd.yaml", ""):
-        with pytest.raises(ConfigError, match="no shipped config of that name; shipped: ppo,"):
+        with pytest.raises(ConfigError, match="no shipped config of that name; shipped: ppo_ftl,"):
             find_config(name)
     assert "tanks/b737_center" in shipped_configs() and "ppo_ftl" in shipped_configs()
 

@@ -642,9 +642,9 @@ def test_train_cli_sac_her(tmp_path):
 
     from aftir_rl.cli.train import main
 
-    config = yaml.safe_load(open("configs/sac_ftl.yaml"))
-    config.update(total_timesteps=400, eval_freq=400, eval_targets=2, checkpoint_freq=400)
-    config["hyperparameters"].update(
+    config = {"env_id": "AFTIR-ArmFTL-v0", "total_timesteps": 400, "eval_freq": 400}
+    config.update(eval_targets=2, checkpoint_freq=400)  # HER from the entry of sac.yml
+    config["hyperparameters"] = dict(
         learning_starts=320, batch_size=16, buffer_size=2000, policy_kwargs={"net_arch": [16]}
     )
     path = tmp_path / "sac.yaml"

@@ -447,7 +447,7 @@ def test_train_cli_ppo_on_the_batched_env(tmp_path):
     config.update(
         total_timesteps=512, n_envs=16, eval_freq=512, eval_targets=2, checkpoint_freq=512
     )
-    config["hyperparameters"].update(
+    config["hyperparameters"] = dict(  # over the entry of configs/hyperparams/ppo.yml
         n_steps=16, batch_size=128, n_epochs=1, policy_kwargs={"net_arch": [16]}
     )
     path = tmp_path / "ppo.yaml"

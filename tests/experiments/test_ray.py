@@ -156,9 +156,9 @@ def test_tune_help_and_dispatch(capsys):
 @pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
 def test_shipped_search_spaces_load(algo):
     from aftir_rl.experiments.tune import load_search_space
-    from aftir_rl.rl.sb3 import load_sb3_config
+    from aftir_rl.rl.sb3 import entry_config
 
-    base = load_sb3_config(CONFIG_DIR / f"{algo}.yaml", algo)
+    base = entry_config(algo, "AFTIR-ArmReach-v0")
     space = load_search_space(CONFIG_DIR / "search_spaces" / f"{algo}.yaml", algo, base)
     assert {d.key for d in space} >= {"learning_rate", "batch_size", "gamma"}
 
@@ -183,9 +183,9 @@ def test_shipped_search_spaces_load(algo):
 )
 def test_search_space_is_checked(tmp_path, text, message):
     from aftir_rl.experiments.tune import load_search_space
-    from aftir_rl.rl.sb3 import load_sb3_config
+    from aftir_rl.rl.sb3 import entry_config
 
-    base = load_sb3_config(CONFIG_DIR / "ppo.yaml", "ppo")
+    base = entry_config("ppo", "AFTIR-ArmReach-v0")
     path = tmp_path / "space.yaml"
     path.write_text(text)
     with pytest.raises(ConfigError, match=re.escape(message)):
@@ -207,9 +207,9 @@ def test_best_config_yaml_is_a_training_config(tmp_path):
     import dataclasses
 
     from aftir_rl.experiments.tune import write_config_yaml
-    from aftir_rl.rl.sb3 import load_sb3_config
+    from aftir_rl.rl.sb3 import entry_config, load_sb3_config
 
-    base = load_sb3_config(CONFIG_DIR / "ppo.yaml", "ppo")
+    base = entry_config("ppo", "AFTIR-ArmReach-v0")
     best = dataclasses.replace(
         base, hyperparameters={**base.hyperparameters, "learning_rate": 1.234e-05, "gamma": 0.97}
     )

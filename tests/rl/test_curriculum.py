@@ -26,15 +26,15 @@ def _write(tmp_path, text):
     [
         ("stages: ppo\n", "a list of stages"),
         ("stages: []\n", "a list of stages"),
-        ("stages: [{config: ppo}]\nextra: 1\n", "one key"),
-        ("stages: [{conf: ppo}]\n", r"stages\[0\]"),
-        ("stages: [{config: ppo, seed: 3}]\n", "unknown key 'seed'"),
+        ("stages: [{config: ppo_ftl}]\nextra: 1\n", "one key"),
+        ("stages: [{conf: ppo_ftl}]\n", r"stages\[0\]: expected a mapping with a config"),
+        ("stages: [{config: ppo_ftl, seed: 3}]\n", "unknown key 'seed'"),
         ("stages: [{config: ppo_ftl_curriculum}]\n", "stage file itself"),
-        ("stages: [{config: ppo}, {config: ppo_ftl}]\n", "same env"),
-        ("stages: [{config: ppo, total_timesteps: 0}]\n", "total_timesteps"),
+        ("stages: [{env_id: AFTIR-ArmReach-v0}, {config: ppo_ftl}]\n", "same env"),
+        ("stages: [{config: ppo_ftl, total_timesteps: 0}]\n", "total_timesteps"),
         ("stages: [{config: ppo_ftl, env_kwargs: {bay: x}}]\n", "bay"),
         ("stages: [{config: /etc/passwd}]\n", "passwd"),
-        ("stages: [" + ", ".join(["{config: ppo}"] * (MAX_STAGES + 1)) + "]\n", "at most"),
+        ("stages: [" + ", ".join(["{config: ppo_ftl}"] * (MAX_STAGES + 1)) + "]\n", "at most"),
     ],
 )
 def test_bad_stage_files_are_one_line(tmp_path, text, match):

@@ -1,9 +1,10 @@
 """Stable-Baselines3 baselines (PPO, SAC, TD3) on the arm envs, logged like the Q-table runs.
 
-One import for the SB3 side of the package, which lives in four modules:
+One import for the SB3 side of the package, which lives in five modules:
 
-- :mod:`aftir_rl.rl.sb3.config`: ``configs/{ppo,sac,td3}.yaml`` load into a checked
-  :class:`SB3Config`, and :func:`build_model` makes the model;
+- :mod:`aftir_rl.rl.sb3.hyperparams` and :mod:`aftir_rl.rl.sb3.config`: the env-keyed
+  hyperparameter files and the named configs load into a checked :class:`SB3Config`, and
+  :func:`build_model` makes the model;
 - :mod:`aftir_rl.rl.sb3.evaluation`: :class:`ArmEvalCallback` evaluates the deterministic policy
   on fixed targets and logs the ``eval/*`` tags and ``paths/eval`` shared with the Q-learning
   runs (docs/design.md §10); checkpoints are written atomically (:class:`AtomicCheckpoint`,
@@ -27,7 +28,6 @@ from aftir_rl.rl.sb3.config import (
     check_goal_settings,
     check_sb3_config,
     constructor_keys,
-    load_sb3_config,
     sb3_config_from_run,
 )
 from aftir_rl.rl.sb3.evaluation import (
@@ -40,6 +40,7 @@ from aftir_rl.rl.sb3.evaluation import (
     evaluation_targets,
     save_model,
 )
+from aftir_rl.rl.sb3.hyperparams import entry_config, load_sb3_config
 from aftir_rl.rl.sb3.loading import MAX_MODEL_BYTES, load_model, load_run, newest_model
 from aftir_rl.rl.sb3.vec_adapter import SB3VectorEnv, make_sb3_vec_env
 
@@ -60,6 +61,7 @@ __all__ = [
     "check_goal_settings",
     "check_sb3_config",
     "constructor_keys",
+    "entry_config",
     "evaluate_policy_on_targets",
     "evaluation_env_kwargs",
     "evaluation_targets",

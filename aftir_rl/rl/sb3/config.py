@@ -1,6 +1,7 @@
 """Configs of the Stable-Baselines3 baselines (PPO, SAC, TD3), checked before anything is built.
 
-``configs/{ppo,sac,td3}.yaml`` load into :class:`SB3Config` (:func:`load_sb3_config`);
+A config (:class:`SB3Config`; read by :mod:`aftir_rl.rl.sb3.hyperparams` from the env-keyed
+hyperparameter files and the named configs) is checked by :func:`check_sb3_config`:
 ``hyperparameters`` go to the algorithm's constructor and are checked against its signature and
 against bounds (an unknown key or a value out of range is a
 :class:`~aftir_rl.core.errors.ConfigError`
@@ -14,7 +15,6 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import math
-import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,9 +24,8 @@ import gymnasium as gym
 from stable_baselines3 import PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 
-from aftir_rl.core.config import brief, from_mapping, read_yaml, shorten, to_float
+from aftir_rl.core.config import brief, from_mapping, shorten, to_float
 from aftir_rl.core.errors import CheckpointError, ConfigError
-from aftir_rl.core.shipped import find_config
 from aftir_rl.core.tank.loading import resolve_run_tank
 from aftir_rl.envs.ftl.spec import (
     CONFIG_KWARG_TYPES,
@@ -34,14 +33,11 @@ from aftir_rl.envs.ftl.spec import (
     STEER_MODES,
 )
 from aftir_rl.envs.registration import registered_env_id
-from aftir_rl.rl.common import check_env_id
 from aftir_rl.rl.sb3.checks import LINEAR_PREFIX as LINEAR_PREFIX
 from aftir_rl.rl.sb3.checks import OBJECT_KEYS, check_hyperparameters, check_range
 from aftir_rl.rl.sb3.checks import linear_start as linear_start
 
 __all__ = [
-    "ENV_CONFIGS",
-    "env_config_name",
     "rollout_steps",
     "ALGORITHMS",
     "SB3Config",
@@ -50,7 +46,6 @@ __all__ = [
     "SB3_ENV_IDS",
     "HER_KWARGS",
     "OBJECT_KEYS",
-    "load_sb3_config",
     "parse_hyperparameters",
     "check_sb3_config",
     "check_goal_settings",
@@ -64,7 +59,7 @@ ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3
 
 @dataclass(frozen=True)
 class SB3Config:
-    """A run of an SB3 algorithm (``configs/<algo>.yaml``).
+    """A run of an SB3 algorithm (an entry of ``configs/hyperparams/<algo>.yml``, a named config).
 
     Attributes:
         env_id: environment id (``AFTIR-ArmReach-v0``...).
@@ -91,35 +86,6 @@ class SB3Config:
     hyperparameters: dict[str, Any] = field(default_factory=dict)
     her: bool = False
     env_kwargs: dict[str, Any] = field(default_factory=dict)
-
-
-#: The shipped config each algorithm trains an env with when only ``--env`` is given.
-ENV_CONFIGS: dict[str, dict[str, str]] = {
-    "ppo": {
-        "AFTIR-ArmReach-v0": "ppo",
-        "AFTIR-ArmFull-v0": "ppo_full",
-        "AFTIR-ArmFTL-v0": "ppo_ftl",
-    },
-    "sac": {"AFTIR-ArmReach-v0": "sac", "AFTIR-ArmFTL-v0": "sac_ftl"},
-    "td3": {"AFTIR-ArmReach-v0": "td3", "AFTIR-ArmFTL-v0": "td3_ftl"},
-}
-
-
-def env_config_name(algo: str, env_id: str) -> str:
-    """The shipped config of :data:`ENV_CONFIGS` for ``algo`` on ``env_id`` (its bare id).
-
-    Raises:
-        ConfigError: none ships; the message names the envs that have one.
-
-    """
-    bare = check_env_id(env_id, SB3_ENV_IDS, algo)
-    known = ENV_CONFIGS.get(algo, {})
-    if bare not in known:
-        raise ConfigError(
-            f"no shipped {algo} config for {bare}; one ships for {', '.join(known)} "
-            f"(or give --config FILE with env_id: {bare})"
-        )
-    return known[bare]
 
 
 def rollout_steps(algo: str, config: SB3Config) -> int:
@@ -152,26 +118,6 @@ def parse_hyperparameters(hyper: dict[str, Any], algo: str, source: str) -> dict
                 pass
         parsed[key] = value
     return parsed
-
-
-def load_sb3_config(path: str | os.PathLike[str], algo: str) -> SB3Config:
-    """Read and check an SB3 config (a path, or a shipped name such as ``ppo_ftl``).
-
-    Numbers written as strings (``3e-4``) are parsed.
-    """
-    path = find_config(path)
-    data = read_yaml(path)
-    hyper = data.pop("hyperparameters", None) or {}
-    if not isinstance(hyper, dict):
-        raise ConfigError(f"{path}: hyperparameters: expected a mapping")
-    for key in hyper:
-        if not isinstance(key, str):
-            raise ConfigError(f"{path}: hyperparameters: unknown key {brief(key)}")
-    config = from_mapping(SB3Config, data, str(path))
-    parsed = parse_hyperparameters(hyper, algo, str(path))
-    config = SB3Config(**{**config.__dict__, "hyperparameters": parsed})
-    check_sb3_config(config, algo, str(path))
-    return config
 
 
 #: Bounds of the fields of :class:`SB3Config`.

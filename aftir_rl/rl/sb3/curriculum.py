@@ -1,15 +1,16 @@
 """A curriculum: configs trained one after the other, each resumed from the previous stage's model.
 
 A stage file is a config whose only key is ``stages``, a list of at most :data:`MAX_STAGES`
-mappings: ``config`` (a shipped config's name or a path) and, optionally, ``total_timesteps``
-and ``env_kwargs`` (merged over the config's). ``aftir train ppo --config NAME`` trains a stage
-file like any config: stage ``k`` writes its run directory under ``LOGDIR/stage<k>/`` and the
-next stage resumes from it (``--resume``), so the recipe is one command::
+mappings of :class:`~aftir_rl.rl.sb3.config.SB3Config` fields, each over ``config`` (a named
+config or a path) if it gives one, else over its ``env_id``'s entry in the hyperparameter file
+(:func:`~aftir_rl.rl.sb3.hyperparams.config_from_mapping`: ``env_kwargs`` and
+``hyperparameters`` merged key by key). ``aftir train ppo --config NAME`` trains a stage file
+like any config: stage ``k`` writes its run directory under ``LOGDIR/stage<k>/`` and the next
+stage resumes from it (``--resume``), so the recipe is one command::
 
     stages:
       - config: ppo_ftl_cost_bay1
-      - config: ppo_ftl_cost_failure
-        total_timesteps: 58032128
+      - {env_id: AFTIR-ArmFTL-v0, total_timesteps: 58032128, env_kwargs: {bay: 2}}
 """
 
 from __future__ import annotations
@@ -23,13 +24,14 @@ from typing import Any
 from aftir_rl.core.config import brief, read_yaml
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.shipped import find_config
-from aftir_rl.rl.sb3.config import SB3Config, check_sb3_config, load_sb3_config
+from aftir_rl.rl.sb3.config import SB3Config
+from aftir_rl.rl.sb3.hyperparams import config_from_mapping, load_sb3_config
 
 __all__ = ["MAX_STAGES", "is_curriculum", "load_curriculum", "train_curriculum"]
 
 #: Most stages a stage file may hold.
 MAX_STAGES = 10
-_STAGE_KEYS = {"config", "total_timesteps", "env_kwargs"}
+_STAGE_KEYS = {"config"} | {f.name for f in dataclasses.fields(SB3Config)}
 
 
 def is_curriculum(name: str | os.PathLike[str]) -> bool:
@@ -39,28 +41,26 @@ def is_curriculum(name: str | os.PathLike[str]) -> bool:
 
 def _stage(entry: Any, k: int, algo: str, source: str) -> SB3Config:
     where = f"{source}: stages[{k}]"
-    if not isinstance(entry, dict) or "config" not in entry:
-        raise ConfigError(f"{where}: expected a mapping with a config, got {brief(entry)}")
+    if not isinstance(entry, dict) or not ({"config", "env_id"} & set(entry)):
+        raise ConfigError(
+            f"{where}: expected a mapping with a config or an env_id, got {brief(entry)}"
+        )
     unknown = set(entry) - _STAGE_KEYS
     if unknown:
         raise ConfigError(
             f"{where}: unknown key {brief(sorted(map(str, unknown))[0])}; allowed keys are "
             f"{', '.join(sorted(_STAGE_KEYS))}"
         )
-    if not isinstance(entry["config"], str):
-        raise ConfigError(f"{where}.config: expected a config's name or path")
-    if is_curriculum(entry["config"]):
-        raise ConfigError(f"{where}.config: {entry['config']} is a stage file itself")
-    config = load_sb3_config(entry["config"], algo)
-    kwargs = entry.get("env_kwargs") or {}
-    if not isinstance(kwargs, dict):
-        raise ConfigError(f"{where}.env_kwargs: expected a mapping, got {brief(kwargs)}")
-    changes: dict[str, Any] = {"env_kwargs": {**config.env_kwargs, **kwargs}}
-    if "total_timesteps" in entry:
-        changes["total_timesteps"] = entry["total_timesteps"]
-    config = dataclasses.replace(config, **changes)
-    check_sb3_config(config, algo, where)
-    return config
+    fields = dict(entry)
+    base = None
+    if "config" in fields:
+        name = fields.pop("config")
+        if not isinstance(name, str):
+            raise ConfigError(f"{where}.config: expected a config's name or path")
+        if is_curriculum(name):
+            raise ConfigError(f"{where}.config: {name} is a stage file itself")
+        base = load_sb3_config(name, algo)
+    return config_from_mapping(fields, algo, where, base)
 
 
 def load_curriculum(name: str | os.PathLike[str], algo: str) -> list[SB3Config]:
