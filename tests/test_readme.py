@@ -34,7 +34,7 @@ def _small(line: str) -> str:
     line = line.split("  #", 1)[0].strip()
     if re.match(r"aftir train (ppo|sac|td3)\b", line):
         line = re.sub(r" --total-timesteps \d+", "", line) + " --total-timesteps 1024 --n-envs 8"
-        line += " --no-progress"
+        line += " --eval-episodes 2 --no-progress"
     return re.sub(r"--random \d+", "--random 1", line)
 
 

@@ -133,7 +133,7 @@ def entry_config(algo: str, env_id: str, path: str | os.PathLike[str] | None = N
     return config
 
 
-def _derived(config: SB3Config, given: dict[str, Any]) -> dict[str, int]:
+def _derived(config: SB3Config, given: dict[str, Any]) -> dict[str, Any]:
     """``eval_freq`` and ``checkpoint_freq`` from ``config.total_timesteps``, unless given."""
     steps = config.total_timesteps
     return {k: max(low, steps // share) for k, (share, low) in _DERIVED.items() if k not in given}
