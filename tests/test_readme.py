@@ -35,6 +35,8 @@ def _small(line: str) -> str:
     if re.match(r"aftir train (ppo|sac|td3)\b", line):
         line = re.sub(r" --total-timesteps \d+", "", line) + " --total-timesteps 1024 --n-envs 8"
         line += " --eval-episodes 2 --no-progress"
+    if line.startswith("aftir dataset"):
+        line = re.sub(r"--episodes \d+", "--episodes 1", line) + " --no-progress"
     return re.sub(r"--random \d+", "--random 1", line)
 
 

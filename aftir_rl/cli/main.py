@@ -31,6 +31,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "aftir_rl.cli.pretrained",
         "the trained policies shipped with the package (--pretrained NAME)",
     ),
+    "dataset": (
+        "aftir_rl.cli.dataset",
+        "expert episodes of AFTIR-ArmFTL-v0 as a Minari dataset (needs aftir_rl[demos])",
+    ),
     "configs": (
         "aftir_rl.cli.configs",
         "the shipped configs and tanks, by the names --config takes",

@@ -176,9 +176,9 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
     )
     p.add_argument(
         "--total-timesteps",
-        type=bounded_int(1, MAX_TIMESTEPS),
+        type=bounded_int(0, MAX_TIMESTEPS),
         metavar="T",
-        help=f"training steps, 1 to {MAX_TIMESTEPS:,} (overrides config)",
+        help=f"training steps, 0 to {MAX_TIMESTEPS:,} (overrides config; 0: evaluate only)",
     )
     p.add_argument(
         "--n-envs",
@@ -210,6 +210,18 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
         "n_epochs:5)",
     )
     _add_run_numbers(p)
+    p.add_argument(
+        "--demos",
+        metavar="DATASET",
+        help="behaviour-clone this Minari dataset (aftir dataset) into the new PPO policy first",
+    )
+    p.add_argument(
+        "--bc-epochs",
+        type=bounded_int(1, 1000),
+        default=20,
+        metavar="N",
+        help="passes over the demonstrations (default 20)",
+    )
     p.add_argument("--logdir", default="runs", help="parent of the run directory")
     p.add_argument("--resume", help="model.zip or run directory to continue training from")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -281,7 +293,9 @@ def _main_sb3(args: argparse.Namespace) -> int:
     configs = _sb3_configs(args)
     for config in configs:
         _say_rollout(args.algo, config)
-    options = {"progress_bar": not args.no_progress}
+    options: dict[str, Any] = {"progress_bar": not args.no_progress}
+    if args.demos is not None:
+        options["pretrain"] = _pretrainer(args, configs)
     if len(configs) == 1:
         summaries = [
             train_sb3(args.algo, configs[0], args.seed, args.logdir, args.resume, **options)
@@ -301,6 +315,15 @@ def _main_sb3(args: argparse.Namespace) -> int:
         )
         print(f"  run dir: {s['run_dir']}")
     return 0
+
+
+def _pretrainer(args: argparse.Namespace, configs: list[Any]) -> Any:
+    """Behaviour cloning of ``--demos`` for the one config of a new PPO run."""
+    if args.algo != "ppo" or len(configs) != 1 or args.resume is not None:
+        raise ConfigError("--demos: behaviour cloning starts a new PPO run of one config")
+    from aftir_rl.rl.imitation import pretrainer
+
+    return pretrainer(args.demos, configs[0], args.bc_epochs, args.seed)
 
 
 def _say_rollout(algo: str, config: Any) -> None:

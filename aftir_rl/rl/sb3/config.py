@@ -122,7 +122,7 @@ def parse_hyperparameters(hyper: dict[str, Any], algo: str, source: str) -> dict
 
 #: Bounds of the fields of :class:`SB3Config`.
 _CONFIG_RANGES = {
-    "total_timesteps": (1, 1_000_000_000),
+    "total_timesteps": (0, 1_000_000_000),
     "n_envs": (1, 64),
     "eval_freq": (1, 1_000_000_000),
     "eval_targets": (1, 1000),

@@ -30,6 +30,7 @@ def train_sb3(
     resume: str | Path | None = None,
     progress_bar: bool = True,
     on_evaluation: Any = None,
+    pretrain: Any = None,
 ) -> dict[str, Any]:
     """Train PPO, SAC or TD3 on an arm env; one run directory with the model and its logs.
 
@@ -44,7 +45,11 @@ def train_sb3(
     run finishes it: it trains what is left of ``total_timesteps`` counted from where that run
     started, so it ends where an uninterrupted run would; resuming a finished run trains
     ``total_timesteps`` more. ``on_evaluation(model, metrics)``, if given, is called after each
-    evaluation is logged (``aftir tune`` reports to Ray Tune there).
+    evaluation is logged (``aftir tune`` reports to Ray Tune there). ``pretrain(model)``, if
+    given, is applied to a new model before training (behaviour cloning,
+    :func:`aftir_rl.rl.imitation.clone`); the numbers it returns are logged under
+    ``pretrain/*`` and kept in the summary. ``total_timesteps`` 0 trains nothing: the run
+    evaluates the new (or pretrained, or resumed) model.
 
     Raises:
         ConfigError: the config, ``logdir`` or the hyperparameters are refused (before any
@@ -76,6 +81,7 @@ def train_sb3(
             targets,
             progress_bar=progress_bar,
             on_evaluation=on_evaluation,
+            pretrain=pretrain,
         )
     finally:
         try:
@@ -140,6 +146,7 @@ def _train_run(
     *,
     progress_bar: bool,
     on_evaluation: Any,
+    pretrain: Any = None,
 ) -> dict[str, Any]:
     """Build (or load) the model, train it and write its run directory under ``logdir``.
 
@@ -160,6 +167,9 @@ def _train_run(
     with staged as partial, run_logger(partial) as logger:
         model.set_logger(logger)
         _write_config(partial, logger, algo, config, seed, resume_path)
+        cloned = pretrain(model) if pretrain is not None and resume_path is None else {}
+        for key, value in cloned.items():
+            logger.record(f"pretrain/{key}", value)
         evaluator, callbacks = _callbacks(
             f"aftir_rl:{bare}", config, targets, on_evaluation, partial
         )
@@ -174,6 +184,7 @@ def _train_run(
             "run_dir": str(run_dir),
             **evaluator.last_metrics,
             "best": evaluator.best_metrics,
+            **({"pretrain": cloned} if cloned else {}),
         }
         write_json(partial / "summary.json", summary)
     return summary

@@ -1,0 +1,113 @@
+"""``aftir dataset``: expert episodes of ``AFTIR-ArmFTL-v0`` as a Minari dataset.
+
+A thin command line over :func:`aftir_rl.rl.demos.write_dataset`: the env's keyword arguments
+come from a PPO config (default ``ppo_ftl_demos``, the recipe that learns from the dataset) and
+``--env-kwargs``; the dataset goes to ``-o ROOT/<id>`` (``ROOT`` is what ``MINARI_DATASETS_PATH``
+names for ``minari.load_dataset``). Run again with a larger ``--episodes`` to add to it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Sequence
+
+from aftir_rl.cli.args import MAX_SEED, OneLineParser, bounded_int
+from aftir_rl.cli.guard import cli
+from aftir_rl.core.errors import ConfigError
+
+__all__ = ["build_parser", "main"]
+
+#: The most episodes one dataset may hold.
+MAX_EPISODES = 100_000
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The options of ``aftir dataset``."""
+    p = OneLineParser(
+        prog="aftir dataset",
+        description="Write expert episodes of AFTIR-ArmFTL-v0 (the follow-the-leader planner's "
+        "motions, replayed in the env) as a Minari dataset.",
+    )
+    p.add_argument(
+        "--episodes",
+        type=bounded_int(1, MAX_EPISODES),
+        required=True,
+        metavar="N",
+        help=f"episodes the dataset should hold, 1 to {MAX_EPISODES:,}",
+    )
+    p.add_argument("-o", "--output", required=True, metavar="ROOT", help="the datasets root")
+    p.add_argument(
+        "--config",
+        default="ppo_ftl_demos",
+        help="the PPO config whose env_kwargs the episodes use (default ppo_ftl_demos)",
+    )
+    p.add_argument(
+        "--env-kwargs",
+        nargs="+",
+        default=[],
+        metavar="KEY:VALUE",
+        help="env keyword arguments over the config's (e.g. bay:1)",
+    )
+    p.add_argument(
+        "--seed",
+        type=bounded_int(0, MAX_SEED),
+        default=0,
+        help="reset seed of the first target (default 0); target j is drawn with seed + j",
+    )
+    p.add_argument("--id", default="aftir/armftl-expert-v0", help="Minari's dataset id")
+    p.add_argument(
+        "--workers",
+        type=bounded_int(1, 64),
+        default=1,
+        metavar="W",
+        help="processes that plan (default 1)",
+    )
+    p.add_argument(
+        "--max-seconds",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="the expert's planning budget per target (default 30 s); a target it misses is "
+        "skipped",
+    )
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    return p
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``aftir dataset``."""
+    args = build_parser().parse_args(argv)
+    if not 0 < args.max_seconds <= 3600:
+        raise ConfigError(f"--max-seconds must be in (0, 3600], got {args.max_seconds:g}")
+    from tqdm import tqdm
+
+    from aftir_rl.rl.demos import write_dataset
+    from aftir_rl.rl.sb3.hyperparams import load_sb3_config
+    from aftir_rl.rl.sb3.overrides import with_overrides
+
+    config = with_overrides(load_sb3_config(args.config, "ppo"), "ppo", args.env_kwargs)
+    if config.env_id.removeprefix("aftir_rl:") != "AFTIR-ArmFTL-v0":
+        raise ConfigError(f"--config: the expert plays AFTIR-ArmFTL-v0, not {config.env_id}")
+    start = time.perf_counter()
+    with tqdm(total=args.episodes, unit="ep", disable=args.no_progress) as bar:
+
+        def progress(done: int, total: int) -> None:
+            bar.n = done
+            bar.refresh()
+
+        out = write_dataset(
+            args.output,
+            args.episodes,
+            args.seed,
+            config.env_kwargs,
+            args.id,
+            args.workers,
+            args.max_seconds,
+            progress,
+        )
+    out["seconds"] = round(time.perf_counter() - start, 1)
+    print(json.dumps(out))
+    return 0

@@ -1,0 +1,84 @@
+"""The follow-the-leader expert on held-out targets: how often it finds a motion, and how fast.
+
+Run: ``python benchmarks/bench_expert.py --random 50 --seed 2000000 --json OUT.json``. Each
+target is one the env draws with the reset seeds ``seed .. seed + N - 1`` (the same as
+``aftir evaluate --random N --seed S`` measures a policy on); the expert plans with its budget,
+its motion is replayed in the env, and python-fcl checks the margin after every step. Printed:
+success, contacts, tip error, planning seconds (median, p90, max) and the machine; the rows go
+to ``--json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+import aftir_rl  # noqa: F401  (registers the envs)
+from aftir_rl.core.collision import CollisionScene
+from aftir_rl.experiments.bench import machine_facts
+from aftir_rl.rl.expert import FTLExpert
+
+KWARGS = {"bay": 2, "steer": "target", "guide": True, "shaping": "field", "step_cost": 0.02}
+
+
+def main() -> None:
+    """Measure the expert on the drawn targets; print the table, write the JSON."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    parser.add_argument("--random", type=int, default=50, help="targets")
+    parser.add_argument("--seed", type=int, default=2_000_000, help="reset seed of the first")
+    parser.add_argument("--max-seconds", type=float, default=30.0, help="budget per target")
+    parser.add_argument("--json", help="where the rows go")
+    args = parser.parse_args()
+
+    env = gym.make("AFTIR-ArmFTL-v0", **KWARGS)
+    expert = FTLExpert(max_seconds=args.max_seconds, **KWARGS)
+    scene = CollisionScene(env.unwrapped.tank)
+    rows = []
+    for seed in range(args.seed, args.seed + args.random):
+        _, info = env.reset(seed=seed)
+        start = time.perf_counter()
+        plan = expert.plan(info["target"])
+        seconds = time.perf_counter() - start
+        row = {"seed": seed, "target": info["target"].tolist(), "seconds": seconds}
+        row.update(success=False, contact=False, steps=0, least_clearance_cm=None)
+        if plan is not None:
+            least = np.inf
+            for a in plan.actions:
+                _, _, term, _, step = env.step(a)
+                least = min(least, scene.check(env.unwrapped.posture).clearance_cm)
+            row.update(
+                success=bool(step["is_success"]),
+                contact=bool(step["contact"]) or least < 0.0,
+                steps=len(plan.actions),
+                tip_error_cm=step["distance_cm"],
+                least_clearance_cm=float(least),
+                slack=plan.slack,
+            )
+        rows.append(row)
+        print(f"{seed}: {'ok' if row['success'] else 'no motion'} in {seconds:.1f} s", flush=True)
+    times = np.array([r["seconds"] for r in rows])
+    ok = [r for r in rows if r["success"]]
+    summary = {
+        "targets": len(rows),
+        "success_rate": len(ok) / len(rows),
+        "contacts": sum(r["contact"] for r in rows),
+        "least_clearance_cm": min((r["least_clearance_cm"] for r in ok), default=None),
+        "seconds_median": float(np.median(times)),
+        "seconds_p90": float(np.percentile(times, 90)),
+        "seconds_max": float(times.max()),
+        "steps_mean": float(np.mean([r["steps"] for r in ok])) if ok else 0.0,
+    }
+    print(json.dumps(summary, indent=1))
+    print(machine_facts())
+    if args.json:
+        out = {"machine": machine_facts(), "env_kwargs": KWARGS, "options": vars(args)}
+        Path(args.json).write_text(json.dumps({**out, "summary": summary, "rows": rows}, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,165 @@
+"""The planner as a teacher: route actions, the expert's motions, datasets and cloning."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.errors import ConfigError
+from aftir_rl.envs.ftl.env import ArmFTLEnv
+from aftir_rl.planning.ftl.model import Route
+from aftir_rl.rl.expert import FTLExpert, route_actions
+
+KWARGS = {"bay": 2, "steer": "target", "guide": True, "shaping": "field", "step_cost": 0.02}
+
+
+@pytest.mark.parametrize("steer", ["target", "increment"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_route_actions_deploy_the_route(steer, seed):
+    """The env ends on the route: its κ history, and the tip forward kinematics gives."""
+    rng = np.random.default_rng(seed)
+    env = ArmFTLEnv(steer=steer, margin=0.0)
+    env.reset(seed=seed)
+    m = int(rng.integers(1, 7))
+    kappa = rng.uniform(-0.8, 0.8, (m, 2))
+    for a in route_actions(kappa, env):
+        env.step(a)
+    b = env.batch
+    assert b.s[0] == pytest.approx(m * b.l)
+    np.testing.assert_allclose(b.kappa[0, :m], kappa, atol=1e-6)
+    np.testing.assert_allclose(env.tip, Route(0.0, kappa, b.l).tip(), atol=1e-3)
+
+
+def test_route_actions_start_from_any_arm():
+    """From a deployed arm they pull back to the floor first, then deploy the new route."""
+    env = ArmFTLEnv(steer="target", margin=0.0)
+    env.reset(seed=0)
+    for a in route_actions([[0.3, 0.1], [-0.2, 0.4]], env):
+        env.step(a)
+    kappa = np.array([[0.1, -0.5], [0.6, 0.0], [0.0, 0.2]])
+    actions = route_actions(kappa, env)
+    assert (actions[:20, 2] == -1).all()  # 100 cm back, 5 cm a step
+    for a in actions:
+        env.step(a)
+    np.testing.assert_allclose(env.tip, Route(0.0, kappa, env.batch.l).tip(), atol=1e-3)
+
+
+# bay-2 targets: one the env drew (seed 5,000,003), a corner, right behind the baffle beside
+# the hatch (the last two the expert may miss: the env's deployment between stages grazes there)
+_TARGETS = [(28.94, 110.54, 26.0), (230.0, 140.0, 90.0), (100.3, 81.7, 80.0)]
+
+
+@pytest.mark.parametrize("target", _TARGETS)
+def test_the_expert_reaches_a_target_without_contact(target):
+    """Replayed in a fresh env: success, and python-fcl keeps the margin after every step.
+
+    Or no motion at all within the budget: never one the env would end in contact.
+    """
+    import gymnasium as gym
+
+    expert = FTLExpert(max_seconds=10.0, **KWARGS)
+    plan = expert.plan(target)
+    if plan is None:
+        assert target != _TARGETS[0]
+        return
+    env = gym.make("AFTIR-ArmFTL-v0", **KWARGS)
+    env.reset(options={"target": target})
+    scene = CollisionScene(env.unwrapped.tank)
+    for k, a in enumerate(plan.actions):
+        _, _, term, trunc, info = env.step(a)
+        assert scene.check(env.unwrapped.posture).clearance_cm >= 1.0
+        assert not info["contact"] and not trunc
+        assert term == (k == len(plan.actions) - 1)
+    assert info["is_success"] and info["distance_cm"] < 2.0
+
+
+@pytest.mark.slow
+def test_the_expert_on_random_bay2_targets():
+    """Random bay-2 targets of the env's own draw: the expert's motions all succeed."""
+    import gymnasium as gym
+
+    env = gym.make("AFTIR-ArmFTL-v0", **KWARGS)
+    expert = FTLExpert(**KWARGS)
+    found = 0
+    for seed in range(6_000_000, 6_000_008):
+        _, info = env.reset(seed=seed)
+        plan = expert.plan(info["target"])
+        if plan is None:
+            continue
+        found += 1
+        for a in plan.actions:
+            _, _, term, _, step = env.step(a)
+        assert term and step["is_success"] and not step["contact"]
+    assert found >= 7
+
+
+def test_bad_dataset_ids_and_paths_are_one_line(tmp_path):
+    from aftir_rl.rl.demos import write_dataset
+    from aftir_rl.rl.imitation import load_demos
+
+    for bad in ("../../etc/x-v0", "aftir/x", "/abs/x-v0", "a/b/c-v0"):
+        with pytest.raises(ConfigError, match="dataset id") as info:
+            write_dataset(tmp_path, 1, dataset_id=bad)
+        assert "\n" not in str(info.value)
+    with pytest.raises(ConfigError, match="not a Minari dataset"):
+        load_demos(tmp_path, 0.99)
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    from aftir_rl.rl.demos import write_dataset
+
+    root = tmp_path_factory.mktemp("datasets")
+    out = write_dataset(root, 2, seed=8_000_000, env_kwargs=KWARGS)
+    return root, out
+
+
+@pytest.mark.slow
+def test_a_dataset_holds_the_env_episodes_and_resumes(dataset):
+    import minari
+
+    from aftir_rl.rl.demos import write_dataset
+
+    root, out = dataset
+    assert out["episodes"] == 2 and out["steps"] > 100
+    data = minari.load_dataset(out["dataset_id"])
+    assert data.total_episodes == 2 and data.spec.env_spec.kwargs == KWARGS
+    env = data.recover_environment()
+    for episode in data.iterate_episodes():
+        assert episode.terminations[-1] and not episode.terminations[:-1].any()
+        for key, space in env.observation_space.spaces.items():
+            assert episode.observations[key].shape == (len(episode.actions) + 1, *space.shape)
+        # the relabelled reward HER would compute is the recorded one
+        rewards = env.unwrapped.compute_reward(
+            episode.observations["achieved_goal"][1:],
+            episode.observations["desired_goal"][1:],
+            {"prev_achieved_goal": episode.infos["prev_achieved_goal"][1:]},
+        )
+        np.testing.assert_allclose(rewards, episode.rewards, atol=1e-4)
+    again = write_dataset(root, 3, seed=8_000_000, env_kwargs=KWARGS)
+    assert again["episodes"] == 3 and minari.load_dataset(out["dataset_id"]).total_episodes == 3
+    with pytest.raises(ConfigError, match="other env arguments"):
+        write_dataset(root, 4, env_kwargs={**KWARGS, "bay": 1})
+
+
+@pytest.mark.slow
+def test_cloning_fits_the_experts_actions(dataset, tmp_path):
+    """The cloned policy's deterministic actions are much nearer the expert's than before."""
+    from aftir_rl.rl.imitation import clone, load_demos
+    from aftir_rl.rl.sb3 import build_model, entry_config
+    from aftir_rl.rl.sb3.vec_adapter import make_sb3_vec_env
+
+    root, out = dataset
+    demos = load_demos(root / out["dataset_id"], 0.995)
+    config = entry_config("ppo", "AFTIR-ArmFTL-v0")
+    venv = make_sb3_vec_env("AFTIR-ArmFTL-v0", 2, **KWARGS)
+    model = build_model("ppo", config, venv, seed=0)
+    first = clone(model, demos, epochs=1, learning_rate=0.0)  # measures only
+    fitted = clone(model, demos, epochs=60, batch_size=64)
+    assert fitted["action_mse"] < 0.3 * first["action_mse"]
+    assert fitted["steps"] == len(demos.actions) == out["steps"]
+    with pytest.raises(ConfigError, match="steer"):
+        from aftir_rl.rl.imitation import pretrainer
+
+        pretrainer(root / out["dataset_id"], config)  # the entry steers by increments
