@@ -84,20 +84,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise ConfigError(f"--max-seconds must be in (0, 3600], got {args.max_seconds:g}")
     from tqdm import tqdm
 
-    from aftir_rl.rl.demos import write_dataset
+    from aftir_rl.rl.demos import check_dataset_id, write_dataset
     from aftir_rl.rl.sb3.hyperparams import load_sb3_config
     from aftir_rl.rl.sb3.overrides import with_overrides
 
+    check_dataset_id(args.id)
     config = with_overrides(load_sb3_config(args.config, "ppo"), "ppo", args.env_kwargs)
     if config.env_id.removeprefix("aftir_rl:") != "AFTIR-ArmFTL-v0":
         raise ConfigError(f"--config: the expert plays AFTIR-ArmFTL-v0, not {config.env_id}")
     start = time.perf_counter()
-    with tqdm(total=args.episodes, unit="ep", disable=args.no_progress) as bar:
+    bars: list[tqdm] = []  # made at the first episode, once every argument has been checked
 
-        def progress(done: int, total: int) -> None:
-            bar.n = done
-            bar.refresh()
+    def progress(done: int, total: int) -> None:
+        if not bars:
+            bars.append(tqdm(total=total, unit="ep", disable=args.no_progress))
+        bars[0].n = done
+        bars[0].refresh()
 
+    try:
         out = write_dataset(
             args.output,
             args.episodes,
@@ -108,6 +112,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.max_seconds,
             progress,
         )
+    finally:
+        for bar in bars:
+            bar.close()
     out["seconds"] = round(time.perf_counter() - start, 1)
     print(json.dumps(out))
     return 0

@@ -210,25 +210,13 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
         "n_epochs:5)",
     )
     _add_run_numbers(p)
-    p.add_argument(
-        "--demos",
-        metavar="DATASET",
-        help="behaviour-clone this Minari dataset (aftir dataset) into the new PPO policy first",
-    )
-    p.add_argument(
-        "--bc-epochs",
-        type=bounded_int(1, 1000),
-        default=20,
-        metavar="N",
-        help="passes over the demonstrations (default 20)",
-    )
     p.add_argument("--logdir", default="runs", help="parent of the run directory")
     p.add_argument("--resume", help="model.zip or run directory to continue training from")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
 def _add_run_numbers(p: argparse.ArgumentParser) -> None:
-    """Add RL Zoo's ``--eval-freq``, ``--eval-episodes`` and ``--save-freq`` to ``p``."""
+    """Add RL Zoo's ``--eval-freq``, ``--eval-episodes``, ``--save-freq``, and ``--demos``."""
     p.add_argument(
         "--eval-freq",
         type=bounded_int(1, MAX_TIMESTEPS),
@@ -246,6 +234,18 @@ def _add_run_numbers(p: argparse.ArgumentParser) -> None:
         type=bounded_int(1, MAX_TIMESTEPS),
         metavar="T",
         help="steps between checkpoints (overrides config; default: every 10%% of the run)",
+    )
+    p.add_argument(
+        "--demos",
+        metavar="DATASET",
+        help="behaviour-clone this Minari dataset (aftir dataset) into the new PPO policy first",
+    )
+    p.add_argument(
+        "--bc-epochs",
+        type=bounded_int(1, 1000),
+        default=20,
+        metavar="N",
+        help="passes over the demonstrations (default 20)",
     )
 
 

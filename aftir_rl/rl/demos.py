@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError
 
-__all__ = ["DATASET_ID", "write_dataset"]
+__all__ = ["DATASET_ID", "check_dataset_id", "write_dataset"]
 
 #: The dataset id :func:`write_dataset` writes by default.
 DATASET_ID = "aftir/armftl-expert-v0"
@@ -106,6 +106,67 @@ def _episode(env: gym.Env, seed: int, actions: NDArray[np.float32]) -> Any:
     )
 
 
+def check_dataset_id(dataset_id: str) -> None:
+    """Refuse a dataset id that is not ``namespace/name-vN`` (a name, never a path).
+
+    Raises:
+        ConfigError: one line.
+
+    """
+    if not _DATASET_ID.fullmatch(dataset_id):
+        raise ConfigError(
+            f"dataset id {dataset_id[:80]!r}: expected namespace/name-vN (letters, digits, - _ .)"
+        )
+
+
+def _minari(dataset_id: str) -> Any:
+    """The ``minari`` module, once ``dataset_id`` is checked."""
+    try:
+        import minari
+    except ImportError:
+        raise ConfigError("writing datasets needs Minari: pip install 'aftir_rl[demos]'") from None
+    check_dataset_id(dataset_id)
+    return minari
+
+
+def _resume_point(
+    minari: Any, dataset_id: str, env_kwargs: dict[str, Any], seed: int
+) -> tuple[int, int]:
+    """``(episodes on disk, next seed)`` of ``dataset_id``; ``(0, seed)`` when there is none.
+
+    Raises:
+        ConfigError: the dataset on disk was made with other env arguments.
+
+    """
+    if dataset_id not in minari.list_local_datasets():
+        return 0, seed
+    old = minari.load_dataset(dataset_id)
+    made = old.spec.env_spec.kwargs if old.spec.env_spec is not None else None
+    spec = gym.make("AFTIR-ArmFTL-v0", **env_kwargs).spec
+    if spec is None or made != spec.kwargs:
+        raise ConfigError(
+            f"{dataset_id}: made with other env arguments ({made}); resume it "
+            "with those or write another dataset id"
+        )
+    done = old.total_episodes
+    metas = old.storage.get_episode_metadata(range(done))
+    return done, (max(int(m["seed"]) for m in metas) + 1 if done else seed)
+
+
+def _save(minari: Any, dataset_id: str, buffers: list[Any], env: gym.Env) -> None:
+    """Add ``buffers`` to the dataset on disk, or create it with them."""
+    if dataset_id in minari.list_local_datasets():
+        minari.load_dataset(dataset_id).storage.update_episodes(buffers)
+    else:
+        minari.create_dataset_from_buffers(
+            dataset_id,
+            buffers,
+            env=env,
+            algorithm_name="aftir_rl.rl.expert.FTLExpert",
+            description="Follow-the-leader expert episodes of AFTIR-ArmFTL-v0",
+        )
+
+
 def write_dataset(
     root: str | os.PathLike[str],
     episodes: int,
@@ -135,29 +196,11 @@ def write_dataset(
         ConfigError: Minari is not installed, or the dataset on disk was made differently.
 
     """
-    try:
-        import minari
-    except ImportError:
-        raise ConfigError("writing datasets needs Minari: pip install 'aftir_rl[demos]'") from None
-    if not _DATASET_ID.fullmatch(dataset_id):
-        raise ConfigError(
-            f"dataset id {dataset_id[:80]!r}: expected namespace/name-vN (letters, digits, - _ .)"
-        )
+    minari = _minari(dataset_id)
     env_kwargs = dict(env_kwargs or {})
     os.environ["MINARI_DATASETS_PATH"] = str(Path(root).resolve())
-    done, next_seed, skipped = 0, seed, 0
-    if dataset_id in minari.list_local_datasets():
-        old = minari.load_dataset(dataset_id)
-        made = old.spec.env_spec.kwargs if old.spec.env_spec is not None else None
-        spec = gym.make("AFTIR-ArmFTL-v0", **env_kwargs).spec
-        if spec is None or made != spec.kwargs:
-            raise ConfigError(
-                f"{dataset_id}: made with other env arguments ({made}); resume it "
-                "with those or write another dataset id"
-            )
-        done = old.total_episodes
-        metas = old.storage.get_episode_metadata(range(done))
-        next_seed = max(int(m["seed"]) for m in metas) + 1 if done else seed
+    done, next_seed = _resume_point(minari, dataset_id, env_kwargs, seed)
+    skipped = 0
     env = gym.make("AFTIR-ArmFTL-v0", **env_kwargs)
     jobs = _targets(env_kwargs, next_seed)
     steps = 0
@@ -173,22 +216,8 @@ def write_dataset(
                 steps += len(actions)
                 if progress is not None:
                     progress(done + len(buffers), episodes)
-            if buffers and dataset_id in minari.list_local_datasets():
-                minari.load_dataset(dataset_id).storage.update_episodes(buffers)
-            elif buffers:
-                minari.create_dataset_from_buffers(
-                    dataset_id,
-                    buffers,
-                    env=env,
-                    algorithm_name="aftir_rl.rl.expert.FTLExpert",
-                    description="Follow-the-leader expert episodes of AFTIR-ArmFTL-v0",
-                )
+            if buffers:
+                _save(minari, dataset_id, buffers, env)
             done += len(buffers)
-    path = Path(root) / dataset_id
-    return {
-        "episodes": done,
-        "skipped": skipped,
-        "steps": steps,
-        "dataset_id": dataset_id,
-        "path": str(path),
-    }
+    path = str(Path(root) / dataset_id)
+    return dict(episodes=done, skipped=skipped, steps=steps, dataset_id=dataset_id, path=path)

@@ -163,3 +163,48 @@ def test_cloning_fits_the_experts_actions(dataset, tmp_path):
         from aftir_rl.rl.imitation import pretrainer
 
         pretrainer(root / out["dataset_id"], config)  # the entry steers by increments
+
+
+@pytest.mark.parametrize(
+    "args, says",
+    [
+        (["sac", "--env", "AFTIR-ArmFTL-v0", "--demos", "x"], "starts a new PPO run"),
+        (["ppo", "--config", "ppo_ftl_demos", "--demos", "x", "--resume", "r"], "new PPO run"),
+        (["ppo", "--config", "ppo_ftl_curriculum", "--demos", "x"], "new PPO run"),
+        (["ppo", "--config", "ppo_ftl_demos", "--demos", "/nonexistent"], "not a Minari"),
+    ],
+)
+def test_bad_demos_are_one_line_before_training(args, says, tmp_path, capsys):
+    from aftir_rl.cli import train
+
+    assert train.main([*args, "--logdir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert says in err and "\n" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_aftir_dataset_refuses_bad_input_in_one_line(tmp_path, capsys):
+    from aftir_rl.cli import dataset
+
+    for argv, says in [
+        (["--episodes", "0", "-o", str(tmp_path)], "--episodes"),
+        (["--episodes", "1", "-o", str(tmp_path), "--id", "../x-v0"], "dataset id"),
+        (
+            [
+                "--episodes",
+                "1",
+                "-o",
+                str(tmp_path),
+                "--config",
+                "ppo_ftl",
+                "--env-kwargs",
+                "bay:9",
+            ],
+            "bay",
+        ),
+        (["--episodes", "1", "-o", str(tmp_path), "--max-seconds", "0"], "--max-seconds"),
+    ]:
+        assert dataset.main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert says in err and "\n" not in err, err
+    assert list(tmp_path.iterdir()) == []

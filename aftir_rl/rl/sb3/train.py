@@ -45,11 +45,9 @@ def train_sb3(
     run finishes it: it trains what is left of ``total_timesteps`` counted from where that run
     started, so it ends where an uninterrupted run would; resuming a finished run trains
     ``total_timesteps`` more. ``on_evaluation(model, metrics)``, if given, is called after each
-    evaluation is logged (``aftir tune`` reports to Ray Tune there). ``pretrain(model)``, if
-    given, is applied to a new model before training (behaviour cloning,
-    :func:`aftir_rl.rl.imitation.clone`); the numbers it returns are logged under
-    ``pretrain/*`` and kept in the summary. ``total_timesteps`` 0 trains nothing: the run
-    evaluates the new (or pretrained, or resumed) model.
+    evaluation is logged (``aftir tune`` reports to Ray Tune there). ``pretrain(model)`` is
+    applied to a new model first (:mod:`aftir_rl.rl.imitation`), its numbers logged as
+    ``pretrain/*``; ``total_timesteps`` 0 only evaluates the model.
 
     Raises:
         ConfigError: the config, ``logdir`` or the hyperparameters are refused (before any
@@ -69,20 +67,10 @@ def train_sb3(
     resume_path = newest_model(resume) if resume is not None else None
     targets = evaluation_targets(env_id, config.eval_targets, env_kwargs=config.env_kwargs)
     venv = _make_venv(env_id, config, seed)
+    run = (algo, bare, config, venv, seed, logdir, resume_path, targets)
+    hooks = {"on_evaluation": on_evaluation, "pretrain": pretrain}
     try:
-        return _train_run(
-            algo,
-            bare,
-            config,
-            venv,
-            seed,
-            logdir,
-            resume_path,
-            targets,
-            progress_bar=progress_bar,
-            on_evaluation=on_evaluation,
-            pretrain=pretrain,
-        )
+        return _train_run(*run, progress_bar=progress_bar, **hooks)
     finally:
         try:
             venv.close()
