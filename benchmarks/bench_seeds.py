@@ -23,6 +23,7 @@ import numpy as np
 from aftir_rl.core.files import write_json
 from aftir_rl.experiments.bench import env_steps_per_second, machine_facts
 from aftir_rl.experiments.runs import evaluate_run
+from aftir_rl.rl.imitation import pretrainer
 from aftir_rl.rl.sb3 import entry_config, load_sb3_config
 from aftir_rl.rl.sb3.curriculum import train_curriculum
 from aftir_rl.rl.sb3.train import train_sb3
@@ -30,15 +31,21 @@ from aftir_rl.rl.sb3.train import train_sb3
 METRICS = ("success_rate", "tip_error_cm", "collision_rate", "min_clearance_cm")
 
 
-def train_seed(algo: str, configs: list[Any], seed: int, logdir: Path) -> dict[str, Any]:
-    """Train every stage from ``seed``; the last stage's run directory, steps and seconds."""
+def train_seed(
+    algo: str, configs: list[Any], seed: int, logdir: Path, demos: Any = None, epochs: int = 20
+) -> dict[str, Any]:
+    """Train every stage from ``seed`` (the first cloned from ``demos`` if given); the last
+    stage's run directory, steps and seconds (behaviour cloning included)."""
+    extra = {"pretrain": pretrainer(demos, configs[0], epochs, seed)} if demos else {}
     stages = train_curriculum(
-        train_sb3, algo, configs, seed, logdir / f"seed{seed}", progress_bar=False
+        train_sb3, algo, configs, seed, logdir / f"seed{seed}", progress_bar=False, **extra
     )
+    cloning = float(stages[0].get("pretrain", {}).get("seconds", 0.0))
     return {
         "run_dir": stages[-1]["run_dir"],
         "timesteps": int(stages[-1]["timesteps"]),
-        "train_seconds": sum(float(s["seconds"]) for s in stages),
+        "train_seconds": cloning + sum(float(s["seconds"]) for s in stages),
+        "clone_seconds": cloning,
     }
 
 
@@ -67,6 +74,8 @@ def main() -> None:
     parser.add_argument("--total-timesteps", type=int, help="steps of the last stage")
     parser.add_argument("--random", type=int, default=100, help="held-out targets")
     parser.add_argument("--eval-seed", type=int, default=3_000_000)
+    parser.add_argument("--demos", help="a Minari dataset to clone into the first stage")
+    parser.add_argument("--bc-epochs", type=int, default=20, help="cloning passes")
     parser.add_argument("--logdir", default="runs/seeds")
     parser.add_argument("--json", required=True, help="where the results go")
     args = parser.parse_args()
@@ -84,7 +93,8 @@ def main() -> None:
     lake = env_steps_per_second("FrozenLake-v1", 50_000, map_name="8x8", is_slippery=False)
     rows = []
     for seed in args.seeds:
-        row = {"seed": seed, **train_seed(args.algo, configs, seed, logdir)}
+        trained = train_seed(args.algo, configs, seed, logdir, args.demos, args.bc_epochs)
+        row = {"seed": seed, **trained}
         start = time.perf_counter()
         measured = evaluate_run(row["run_dir"], draw=(args.random, args.eval_seed))
         row["eval_seconds"] = time.perf_counter() - start
@@ -102,6 +112,7 @@ def main() -> None:
             "algo": args.algo,
             "env_id": configs[-1].env_id,
             "configs": args.config,
+            "demos": args.demos and {"path": args.demos, "bc_epochs": args.bc_epochs},
             "total_timesteps": [c.total_timesteps for c in configs],
             "eval": {
                 "targets": args.random,

@@ -49,7 +49,7 @@ def _one_line(err: str) -> str:
         ("train", ["q_table", "--episodes", str(10**12)], "--episodes must be from 1 to 1,000,000"),
         ("train", ["q_table", "--seed", "-1"], "--seed must be from 0 to 4,294,967,295, got -1"),
         ("train", ["q_table", "--target", "1", "inf", "2"], "--target must be finite"),
-        ("train", ["ppo", "--total-timesteps", "1e12"], "--total-timesteps must be from 1 to"),
+        ("train", ["ppo", "--total-timesteps", "1e12"], "--total-timesteps must be from 0 to"),
         ("train", ["ppo", "--n-envs", "5000"], "--n-envs must be from 1 to 4,096"),
         ("train", ["nope"], "invalid choice: 'nope'"),
         ("train", [], "the following arguments are required: ALGO"),

@@ -31,7 +31,7 @@ def _write(tmp_path, text):
         ("stages: [{config: ppo_ftl, seed: 3}]\n", "unknown key 'seed'"),
         ("stages: [{config: ppo_ftl_curriculum}]\n", "stage file itself"),
         ("stages: [{env_id: AFTIR-ArmReach-v0}, {config: ppo_ftl}]\n", "same env"),
-        ("stages: [{config: ppo_ftl, total_timesteps: 0}]\n", "total_timesteps"),
+        ("stages: [{config: ppo_ftl, total_timesteps: -1}]\n", "total_timesteps"),
         ("stages: [{config: ppo_ftl, env_kwargs: {bay: x}}]\n", "bay"),
         ("stages: [{config: /etc/passwd}]\n", "passwd"),
         ("stages: [" + ", ".join(["{config: ppo_ftl}"] * (MAX_STAGES + 1)) + "]\n", "at most"),
