@@ -47,7 +47,11 @@ def test_route_actions_start_from_any_arm():
 
 # bay-2 targets: one the env drew (seed 5,000,003), a corner, right behind the baffle beside
 # the hatch (the last two the expert may miss: the env's deployment between stages grazes there)
-_TARGETS = [(28.94, 110.54, 26.0), (230.0, 140.0, 90.0), (100.3, 81.7, 80.0)]
+_TARGETS = [
+    (28.94, 110.54, 26.0),
+    pytest.param((230.0, 140.0, 90.0), marks=pytest.mark.slow),
+    pytest.param((100.3, 81.7, 80.0), marks=pytest.mark.slow),
+]
 
 
 @pytest.mark.parametrize("target", _TARGETS)
@@ -61,7 +65,7 @@ def test_the_expert_reaches_a_target_without_contact(target):
     expert = FTLExpert(max_seconds=10.0, **KWARGS)
     plan = expert.plan(target)
     if plan is None:
-        assert target != _TARGETS[0]
+        assert target != (28.94, 110.54, 26.0)
         return
     env = gym.make("AFTIR-ArmFTL-v0", **KWARGS)
     env.reset(options={"target": target})
