@@ -47,7 +47,8 @@ def test_readme_first_steps_run_from_a_wheel(installed) -> None:
     bin_dir.mkdir(exist_ok=True)
     script = bin_dir / "aftir"
     script.write_text(
-        f"#!{sys.executable}\nimport sys\nfrom aftir_rl.cli.main import main\nsys.exit(main())\n"
+        f"#!{sys.executable}\nimport sys\nfrom aftir_rl.cli.main import main\n"
+        "if __name__ == '__main__':\n    sys.exit(main())\n"  # as pip writes it
     )
     script.chmod(0o755)
     env = {**env, "PATH": f"{bin_dir}{os.pathsep}{env['PATH']}", "OMP_NUM_THREADS": "1"}

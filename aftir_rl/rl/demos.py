@@ -16,6 +16,8 @@ import multiprocessing
 import os
 import re
 from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
@@ -53,15 +55,24 @@ def _plan(job: tuple[int, NDArray[np.float64]]) -> tuple[int, NDArray[np.float32
 
 @contextlib.contextmanager
 def _planner(workers: int, env_kwargs: dict[str, Any], max_seconds: float) -> Iterator[Any]:
-    """``imap`` over ``workers`` planning processes (in this process for one)."""
+    """``map`` over ``workers`` planning processes (in this process for one).
+
+    A worker that dies (killed, or failing to start) is a :class:`ConfigError`, not a hang.
+    """
     if workers <= 1:
         _init_worker(env_kwargs, max_seconds)
         yield map
         return
-    with multiprocessing.get_context("spawn").Pool(
-        workers, _init_worker, (env_kwargs, max_seconds)
-    ) as pool:
-        yield pool.imap
+    ctx = multiprocessing.get_context("spawn")
+    init = (env_kwargs, max_seconds)
+    with ProcessPoolExecutor(workers, ctx, initializer=_init_worker, initargs=init) as pool:
+        try:
+            yield pool.map
+        except BrokenProcessPool:
+            raise ConfigError(
+                "a planning worker died (out of memory, killed, or unable to start); try "
+                "--workers 1"
+            ) from None
 
 
 def _targets(env_kwargs: dict[str, Any], first_seed: int) -> Iterator[tuple[int, Any]]:

@@ -138,7 +138,12 @@ def test_a_dataset_holds_the_env_episodes_and_resumes(dataset):
         rewards = env.unwrapped.compute_reward(
             episode.observations["achieved_goal"][1:],
             episode.observations["desired_goal"][1:],
-            {"prev_achieved_goal": episode.infos["prev_achieved_goal"][1:]},
+            [
+                {"prev_achieved_goal": p, "contact": c}
+                for p, c in zip(
+                    episode.infos["prev_achieved_goal"][1:], episode.infos["contact"][1:]
+                )
+            ],
         )
         np.testing.assert_allclose(rewards, episode.rewards, atol=1e-4)
     again = write_dataset(root, 3, seed=8_000_000, env_kwargs=KWARGS)
