@@ -34,7 +34,8 @@ CASES = int(os.environ.get("AFTIR_FUZZ_CASES", "5"))  # ``make fuzz``: 2,000
 PEAK_MB = 800
 
 PPO_REACH = (
-    "env_id: AFTIR-ArmReach-v0\neval_freq: 100000\neval_targets: 2\ncheckpoint_freq: 64\n"
+    "env_id: AFTIR-ArmReach-v0\nn_envs: 1\n"  # one env, not the entry's two
+    "eval_freq: 100000\neval_targets: 2\ncheckpoint_freq: 64\n"
     "hyperparameters:\n  n_steps: 64\n  batch_size: 32\n"
 )
 PPO_FTL = (

@@ -31,7 +31,8 @@ from aftir_rl.rl.tabular.q_table import QLearning
 
 ROOT = Path(__file__).resolve().parents[2]
 PPO_YAML = (
-    "env_id: AFTIR-ArmReach-v0\neval_freq: 100000\neval_targets: 2\ncheckpoint_freq: 64\n"
+    "env_id: AFTIR-ArmReach-v0\nn_envs: 1\n"  # one env, not the entry's two
+    "eval_freq: 100000\neval_targets: 2\ncheckpoint_freq: 64\n"
     "hyperparameters:\n  n_steps: 64\n  batch_size: 32\n"
 )
 TARGET = ["-50", "140", "10"]
