@@ -167,7 +167,7 @@ def test_cloning_fits_the_experts_actions(dataset, tmp_path):
     first = clone(model, demos, epochs=1, learning_rate=0.0)  # measures only
     fitted = clone(model, demos, epochs=60, batch_size=64)
     assert fitted["action_mse"] < 0.3 * first["action_mse"]
-    assert fitted["steps"] == len(demos.actions) == out["steps"]
+    assert fitted["steps"] == len(demos.actions)  # every step of every episode on disk
     with pytest.raises(ConfigError, match="steer"):
         from aftir_rl.rl.imitation import pretrainer
 
