@@ -38,10 +38,7 @@ _EXPERT: Any = None  # a worker's expert (made once per process)
 
 
 def _init_worker(env_kwargs: dict[str, Any], max_seconds: float) -> None:
-    global _EXPERT
-    import torch
-
-    torch.set_num_threads(1)
+    global _EXPERT  # the expert plans in numpy and numba: no torch in the workers
     from aftir_rl.rl.expert import FTLExpert
 
     _EXPERT = FTLExpert(max_seconds=max_seconds, **env_kwargs)

@@ -77,7 +77,8 @@ def is_hyperparams_file(name: str | os.PathLike[str]) -> bool:
     """Whether the config ``name`` stands for is keyed by env id (RL Zoo's format)."""
     data = read_yaml(find_config(name))
     fields = {f.name for f in dataclasses.fields(SB3Config)} | {"stages"}
-    return bool(data) and not fields & set(data) and bool(_entries("", find_config(name))[1])
+    envs = [k for k in data if isinstance(k, str) and k.startswith("AFTIR-")]
+    return bool(envs) and not fields & set(data)
 
 
 def _zoo_fields(entry: Any, algo: str, source: str) -> dict[str, Any]:
