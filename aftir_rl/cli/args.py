@@ -27,8 +27,14 @@ __all__ = [
     "MAX_WORKERS",
     "CommandLineError",
     "OneLineParser",
+    "add_int_option",
+    "add_key_values_option",
     "add_margin_option",
+    "add_motion_option",
     "add_ray_options",
+    "add_run_dir_options",
+    "add_seconds_option",
+    "add_seed_option",
     "add_target_option",
     "bounded_int",
     "check_margin",
@@ -143,6 +149,49 @@ def add_target_option(parser: argparse.ArgumentParser, help: str, required: bool
         metavar=("X", "Y", "Z"),
         help=help,
     )
+
+
+def add_int_option(
+    parser: argparse.ArgumentParser,
+    flag: str,
+    bounds: tuple[int, int],
+    help: str,
+    default: int | None = None,
+    metavar: str = "N",
+) -> None:
+    """``flag N``, an integer within ``bounds`` (both included; :func:`bounded_int`)."""
+    parser.add_argument(
+        flag, type=bounded_int(*bounds), default=default, metavar=metavar, help=help
+    )
+
+
+def add_seed_option(parser: argparse.ArgumentParser, help: str, default: int | None = 0) -> None:
+    """``--seed SEED``, 0 to :data:`MAX_SEED`."""
+    add_int_option(parser, "--seed", (0, MAX_SEED), help, default, metavar="SEED")
+
+
+def add_seconds_option(
+    parser: argparse.ArgumentParser, flag: str, default: float, help: str
+) -> None:
+    """``flag S``, a time budget in seconds."""
+    parser.add_argument(flag, type=float, default=default, metavar="S", help=help)
+
+
+def add_key_values_option(parser: argparse.ArgumentParser, flag: str, help: str) -> None:
+    """``flag KEY:VALUE ...``, RL Zoo's spelling of keyword arguments (values read as YAML)."""
+    parser.add_argument(flag, nargs="+", default=[], metavar="KEY:VALUE", help=help)
+
+
+def add_motion_option(parser: argparse.ArgumentParser, help: str) -> None:
+    """``--motion ftl|progressive``: how a Q-table run's cells become a motion (default ftl)."""
+    parser.add_argument("--motion", choices=("ftl", "progressive"), default="ftl", help=help)
+
+
+def add_run_dir_options(parser: argparse.ArgumentParser, logdir_help: str, resume: str) -> None:
+    """``--logdir`` (default ``runs``), ``--resume`` (from ``resume``) and ``--no-progress``."""
+    parser.add_argument("--logdir", default="runs", help=logdir_help)
+    parser.add_argument("--resume", help=f"{resume} or run directory to continue training from")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
 def add_margin_option(parser: argparse.ArgumentParser, help: str) -> None:

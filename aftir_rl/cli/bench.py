@@ -16,11 +16,12 @@ from dataclasses import asdict
 from pathlib import Path
 
 from aftir_rl.cli.args import (
-    MAX_SEED,
     OneLineParser,
+    add_int_option,
     add_margin_option,
     add_ray_options,
-    bounded_int,
+    add_seconds_option,
+    add_seed_option,
 )
 from aftir_rl.cli.guard import cli, preload
 from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
@@ -59,34 +60,23 @@ def build_parser() -> argparse.ArgumentParser:
         help="target sets to run, named after the papers (aftir_rl.core.papers) and the two bays "
         "(default: all)",
     )
-    parser.add_argument(
+    add_int_option(
+        parser,
         "--n-random",
-        type=bounded_int(1, MAX_N_RANDOM),
-        default=10,
-        metavar="N",
-        help=f"random targets per bay, 1 to {MAX_N_RANDOM:,} (default 10)",
+        (1, MAX_N_RANDOM),
+        f"random targets per bay, 1 to {MAX_N_RANDOM:,} (default 10)",
+        10,
     )
-    parser.add_argument(
-        "--seed",
-        type=bounded_int(0, MAX_SEED),
-        default=7,
-        help="seed of the random targets, 0 to 2**32-1 (default 7)",
+    add_seed_option(parser, "seed of the random targets, 0 to 2**32-1 (default 7)", 7)
+    add_seconds_option(
+        parser, "--rrt-seconds", 10.0, "RRT-Connect's budget per target (default 10)"
     )
-    parser.add_argument(
-        "--rrt-seconds",
-        type=float,
-        default=10.0,
-        metavar="S",
-        help="RRT-Connect's budget per target (default 10)",
-    )
-    parser.add_argument(
+    add_seconds_option(
+        parser,
         "--bridge-seconds",
-        type=float,
-        default=DEFAULT_BRIDGE_SECONDS,
-        metavar="S",
-        help="RRT-Connect's budget per colliding move of a "
-        f"q_table+postures trajectory, 0 for none (default "
-        f"{DEFAULT_BRIDGE_SECONDS:g})",
+        DEFAULT_BRIDGE_SECONDS,
+        "RRT-Connect's budget per colliding "
+        f"move of a q_table+postures trajectory, 0 for none (default {DEFAULT_BRIDGE_SECONDS:g})",
     )
     parser.add_argument(
         "--model",

@@ -13,7 +13,14 @@ import json
 import time
 from collections.abc import Sequence
 
-from aftir_rl.cli.args import MAX_SEED, OneLineParser, bounded_int
+from aftir_rl.cli.args import (
+    OneLineParser,
+    add_int_option,
+    add_key_values_option,
+    add_seconds_option,
+    add_seed_option,
+    bounded_int,
+)
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import ConfigError
 
@@ -43,34 +50,17 @@ def build_parser() -> argparse.ArgumentParser:
         default="ppo_ftl_demos",
         help="the PPO config whose env_kwargs the episodes use (default ppo_ftl_demos)",
     )
-    p.add_argument(
-        "--env-kwargs",
-        nargs="+",
-        default=[],
-        metavar="KEY:VALUE",
-        help="env keyword arguments over the config's (e.g. bay:1)",
-    )
-    p.add_argument(
-        "--seed",
-        type=bounded_int(0, MAX_SEED),
-        default=0,
-        help="reset seed of the first target (default 0); target j is drawn with seed + j",
+    add_key_values_option(p, "--env-kwargs", "env keyword arguments over the config's (e.g. bay:1)")
+    add_seed_option(
+        p, "reset seed of the first target (default 0); target j is drawn with seed + j"
     )
     p.add_argument("--id", default="aftir/armftl-expert-v0", help="Minari's dataset id")
-    p.add_argument(
-        "--workers",
-        type=bounded_int(1, 64),
-        default=1,
-        metavar="W",
-        help="processes that plan (default 1)",
-    )
-    p.add_argument(
+    add_int_option(p, "--workers", (1, 64), "processes that plan (default 1)", 1, "W")
+    add_seconds_option(
+        p,
         "--max-seconds",
-        type=float,
-        default=30.0,
-        metavar="S",
-        help="the expert's planning budget per target (default 30 s); a target it misses is "
-        "skipped",
+        30.0,
+        "the expert's planning budget per target (default 30 s); a target it misses is skipped",
     )
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return p

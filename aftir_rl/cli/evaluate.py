@@ -20,12 +20,13 @@ from typing import Any
 import numpy as np
 
 from aftir_rl.cli.args import (
-    MAX_SEED,
     OneLineParser,
+    add_int_option,
     add_margin_option,
+    add_motion_option,
     add_ray_options,
+    add_seed_option,
     add_target_option,
-    bounded_int,
     check_margin,
 )
 from aftir_rl.cli.guard import cli, preload
@@ -90,25 +91,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_target_option(parser, "evaluation target for SB3 runs (repeatable)")
     parser.add_argument("--logdir", default="runs", help="where the evaluate__<time> logs go")
-    parser.add_argument(
-        "--motion",
-        choices=("ftl", "progressive"),
-        default="ftl",
-        help="a Q-table run's motion: follow-the-leader (default) or the papers' postures per cell",
+    add_motion_option(
+        parser,
+        "a Q-table run's motion: follow-the-leader (default) or the papers' postures per cell",
     )
-    parser.add_argument(
+    add_int_option(
+        parser,
         "--random",
-        type=bounded_int(1, MAX_RANDOM_TARGETS),
-        metavar="N",
-        help=f"SB3 runs: N targets drawn by the run's env (1..{MAX_RANDOM_TARGETS}), not "
-        "its fixed evaluation targets",
+        (1, MAX_RANDOM_TARGETS),
+        f"SB3 runs: N targets drawn by the run's "
+        f"env (1..{MAX_RANDOM_TARGETS}), not its fixed evaluation targets",
     )
-    parser.add_argument(
-        "--seed",
-        type=bounded_int(0, MAX_SEED),
-        metavar="S",
-        help=f"first seed of --random's targets, 0 to 2**32-1-N (default {RANDOM_SEED}, far "
+    add_seed_option(
+        parser,
+        f"first seed of --random's targets, 0 to 2**32-1-N (default {RANDOM_SEED}, far "
         f"from training's {EVAL_SEED})",
+        None,
     )
     add_margin_option(parser, f"clearance the arm keeps ({DEFAULT_MARGIN:g} cm)")
     add_ray_options(parser, "evaluate the runs")

@@ -23,12 +23,16 @@ from typing import Any
 from aftir_rl.cli.args import (
     MAX_ENVS,
     MAX_EPISODES,
-    MAX_SEED,
     MAX_TIMESTEPS,
     OneLineParser,
+    add_int_option,
+    add_key_values_option,
     add_margin_option,
+    add_motion_option,
+    add_run_dir_options,
+    add_seconds_option,
+    add_seed_option,
     add_target_option,
-    bounded_int,
     check_margin,
 )
 from aftir_rl.cli.guard import cli
@@ -95,6 +99,9 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_SEED_HELP = "random seed (default 0; to 2**32-1)"
+
+
 def _add_q_table_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``q_table`` subcommand to the subparsers ``sub``."""
     q = sub.add_parser(
@@ -110,48 +117,38 @@ def _add_q_table_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
     add_target_option(
         q, "target point in cm; repeat for several (default: the tank's reference targets)"
     )
-    q.add_argument(
+    add_int_option(
+        q,
         "--episodes",
-        type=bounded_int(1, MAX_EPISODES),
-        metavar="N",
-        help=f"training episodes per target, 1 to {MAX_EPISODES:,} (overrides config)",
+        (1, MAX_EPISODES),
+        f"training episodes per target, 1 to {MAX_EPISODES:,} (overrides config)",
     )
     q.add_argument(
         "--all-targets",
         action="store_true",
         help="one goal-conditioned run (AFTIR-TankGoal-v0) that learns every reachable cell",
     )
-    q.add_argument(
-        "--seed",
-        type=bounded_int(0, MAX_SEED),
-        default=0,
-        help="random seed (default 0; to 2**32-1)",
-    )
-    q.add_argument("--logdir", default="runs", help="parent of the run directories (default runs/)")
-    q.add_argument("--resume", help="q_table.npz or run directory to continue training from")
-    q.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_seed_option(q, _SEED_HELP)
+    add_run_dir_options(q, "parent of the run directories (default runs/)", "q_table.npz")
     q.add_argument(
         "--no-postures",
         action="store_true",
         help="skip turning the greedy path into arm postures (trajectory.json)",
     )
-    q.add_argument(
-        "--motion",
-        choices=("ftl", "progressive"),
-        default="ftl",
-        help="ftl: follow-the-leader motion along a route from the learned cells (default); "
+    add_motion_option(
+        q,
+        "ftl: follow-the-leader motion along a route from the learned cells (default); "
         "progressive: the papers' posture per cell, continued and bridged",
     )
     add_margin_option(
         q, f"clearance of the arm's surface along the motion (default {DEFAULT_MARGIN:g} cm)"
     )
-    q.add_argument(
+    add_seconds_option(
+        q,
         "--bridge-seconds",
-        type=float,
-        default=DEFAULT_BRIDGE_SECONDS,
-        metavar="S",
-        help="RRT-Connect's budget for each colliding move of the postures, 0 for none "
-        f"(default {DEFAULT_BRIDGE_SECONDS:g})",
+        DEFAULT_BRIDGE_SECONDS,
+        "RRT-Connect's budget for each colliding "
+        f"move of the postures, 0 for none (default {DEFAULT_BRIDGE_SECONDS:g})",
     )
 
 
@@ -174,79 +171,65 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
         f"configs/hyperparams/{algo}.yml (default {DEFAULT_SB3_ENV_ID}); with --config, overrides "
         "its env_id",
     )
-    p.add_argument(
+    add_int_option(
+        p,
         "--total-timesteps",
-        type=bounded_int(0, MAX_TIMESTEPS),
+        (0, MAX_TIMESTEPS),
+        f"training steps, 0 to {MAX_TIMESTEPS:,} (overrides config; 0: evaluate only)",
         metavar="T",
-        help=f"training steps, 0 to {MAX_TIMESTEPS:,} (overrides config; 0: evaluate only)",
     )
-    p.add_argument(
+    add_int_option(
+        p,
         "--n-envs",
-        type=bounded_int(1, MAX_ENVS),
-        metavar="N",
-        help="parallel envs (overrides config): up to 64 subprocesses, or up to "
-        f"{MAX_ENVS:,} rows of a batched env",
+        (1, MAX_ENVS),
+        "parallel envs (overrides config): up to 64 subprocesses, "
+        f"or up to {MAX_ENVS:,} rows of a batched env",
     )
-    p.add_argument(
-        "--seed",
-        type=bounded_int(0, MAX_SEED),
-        default=0,
-        help="random seed (default 0; to 2**32-1)",
-    )
-    p.add_argument(
+    add_seed_option(p, _SEED_HELP)
+    add_key_values_option(
+        p,
         "--env-kwargs",
-        nargs="+",
-        default=[],
-        metavar="KEY:VALUE",
-        help="env keyword arguments over the config's, RL Zoo's spelling (e.g. bay:1 guide:true; "
-        "values read as YAML)",
+        "env keyword arguments over the config's, RL Zoo's spelling (e.g. "
+        "bay:1 guide:true; values read as YAML)",
     )
-    p.add_argument(
+    add_key_values_option(
+        p,
         "--hyperparams",
-        nargs="+",
-        default=[],
-        metavar="KEY:VALUE",
-        help=f"{algo.upper()} hyperparameters over the config's (e.g. learning_rate:1e-4 "
-        "n_epochs:5)",
+        f"{algo.upper()} hyperparameters over the config's (e.g. learning_rate:1e-4 n_epochs:5)",
     )
     _add_run_numbers(p)
-    p.add_argument("--logdir", default="runs", help="parent of the run directory")
-    p.add_argument("--resume", help="model.zip or run directory to continue training from")
-    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_run_dir_options(p, "parent of the run directory", "model.zip")
 
 
 def _add_run_numbers(p: argparse.ArgumentParser) -> None:
     """Add RL Zoo's ``--eval-freq``, ``--eval-episodes``, ``--save-freq``, and ``--demos``."""
-    p.add_argument(
+    steps = (1, MAX_TIMESTEPS)
+    add_int_option(
+        p,
         "--eval-freq",
-        type=bounded_int(1, MAX_TIMESTEPS),
+        steps,
+        "steps between evaluations (overrides config; default: every 5%% of the run)",
         metavar="T",
-        help="steps between evaluations (overrides config; default: every 5%% of the run)",
     )
-    p.add_argument(
+    add_int_option(
+        p,
         "--eval-episodes",
-        type=bounded_int(1, 1000),
-        metavar="N",
-        help="fixed evaluation targets, up to 1,000 (overrides config's eval_targets)",
+        (1, 1000),
+        "fixed evaluation targets, up to 1,000 (overrides config's eval_targets)",
     )
-    p.add_argument(
+    add_int_option(
+        p,
         "--save-freq",
-        type=bounded_int(1, MAX_TIMESTEPS),
+        steps,
+        "steps between checkpoints (overrides config; default: every 10%% of the run)",
         metavar="T",
-        help="steps between checkpoints (overrides config; default: every 10%% of the run)",
     )
     p.add_argument(
         "--demos",
         metavar="DATASET",
         help="behaviour-clone this Minari dataset (aftir dataset) into the new PPO policy first",
     )
-    p.add_argument(
-        "--bc-epochs",
-        type=bounded_int(1, 1000),
-        default=20,
-        metavar="N",
-        help="passes over the demonstrations (default 20)",
-    )
+    add_int_option(p, "--bc-epochs", (1, 1000), "passes over the demonstrations (default 20)", 20)
 
 
 def _sb3_configs(args: argparse.Namespace) -> list[Any]:

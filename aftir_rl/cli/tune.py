@@ -16,11 +16,11 @@ from typing import Any
 
 from aftir_rl.cli.args import (
     MAX_ENVS,
-    MAX_SEED,
     MAX_TIMESTEPS,
     OneLineParser,
+    add_int_option,
     add_ray_options,
-    bounded_int,
+    add_seed_option,
 )
 from aftir_rl.cli.guard import cli, preload
 from aftir_rl.core.config import CONFIG_DIR
@@ -48,47 +48,27 @@ def build_parser() -> argparse.ArgumentParser:
         "configs/hyperparams/ALGO.yml (default AFTIR-ArmReach-v0); with --config, replaces the "
         "config's",
     )
-    parser.add_argument(
-        "--trials",
-        type=bounded_int(1, MAX_TRIALS),
-        default=8,
-        metavar="N",
-        help=f"number of trials, 1 to {MAX_TRIALS:,} (default 8)",
+    add_int_option(
+        parser, "--trials", (1, MAX_TRIALS), f"trials, 1 to {MAX_TRIALS:,} (default 8)", 8
     )
     add_ray_options(parser, "run the trials", default="local")
     parser.add_argument(
         "--logdir", default="runs", help="parent of the sweep folder (default runs/)"
     )
-    parser.add_argument(
-        "--total-timesteps",
-        type=bounded_int(1, MAX_TIMESTEPS),
-        metavar="T",
-        help=f"training steps of each trial, 1 to {MAX_TIMESTEPS:,} (default: the config's)",
-    )
-    parser.add_argument(
-        "--evaluations",
-        type=bounded_int(1, MAX_EVALUATIONS),
-        default=4,
-        metavar="K",
-        help=f"evaluations per trial, ASHA's rungs, 1 to {MAX_EVALUATIONS} (default 4)",
-    )
-    parser.add_argument(
-        "--n-envs",
-        type=bounded_int(1, MAX_ENVS),
-        metavar="N",
-        help="envs (and CPUs) of each trial: up to 64 subprocesses, or up to "
-        f"{MAX_ENVS:,} rows of a batched env (default: the config's)",
-    )
+    per_trial = {
+        "--total-timesteps": ((1, MAX_TIMESTEPS), None, "T", "training steps"),
+        "--evaluations": ((1, MAX_EVALUATIONS), 4, "K", "evaluations (ASHA's rungs)"),
+        "--n-envs": ((1, MAX_ENVS), None, "N", "envs (and CPUs): up to 64 subprocesses or rows"),
+    }
+    for flag, (bounds, default, metavar, what) in per_trial.items():
+        told = "the config's" if default is None else default
+        help = f"{what} of each trial, {bounds[0]} to {bounds[1]:,} (default {told})"
+        add_int_option(parser, flag, bounds, help, default, metavar)
     parser.add_argument(
         "--config", help="base config: a named config or a path (default: the entry of --env)"
     )
     parser.add_argument("--space", help="search space (default: configs/search_spaces/ALGO.yaml)")
-    parser.add_argument(
-        "--seed",
-        type=bounded_int(0, MAX_SEED),
-        default=0,
-        help="seed of every trial, 0 to 2**32-1 (default 0)",
-    )
+    add_seed_option(parser, "seed of every trial, 0 to 2**32-1 (default 0)")
     parser.add_argument("--quiet", action="store_true", help="no Ray Tune status tables")
     return parser
 

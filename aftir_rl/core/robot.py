@@ -236,9 +236,9 @@ def body_points(
     """Points along the arm's backbone [cm].
 
     Args:
-        dis: module travel [cm], shape ``(...)`` or scalar.
-        theta: bending angles [rad], shape ``(..., N)``.
-        phi: bending-plane angles [rad], shape ``(..., N)``.
+        dis: module travel [cm] (as :func:`forward_kinematics` takes it, as are the next three).
+        theta: bending angles [rad].
+        phi: bending-plane angles [rad].
         section_length: ``l`` [cm].
         points_per_section: K, the points per section at arc lengths ``l·j/K``, ``j = 1..K``.
 

@@ -393,12 +393,14 @@ class FieldGuide:
             np.asarray(ids, dtype=np.int64),
             self._next,
             np.asarray(hops, dtype=np.int64),
-            self._origin,
-            float(self.size),
-            self.shape,
+            self._kernel_grid(),
             out,
         )
         return out
+
+    def _kernel_grid(self) -> kernel.Grid:
+        """The grid as the compiled queries read it."""
+        return self._origin, float(self.size), self.shape
 
     def __call__(
         self, p: NDArray[np.float64], g: NDArray[np.float64], ids: NDArray[np.int64]
@@ -415,9 +417,7 @@ class FieldGuide:
             self._table,
             self._edges_flat,
             self.neighbours,
-            self._origin,
-            float(self.size),
-            self.shape,
+            self._kernel_grid(),
             to_go,
             way,
         )

@@ -205,26 +205,21 @@ class FTLBatch:
             self.ray_clearance = np.empty((b, (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)))
         kernel.refresh(
             np.asarray(rows, dtype=np.int64),
-            self.kappa,
-            self.k,
-            self.s,
+            self.kernel_arms(),
             self.l,
             self.k_samples,
             float(self.arm.radius),
             self._deep,
-            _RAY_AXES,
-            _RAY_STEPS,
+            (_RAY_AXES, _RAY_STEPS),
             self._kernel_tank,
-            self.theta,
-            self.phi,
-            self.points,
-            self.heading,
-            self.body_clearance,
-            self.ray_clearance,
         )
         self.dis = self.s - n * self.l
         self.tip = self.points[:, -1]
         self.contact = self.body_clearance < self.margin
+
+    def kernel_arms(self) -> kernel.KernelArms:
+        """The batch's arrays as the compiled kernels read them (the arrays themselves)."""
+        return kernel.KernelArms(*(getattr(self, name) for name in kernel.KernelArms._fields))
 
     def observation(self, rows: NDArray[np.int64] | None = None) -> NDArray[np.float32]:
         """The observation vectors of every env ``(B, obs_size)``, or of ``rows``.
@@ -237,15 +232,7 @@ class FTLBatch:
         out = np.empty((len(rows), self.obs_size), dtype=np.float32)
         kernel.observation(
             rows,
-            self.kappa,
-            self.k,
-            self.s,
-            self.theta,
-            self.phi,
-            self.points,
-            self.heading,
-            self.body_clearance,
-            self.ray_clearance,
+            self.kernel_arms(),
             self.l,
             self.k_samples,
             float(self.arm.theta_max),

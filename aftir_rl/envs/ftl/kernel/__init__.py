@@ -9,6 +9,7 @@ Compiled on first use and cached beside the files (``cache=True``). See docs/env
 """
 
 from aftir_rl.envs.ftl.kernel.geometry import (
+    KernelArms,
     KernelTank,
     advance,
     fk_points,
@@ -17,7 +18,7 @@ from aftir_rl.envs.ftl.kernel.geometry import (
     steering_frames,
     usable,
 )
-from aftir_rl.envs.ftl.kernel.guide import guide_query, lookahead
+from aftir_rl.envs.ftl.kernel.guide import Grid, guide_query, lookahead
 from aftir_rl.envs.ftl.kernel.observation import (
     CONTACT_PENALTY,
     OBS_LIMIT,
@@ -33,6 +34,8 @@ __all__ = [
     "OBS_LIMIT",
     "PROGRESS_PER_CM",
     "SUCCESS_REWARD",
+    "Grid",
+    "KernelArms",
     "KernelTank",
     "refresh",
     "sdf",

@@ -172,6 +172,25 @@ def advance(
         k[b] = new_k
 
 
+class KernelArms(NamedTuple):
+    """A batch of arms as the kernels read them: the state, then what :func:`refresh` derives.
+
+    The route ``kappa (B, N, 2)``, the steered section ``k (B,)`` and the tip's arc length ``s
+    (B,)``; the posture ``theta``, ``phi (B, N)``, the backbone ``points (B, N·K + 1, 3)``, the
+    tip's ``heading (B, 3)``, the ``body_clearance (B,)`` and the ``ray_clearance (B, R)``.
+    """
+
+    kappa: NDArray[np.float64]
+    k: NDArray[np.int64]
+    s: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    phi: NDArray[np.float64]
+    points: NDArray[np.float64]
+    heading: NDArray[np.float64]
+    body_clearance: NDArray[np.float64]
+    ray_clearance: NDArray[np.float64]
+
+
 class KernelTank(NamedTuple):
     """A tank's signed distance and clearance grids as the arrays the kernels read.
 
@@ -271,31 +290,27 @@ def grid_value(
 @njit(cache=True)
 def refresh(
     rows: NDArray[np.int64],
-    kappa: NDArray[np.float64],
-    k: NDArray[np.int64],
-    s: NDArray[np.float64],
+    arms: KernelArms,
     section_length: float,
     samples: int,
     radius: float,
     deep: float,
-    ray_axes: NDArray[np.float64],
-    ray_distances: NDArray[np.float64],
+    rays: tuple[NDArray[np.float64], NDArray[np.float64]],
     tank: KernelTank,
-    theta: NDArray[np.float64],
-    phi: NDArray[np.float64],
-    points: NDArray[np.float64],
-    heading: NDArray[np.float64],
-    body_clearance: NDArray[np.float64],
-    ray_clearance: NDArray[np.float64],
 ) -> None:
     """Postures, backbone samples, headings and clearances of the arms ``rows``, in place.
 
-    Per row ``b``: ``θ, φ (N,)`` of the FTL posture of route ``kappa[b, :k[b] + 1]`` with the
-    tip at arc length ``s[b]``; ``points (N·K + 1, 3)`` from the base at ``(0, 0, s − N·l)``;
-    the unit heading of the last sample step; the surface clearance ``min(distance) − radius``
-    over the samples above ``deep`` (and the base), exact (grid-pruned); the clearances at
-    ``ray_distances`` along the heading and ``ray_axes`` (grid values, exact outside).
+    Per row ``b`` (of :class:`KernelArms`): ``θ, φ (N,)`` of the FTL posture of route
+    ``kappa[b, :k[b] + 1]`` with the tip at arc length ``s[b]``; ``points (N·K + 1, 3)`` from
+    the base at ``(0, 0, s − N·l)``; the unit heading of the last sample step; the surface
+    clearance ``min(distance) − radius`` over the samples above ``deep`` (and the base), exact
+    (grid-pruned); the clearances at the ray distances along the heading and the ray axes
+    (``rays``: axes ``(A, 3)`` and distances; grid values, exact outside).
     """
+    kappa, k, s, theta, phi = arms.kappa, arms.k, arms.s, arms.theta, arms.phi
+    points, heading = arms.points, arms.heading
+    body_clearance, ray_clearance = arms.body_clearance, arms.ray_clearance
+    ray_axes, ray_distances = rays
     n = kappa.shape[1]
     boxes, cylinders, spheres, walls = tank.boxes, tank.cylinders, tank.spheres, tank.walls
     lo, spacing, shape = tank.grid_lo, tank.grid_spacing, tank.grid_shape

@@ -11,16 +11,15 @@ from numpy.typing import NDArray
 __all__ = ["cell_of", "guide_query", "lookahead"]
 
 
+#: A guide grid as the kernels read it: its corner ``origin (3,)`` [cm], cell ``size`` [cm] and
+#: ``shape (3,)``.
+Grid = tuple[NDArray[np.float64], float, NDArray[np.int64]]
+
+
 @njit(cache=True)
-def cell_of(
-    px: float,
-    py: float,
-    pz: float,
-    origin: NDArray[np.float64],
-    size: float,
-    shape: NDArray[np.int64],
-) -> tuple[int, int, int]:
-    """The grid cell of point ``(px, py, pz)`` [cm], clamped to the grid."""
+def cell_of(px: float, py: float, pz: float, grid: Grid) -> tuple[int, int, int]:
+    """The cell of ``grid`` that holds point ``(px, py, pz)`` [cm], clamped to the grid."""
+    origin, size, shape = grid
     c0 = min(max(int(math.floor((px - origin[0]) / size)), 0), shape[0] - 1)
     c1 = min(max(int(math.floor((py - origin[1]) / size)), 0), shape[1] - 1)
     c2 = min(max(int(math.floor((pz - origin[2]) / size)), 0), shape[2] - 1)
@@ -35,17 +34,16 @@ def guide_query(
     table: NDArray[np.float32],
     edges: NDArray[np.bool_],
     neighbours: NDArray[np.int64],
-    origin: NDArray[np.float64],
-    size: float,
-    shape: NDArray[np.int64],
+    grid: Grid,
     to_go: NDArray[np.float64],
     way: NDArray[np.float64],
 ) -> None:
     """:meth:`FieldGuide.__call__ <aftir_rl.envs.ftl.fields.FieldGuide.__call__>`, in place."""
+    origin, size, shape = grid
     s1, s2 = shape[1], shape[2]
     for b in range(p.shape[0]):
         px, py, pz = p[b, 0], p[b, 1], p[b, 2]
-        c0, c1, c2 = cell_of(px, py, pz, origin, size, shape)
+        c0, c1, c2 = cell_of(px, py, pz, grid)
         flat = (c0 * s1 + c1) * s2 + c2
         row = ids[b]
         dx = px - (origin[0] + (c0 + 0.5) * size)
@@ -72,7 +70,7 @@ def guide_query(
                 best, wx, wy, wz = v, sx, sy, sz
                 first = False
         value = min(value, best)
-        g0, g1, g2 = cell_of(g[b, 0], g[b, 1], g[b, 2], origin, size, shape)
+        g0, g1, g2 = cell_of(g[b, 0], g[b, 1], g[b, 2], grid)
         if (c0 == g0 and c1 == g1 and c2 == g2) or not math.isfinite(best):
             wx, wy, wz = g[b, 0] - px, g[b, 1] - py, g[b, 2] - pz
             value = math.sqrt(wx * wx + wy * wy + wz * wz)
@@ -91,17 +89,16 @@ def lookahead(
     ids: NDArray[np.int64],
     nxt: NDArray[np.int32],
     hops: NDArray[np.int64],
-    origin: NDArray[np.float64],
-    size: float,
-    shape: NDArray[np.int64],
+    grid: Grid,
     out: NDArray[np.float64],
 ) -> None:
     """:meth:`FieldGuide.lookahead <aftir_rl.envs.ftl.fields.FieldGuide.lookahead>`, in place."""
+    origin, size, shape = grid
     s1, s2 = shape[1], shape[2]
     for b in range(p.shape[0]):
-        c0, c1, c2 = cell_of(p[b, 0], p[b, 1], p[b, 2], origin, size, shape)
+        c0, c1, c2 = cell_of(p[b, 0], p[b, 1], p[b, 2], grid)
         cell = (c0 * s1 + c1) * s2 + c2
-        g0, g1, g2 = cell_of(g[b, 0], g[b, 1], g[b, 2], origin, size, shape)
+        g0, g1, g2 = cell_of(g[b, 0], g[b, 1], g[b, 2], grid)
         home = (g0 * s1 + g1) * s2 + g2
         done = 0
         for j in range(hops.shape[0]):

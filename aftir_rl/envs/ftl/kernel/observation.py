@@ -8,6 +8,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from aftir_rl.envs.ftl.kernel.geometry import KernelArms
+
 __all__ = ["observation", "goal_reward", "guide_columns"]
 
 
@@ -29,15 +31,7 @@ OBS_LIMIT = 10.0
 @njit(cache=True)
 def observation(
     rows: NDArray[np.int64],
-    kappa: NDArray[np.float64],
-    k: NDArray[np.int64],
-    s: NDArray[np.float64],
-    theta: NDArray[np.float64],
-    phi: NDArray[np.float64],
-    points: NDArray[np.float64],
-    heading: NDArray[np.float64],
-    body_clearance: NDArray[np.float64],
-    ray_clearance: NDArray[np.float64],
+    arms: KernelArms,
     section_length: float,
     samples: int,
     theta_max: float,
@@ -46,9 +40,12 @@ def observation(
 ) -> None:
     """The goal-free part of the observation vectors of ``rows`` into ``out``'s rows, in place.
 
-    Columns ``0 .. 35 + 3N`` (:meth:`FTLBatch.observation`); the guide's columns after them
-    are filled by the caller.
+    Columns ``0 .. 35 + 3N`` (:meth:`FTLBatch.observation`) from the refreshed ``arms``; the
+    guide's columns after them are filled by the caller.
     """
+    kappa, k, s, theta, phi = arms.kappa, arms.k, arms.s, arms.theta, arms.phi
+    points, heading = arms.points, arms.heading
+    body_clearance, ray_clearance = arms.body_clearance, arms.ray_clearance
     n = theta.shape[1]
     s_max = n * section_length
     tip = points.shape[1] - 1
