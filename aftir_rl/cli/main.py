@@ -35,6 +35,11 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "aftir_rl.cli.dataset",
         "expert episodes of AFTIR-ArmFTL-v0 as a Minari dataset (needs aftir_rl[demos])",
     ),
+    "export": (
+        "aftir_rl.cli.export",
+        "a timed motion as ROS JointTrajectory JSON or CSV (needs aftir_rl[robot])",
+    ),
+    "check": ("aftir_rl.cli.check", "re-check a timed motion: time, limits, clearance; exit 0/1"),
     "configs": (
         "aftir_rl.cli.configs",
         "the shipped configs and tanks, by the names --config takes",

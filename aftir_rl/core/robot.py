@@ -21,6 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from aftir_rl.core.actuation import ActuatorLimits
+
 __all__ = [
     "ArmSpec",
     "Posture",
@@ -30,6 +32,8 @@ __all__ = [
     "tip_position",
     "finite_differences",
     "tip_jacobian",
+    "kappa_to_angles",
+    "angles_to_kappa",
 ]
 
 SMALL = 1e-4
@@ -44,6 +48,7 @@ class ArmSpec:
         max_sections: the most sections the arm has.
         radius: body radius used for collision checking [cm].
         theta_max: bound on ``|θ_i|`` [rad].
+        limits: the actuators' speed, acceleration and travel limits.
 
     """
 
@@ -51,6 +56,7 @@ class ArmSpec:
     max_sections: int = 12
     radius: float = 2.5
     theta_max: float = math.pi / 2
+    limits: ActuatorLimits = ActuatorLimits()
 
     def __post_init__(self) -> None:
         if not self.section_length > 0:
@@ -348,3 +354,17 @@ def tip_jacobian(
         return tip_position(dis, theta, phi, section_length)
 
     return finite_differences(tips, x, h, central)
+
+
+def kappa_to_angles(kappa: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(θ, φ)`` of bending vectors ``κ`` (..., 2); ``θ ≥ 0``, ``φ = 0`` where straight."""
+    k = np.asarray(kappa, dtype=np.float64)
+    theta = np.hypot(k[..., 0], k[..., 1])
+    phi = np.where(theta > 1e-12, np.arctan2(k[..., 1], k[..., 0]), 0.0)
+    return theta, phi
+
+
+def angles_to_kappa(theta: ArrayLike, phi: ArrayLike) -> NDArray[np.float64]:
+    """Bending vectors ``κ = (θ cos φ, θ sin φ)`` (..., 2) of angles ``θ, φ`` (...)."""
+    theta, phi = np.asarray(theta, dtype=np.float64), np.asarray(phi, dtype=np.float64)
+    return np.stack([theta * np.cos(phi), theta * np.sin(phi)], axis=-1)

@@ -15,6 +15,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from aftir_rl.core.actuation import ActuatorLimits
 from aftir_rl.core.config import (
     CONFIG_DIR,
     MAX_YAML_BYTES,
@@ -226,7 +227,8 @@ def _parse_cell_size(value: Any, lo: Vec3, hi: Vec3, src: str) -> float:
 
 def _parse_arm(data: Mapping[str, Any], src: str) -> ArmSpec:
     """The ``arm`` section (defaults for the keys it leaves out)."""
-    arm = _section(data, "arm", {"section_length", "max_sections", "radius", "theta_max"}, src)
+    keys = {"section_length", "max_sections", "radius", "theta_max", "limits"}
+    arm = _section(data, "arm", keys, src)
     try:
         return ArmSpec(
             section_length=to_float(
@@ -237,6 +239,7 @@ def _parse_arm(data: Mapping[str, Any], src: str) -> ArmSpec:
             ),
             radius=to_float(arm.get("radius", 2.5), f"{src}: arm.radius", limit=MAX_COORD),
             theta_max=to_float(arm.get("theta_max", math.pi / 2), f"{src}: arm.theta_max"),
+            limits=ActuatorLimits.from_mapping(arm.get("limits"), f"{src}: arm.limits"),
         )
     except ValueError as exc:
         if isinstance(exc, ConfigError):

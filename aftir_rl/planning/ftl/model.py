@@ -22,7 +22,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.core.robot import Posture, body_points, forward_kinematics, section_transforms
+from aftir_rl.core.robot import (
+    Posture,
+    body_points,
+    forward_kinematics,
+    kappa_to_angles,
+    section_transforms,
+)
 
 __all__ = [
     "Route",
@@ -37,14 +43,6 @@ __all__ = [
 
 #: Backbone samples per section for the density and deviation checks (2.5 cm apart at l = 50).
 SAMPLES_PER_SECTION = 20
-
-
-def kappa_to_angles(kappa: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(θ, φ)`` of bending vectors ``κ`` (..., 2); ``θ ≥ 0``, ``φ = 0`` where straight."""
-    k = np.asarray(kappa, dtype=np.float64)
-    theta = np.hypot(k[..., 0], k[..., 1])
-    phi = np.where(theta > 1e-12, np.arctan2(k[..., 1], k[..., 0]), 0.0)
-    return theta, phi
 
 
 @dataclass(frozen=True)

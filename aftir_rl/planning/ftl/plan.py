@@ -22,10 +22,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.config import DEFAULT_MARGIN
-from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.errors import AftirError, PlanningError
+from aftir_rl.core.robot import ArmSpec
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.model import FTLMotion, ftl_deviation, ftl_motion
 from aftir_rl.planning.ftl.route import RouteResult, RouteSettings, plan_route
+from aftir_rl.planning.timing import TimedMotion, time_motion
 
 __all__ = ["MotionPlan", "plan_motion", "motion_summary", "DEFAULT_MARGIN", "SEARCH_VARIANTS"]
 
@@ -65,6 +67,8 @@ class MotionPlan:
     tip_path_length_cm: float | None = None
     route_departure_cm: tuple[float, float] | None = None
     corridor: str | None = None
+    timing: TimedMotion | None = None
+    timing_note: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The ``trajectory.json`` contract of a q_table run directory."""
@@ -102,7 +106,29 @@ class MotionPlan:
                     "kappa": self.motion.route.kappa.tolist(),
                 },
             )
+            out.update(_timing_json(self.timing, self.timing_note, out["motion"]))
         return out
+
+
+def _timing_json(
+    timing: TimedMotion | None, note: str | None, entries: list[dict[str, Any]]
+) -> dict[str, Any]:
+    """``duration_s`` and ``timing`` of ``trajectory.json``; each entry gains its time ``t``."""
+    if timing is None:
+        return {"duration_s": None, "timing": None, "timing_note": note}
+    for entry, t in zip(entries, timing.t.tolist()):
+        entry["t"] = t
+    return {"duration_s": timing.duration, "timing": timing.to_json()}
+
+
+def _timed(motion: FTLMotion, arm: ArmSpec) -> tuple[TimedMotion | None, str | None]:
+    """The motion's time-optimal schedule under the arm's limits, or why it has none."""
+    try:
+        return time_motion(
+            motion.dis, motion.theta, motion.phi, arm.section_length, arm.limits
+        ), None
+    except AftirError as exc:  # no robot extra, a cable past its travel, the solver
+        return None, f"no timing: {exc}"
 
 
 def motion_clearance(tank: Tank, motion: FTLMotion) -> float:
@@ -173,6 +199,8 @@ def plan_motion(
         if best_deviation <= DEVIATION_GOAL:
             break
     if best is not None:
+        assert best.motion is not None
+        best.timing, best.timing_note = _timed(best.motion, arm)
         best.seconds = time.perf_counter() - start
         return best
     return _unreachable(target, margin, arm.section_length, start, reasons)

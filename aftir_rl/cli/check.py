@@ -1,0 +1,48 @@
+"""``aftir check RUN``: re-check a timed motion independently of the planner; exit 0 or 1.
+
+A thin command line over :func:`aftir_rl.experiments.execution.check_motion`: time from 0 and
+never back, every joint's and cable's speed and acceleration within the arm's limits, the cables
+within their travel, the joint limits, entries dense enough, and python-fcl clearance of at
+least the run's margin with the panel rule at every entry. Prints ``ok`` or the first problem
+in one line (exit 1); a file that cannot be read exits 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+
+from aftir_rl.cli.args import OneLineParser
+from aftir_rl.cli.guard import cli
+
+__all__ = ["build_parser", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The options of ``aftir check``."""
+    parser = OneLineParser(
+        prog="aftir check",
+        description="Re-check a run's timed motion: time, actuator limits, forward kinematics, "
+        "clearance and the margin. Exit 0 if it holds, 1 with the first problem otherwise.",
+    )
+    parser.add_argument("run", metavar="RUN", help="a run directory or its trajectory.json")
+    parser.add_argument(
+        "--tank", help="tank name or YAML (default: the tank the run names, else b737_center)"
+    )
+    return parser
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``aftir check``."""
+    from aftir_rl.experiments.execution import check_motion, timed_run_tank
+
+    args = build_parser().parse_args(argv)
+    run, tank = timed_run_tank(args.run, args.tank)
+    problems = check_motion(run, tank)
+    if problems:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        print(f"{args.run}: {problems[0]}{more}")
+        return 1
+    print(f"{args.run}: ok ({len(run.t)} entries, {run.t[-1]:.2f} s, margin {run.margin_cm:g} cm)")
+    return 0

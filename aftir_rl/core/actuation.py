@@ -1,0 +1,90 @@
+"""The arm's actuator limits: the linear module, the sections' bending, and their cables.
+
+A tank YAML's ``arm.limits`` sets them (every key optional; defaults below); the time
+parametrisation (:mod:`aftir_rl.planning.timing`) keeps every one and ``aftir check`` re-checks
+them. The cable model is :mod:`aftir_rl.core.cables`; docs/robot.md explains both.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from aftir_rl.core.config import brief, to_float
+from aftir_rl.core.errors import ConfigError
+
+__all__ = ["ActuatorLimits"]
+
+#: The largest value any limit may take (a bound for hostile files, far above any real arm).
+MAX_LIMIT = 1e6
+
+
+@dataclasses.dataclass(frozen=True)
+class ActuatorLimits:
+    """Speed, acceleration and travel limits of the arm's actuators (cm, rad, s).
+
+    Attributes:
+        module_speed: the linear module's largest speed [cm/s].
+        module_accel: its largest acceleration [cm/s²].
+        bend_rate: largest rate of each bending-vector component ``κ = (θ cos φ, θ sin φ)`` of a
+            section [rad/s] (``φ`` has no rate where a section is straight; ``κ`` always has).
+        bend_accel: largest acceleration of each component [rad/s²].
+        cable_offset: distance of every cable from the backbone [cm].
+        cable_stagger_deg: each section's three cables (120° apart) are turned by this much from
+            the previous section's, so that the cables of different sections do not share a path.
+        cable_speed: largest rate of a cable's length change [cm/s].
+        cable_accel: largest acceleration of a cable's length [cm/s²].
+        cable_travel: largest change of a cable's length from the straight arm [cm].
+
+    """
+
+    module_speed: float = 5.0
+    module_accel: float = 10.0
+    bend_rate: float = 0.2
+    bend_accel: float = 0.5
+    cable_offset: float = 2.0
+    cable_stagger_deg: float = 10.0
+    cable_speed: float = 2.0
+    cable_accel: float = 5.0
+    cable_travel: float = 40.0
+
+    def __post_init__(self) -> None:
+        for item in dataclasses.fields(self):
+            value = getattr(self, item.name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ConfigError(f"{item.name} must be a number, got {brief(value)}")
+            if item.name == "cable_stagger_deg":
+                if not -360 <= value <= 360:
+                    raise ConfigError(f"cable_stagger_deg must be within ±360, got {value:g}")
+            elif not 0 < value <= MAX_LIMIT:
+                raise ConfigError(f"{item.name} must be positive and at most 1e6, got {value:g}")
+
+    @property
+    def cable_stagger(self) -> float:
+        """:attr:`cable_stagger_deg` in radians."""
+        return math.radians(self.cable_stagger_deg)
+
+    @classmethod
+    def from_mapping(cls, data: Any, where: str) -> ActuatorLimits:
+        """Limits from a YAML mapping (``where`` names it in errors); unknown keys are refused."""
+        if data is None:
+            return cls()
+        if not isinstance(data, Mapping):
+            raise ConfigError(f"{where}: expected a mapping of limits, got {brief(data)}")
+        known = {item.name for item in dataclasses.fields(cls)}
+        unknown = sorted(str(key) for key in data if key not in known)
+        if unknown:
+            raise ConfigError(
+                f"{where}: unknown key {brief(unknown[0])}; known: {', '.join(sorted(known))}"
+            )
+        values = {key: to_float(value, f"{where}.{key}", MAX_LIMIT) for key, value in data.items()}
+        try:
+            return cls(**values)
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+
+    def to_json(self) -> dict[str, float]:
+        """The limits as a plain mapping (the keys of ``arm.limits``)."""
+        return dataclasses.asdict(self)
