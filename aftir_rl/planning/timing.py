@@ -179,7 +179,7 @@ def _toppra(
     ta: Any, ss: NDArray[np.float64], stacked: NDArray[np.float64], n: int, limits: ActuatorLimits
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], Any]:
     """TOPP-RA's ``ṡ`` at the gridpoints ``ss``, ``s̈`` per interval, and the spline path."""
-    path = ta.SplineInterpolator(ss, stacked, bc_type="clamped")
+    path = ta.SplineInterpolator(ss, stacked)
     speed = ta.constraint.JointVelocityConstraint(_limit_rows(n, limits, "speed"))
     accel = ta.constraint.JointAccelerationConstraint(
         _limit_rows(n, limits, "accel"),

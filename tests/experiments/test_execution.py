@@ -1,0 +1,151 @@
+"""aftir check and aftir export: a planned motion passes, a broken one fails, files round-trip."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+
+import numpy as np
+import pytest
+
+from aftir_rl.cli import check as check_cli
+from aftir_rl.cli import export as export_cli
+from aftir_rl.core.cables import cable_lengths
+from aftir_rl.experiments.execution import check_motion, export_motion, read_timed
+from aftir_rl.planning.ftl.plan import plan_motion
+from aftir_rl.planning.timing import joint_positions
+
+pytest.importorskip("toppra")
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory, tank):
+    """A run directory with a planned, timed follow-the-leader motion to a bay-2 target."""
+    plan = plan_motion(tank, (181.5, 111.6, 51.5))
+    assert plan.complete and plan.timing is not None
+    folder = tmp_path_factory.mktemp("runs") / "motion"
+    folder.mkdir()
+    (folder / "trajectory.json").write_text(json.dumps(plan.to_json()))
+    (folder / "path.json").write_text(json.dumps({"tank": "b737_center"}))
+    return folder
+
+
+def _edited(run_dir, tmp_path, edit):
+    """A copy of the run with its trajectory.json changed by ``edit(data)``."""
+    copy = tmp_path / "edited"
+    shutil.copytree(run_dir, copy)
+    data = json.loads((copy / "trajectory.json").read_text())
+    edit(data)
+    (copy / "trajectory.json").write_text(json.dumps(data))
+    return copy
+
+
+def test_a_planned_motion_passes(run_dir, capsys):
+    assert check_cli.main([str(run_dir)]) == 0
+    assert ": ok (" in capsys.readouterr().out
+
+
+def _faster(data):
+    data["timing"]["t"] = [t / 2 for t in data["timing"]["t"]]
+
+
+def _back_in_time(data):
+    data["timing"]["t"][5] = data["timing"]["t"][3]
+
+
+def _into_the_wall(data):
+    entry = data["motion"][-1]
+    entry["dis"] += 100.0  # pushed 1 m further: through the far wall or the ceiling
+
+
+def _stored_speed(data):
+    data["timing"]["velocities"][10][0] = 6.0  # the module's limit is 5 cm/s
+
+
+@pytest.mark.parametrize(
+    "edit, problem",
+    [
+        (_faster, "times its speed limit"),
+        (_back_in_time, "time goes back"),
+        (_stored_speed, "dis's speed at entry 10"),
+    ],
+)
+def test_a_broken_motion_fails_in_one_line(run_dir, tmp_path, capsys, edit, problem):
+    broken = _edited(run_dir, tmp_path, edit)
+    assert check_cli.main([str(broken)]) == 1
+    out = capsys.readouterr().out.strip()
+    assert problem in out and "\n" not in out
+
+
+def test_a_posture_in_the_wall_is_found(run_dir, tmp_path, tank):
+    problems = check_motion(read_timed(_edited(run_dir, tmp_path, _into_the_wall)), tank)
+    assert any("the backbone moves" in p for p in problems)
+    assert any(p.startswith(f"entry {len(read_timed(run_dir).t) - 1} keeps") for p in problems)
+
+
+def test_unreadable_timing_exits_2(run_dir, tmp_path, capsys):
+    def bad(data):
+        data["timing"]["velocities"] = [[1e400]]
+
+    assert check_cli.main([str(_edited(run_dir, tmp_path, bad))]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "timing.velocities" in err and "\n" not in err
+
+
+def test_untimed_motion_is_named(run_dir, tmp_path, capsys):
+    def untimed(data):
+        data.pop("timing")
+
+    assert export_cli.main([str(_edited(run_dir, tmp_path, untimed)), "-o", "x.json"]) == 2
+    assert "has no timing" in capsys.readouterr().err
+
+
+def test_jointtrajectory_json_matches_the_trajectory(run_dir, tmp_path):
+    out = tmp_path / "jt.json"
+    assert export_cli.main([str(run_dir), "-o", str(out)]) == 0
+    message = json.loads(out.read_text())
+    run = read_timed(run_dir)
+    assert message["joint_names"][0] == "dis" and len(message["points"]) == len(run.t)
+    positions = np.array([p["positions"] for p in message["points"]])
+    np.testing.assert_array_equal(positions, joint_positions(run.dis, run.theta, run.phi))
+    times = [
+        p["time_from_start"]["sec"] + p["time_from_start"]["nanosec"] * 1e-9
+        for p in message["points"]
+    ]
+    np.testing.assert_allclose(times, run.t, atol=1e-9)
+    np.testing.assert_array_equal([p["velocities"] for p in message["points"]], run.velocities)
+    # the bending vectors give back the postures' angles
+    kx, ky = positions[:, 1::2], positions[:, 2::2]
+    np.testing.assert_allclose(np.hypot(kx, ky), run.theta, atol=1e-12)
+
+
+def test_cable_csv_matches_the_cables(run_dir, tmp_path):
+    out = tmp_path / "cables.csv"
+    assert (
+        export_cli.main([str(run_dir), "-o", str(out), "--format", "csv", "--space", "cables"]) == 0
+    )
+    with out.open() as f:
+        rows = list(csv.DictReader(f))
+    run = read_timed(run_dir)
+    n = run.theta.shape[1]
+    assert len(rows) == len(run.t)
+    cables = cable_lengths(run.theta, run.phi, run.limits)
+    for i in (0, len(rows) // 2, len(rows) - 1):
+        assert float(rows[i]["time_s"]) == run.t[i]
+        assert float(rows[i]["dis"]) == run.dis[i]
+        got = [float(rows[i][f"section_{s + 1}_cable_{j}"]) for s in range(n) for j in range(3)]
+        np.testing.assert_allclose(got, cables[i].ravel(), atol=1e-12)
+    # the cable rates are the cables' change over time (finite differences, mid-motion)
+    mid = len(rows) // 2
+    dt = run.t[mid + 1] - run.t[mid - 1]
+    name = f"section_{n}_cable_0"
+    rate = (float(rows[mid + 1][name]) - float(rows[mid - 1][name])) / dt
+    assert math.isclose(float(rows[mid][f"{name}_velocity"]), rate, rel_tol=0.1, abs_tol=1e-3)
+
+
+def test_export_and_check_agree_in_the_library(run_dir, tank):
+    run = read_timed(run_dir / "trajectory.json")
+    assert check_motion(run, tank) == []
+    assert export_motion(run, "csv").count("\n") == len(run.t) + 1
