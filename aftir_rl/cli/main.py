@@ -39,6 +39,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "aftir_rl.cli.export",
         "a timed motion as ROS JointTrajectory JSON or CSV (needs aftir_rl[robot])",
     ),
+    "tour": (
+        "aftir_rl.cli.tour",
+        "one timed deployment that visits many targets (needs aftir_rl[robot])",
+    ),
     "check": ("aftir_rl.cli.check", "re-check a timed motion: time, limits, clearance; exit 0/1"),
     "configs": (
         "aftir_rl.cli.configs",

@@ -25,7 +25,7 @@ from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, PlanningError
 from aftir_rl.core.robot import ArmSpec
 from aftir_rl.core.tank import Tank
-from aftir_rl.planning.ftl.model import FTLMotion, ftl_deviation, ftl_motion
+from aftir_rl.planning.ftl.model import FTLMotion, Route, ftl_deviation, ftl_motion
 from aftir_rl.planning.ftl.route import RouteResult, RouteSettings, plan_route
 from aftir_rl.planning.timing import TimedMotion, time_motion
 
@@ -158,6 +158,8 @@ def plan_motion(
     cells: Sequence[Sequence[int]] | None = None,
     margin: float = DEFAULT_MARGIN,
     start_height: float | None = None,
+    prefix: Route | None = None,
+    variants: Sequence[RouteSettings] = (),
 ) -> MotionPlan:
     """Plan, deploy and check a follow-the-leader motion from the panel to ``target`` [cm].
 
@@ -168,6 +170,8 @@ def plan_motion(
         margin: clearance [cm] the arm's surface keeps along the whole motion.
         start_height: the tip's height above the floor at the start (default: the tank's start
             point, at most 20 cm).
+        prefix: a route to continue, unchanged (:func:`~aftir_rl.planning.ftl.route.plan_route`).
+        variants: the route-search settings to try (default :data:`SEARCH_VARIANTS`).
 
     Returns:
         A :class:`MotionPlan`; ``complete`` is False, with ``reason``, when no motion keeps the
@@ -181,9 +185,9 @@ def plan_motion(
     reasons: list[str] = []
     best: MotionPlan | None = None
     best_deviation = float("inf")  # the largest FTL deviation of best [cm]
-    for settings in SEARCH_VARIANTS:
+    for settings in variants or SEARCH_VARIANTS:
         try:
-            found = plan_route(tank, target, cells, replace(settings, margin=margin), arm)
+            found = plan_route(tank, target, cells, replace(settings, margin=margin), arm, prefix)
         except PlanningError as exc:
             reasons.append(str(exc).removeprefix("Cannot reach the target: "))
             if "closer than" in str(exc):

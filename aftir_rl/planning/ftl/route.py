@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.collision import point_clearance, points_clear
 from aftir_rl.core.errors import PlanningError
-from aftir_rl.core.robot import ArmSpec, section_transforms
+from aftir_rl.core.robot import ArmSpec, forward_kinematics, section_transforms
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.closing import close_batch, push_away, route_clearance
 from aftir_rl.planning.ftl.guide import NEIGHBOURS as NEIGHBOURS  # for aftir_rl.envs.ftl.fields
@@ -128,6 +128,7 @@ def plan_route(
     cells: Sequence[Sequence[int]] | None = None,
     settings: RouteSettings | None = None,
     arm: ArmSpec | None = None,
+    prefix: Route | None = None,
 ) -> RouteResult:
     """Plan a follow-the-leader route from the panel to ``target`` [cm].
 
@@ -137,6 +138,8 @@ def plan_route(
         cells: the learned cell path (start first), or None to search the whole free raster.
         settings: search knobs; default :class:`RouteSettings`.
         arm: the arm; default the tank's.
+        prefix: a route the new one continues: its lead and sections are kept unchanged (an
+            arm deployed along it reaches the target without retracting past its end).
 
     Raises:
         PlanningError: no route keeps the margin (the message says why).
@@ -160,7 +163,7 @@ def plan_route(
     notes: list[str] = []
     for name, allowed in attempts:
         guide = GuideField(tank, target, allowed)
-        result = _beam(tank, arm, target, guide, settings, start)
+        result = _beam(_Search(tank, arm, target, guide, settings, start, prefix))
         if result is not None:
             result.corridor = name
             result.notes = notes
@@ -175,7 +178,7 @@ def plan_route(
 
 @dataclass(frozen=True)
 class _Search:
-    """What every step of one beam search shares: the problem and the search's knobs."""
+    """What every step of one beam search shares: the problem, its knobs, the clock, a prefix."""
 
     tank: Tank
     arm: ArmSpec
@@ -183,6 +186,7 @@ class _Search:
     guide: GuideField
     settings: RouteSettings
     start: float
+    prefix: Route | None = None
 
 
 @dataclass
@@ -212,29 +216,23 @@ class _Candidates:
 _Best = tuple[float, Route, float]
 
 
-def _beam(
-    tank: Tank,
-    arm: ArmSpec,
-    target: NDArray[np.float64],
-    guide: GuideField,
-    settings: RouteSettings,
-    start: float,
-) -> RouteResult | None:
-    """Beam search over the sections' bending vectors, ranked by ``guide``; ``start``: the clock.
+def _beam(search: _Search) -> RouteResult | None:
+    """Beam search over the sections' bending vectors, ranked by the search's guide.
 
     Returns the cheapest closed route that keeps the clearance (``corridor`` left empty), or None.
     """
-    search = _Search(tank, arm, target, guide, settings, start)
-    leads = np.array([v for v in settings.leads if v < arm.section_length * arm.max_sections])
-    best = _close_near(search, leads)
-    n0 = len(leads)  # the states before the first section: straight up the axis to each lead
-    beam = _Beam(
-        rot=np.repeat(np.eye(3)[None], n0, axis=0),
-        pos=np.stack([np.zeros(n0), np.zeros(n0), leads], axis=1),
-        kap_hist=np.zeros((n0, 0, 2)),
-        lead=leads.copy(),
-        cost=leads.copy(),
-    )
+    arm, settings, prefix = search.arm, search.settings, search.prefix
+    if prefix is None:
+        leads = np.array([v for v in settings.leads if v < arm.section_length * arm.max_sections])
+        best = _close_near(search, leads)
+        n0 = len(leads)  # the states before the first section: straight up the axis to each lead
+        rot, pos, hist = np.repeat(np.eye(3)[None], n0, 0), np.zeros((n0, 3)), np.zeros((n0, 0, 2))
+        pos[:, 2] = leads
+    else:  # one state: the prefix's end
+        best, leads, hist = None, np.array([prefix.lead]), prefix.kappa[None]
+        end = forward_kinematics(prefix.lead, *kappa_to_angles(prefix.kappa), prefix.section_length)
+        rot, pos = end[None, -1, :3, :3], end[None, -1, :3, 3]
+    beam = _Beam(rot, pos, hist, leads.copy(), leads + hist.shape[1] * arm.section_length)
     best, expanded = _search_depths(search, beam, best)
     if best is None:
         return None
@@ -245,7 +243,7 @@ def _beam(
         clearance_cm=rc,
         cost=total,
         corridor="",
-        seconds=time.perf_counter() - start,
+        seconds=time.perf_counter() - search.start,
         expanded=expanded,
     )
 
@@ -265,7 +263,7 @@ def _keep(
         return best
     rc = route_clearance(search.tank, arm, route)
     need = settings.margin + 0.5 * settings.slack
-    if need - 3.0 < rc < need:
+    if need - 3.0 < rc < need and search.prefix is None:  # (it would move a prefix too)
         # a near miss: move the body away from the tank, the tip staying on the target
         route = push_away(search.tank, arm, route, search.target, need)
         rc = route_clearance(search.tank, arm, route)
@@ -309,7 +307,8 @@ def _search_depths(search: _Search, beam: _Beam, best: _Best | None) -> tuple[_B
     """Grow the beam a section a depth, closing promising states: the best, sections evaluated."""
     settings, expanded = search.settings, 0
     changes = _changes(settings.max_change)
-    for depth in range(search.arm.max_sections):
+    first = 0 if search.prefix is None else search.prefix.n_route_sections
+    for depth in range(first, search.arm.max_sections):
         if time.perf_counter() - search.start > settings.max_seconds or len(beam.cost) == 0:
             break
         count, cand = _expand(search, beam, changes, depth)
@@ -412,7 +411,8 @@ def _close_picks(
     search: _Search, beam: _Beam, picks: list[int], extra: int, best: _Best | None
 ) -> _Best | None:
     """Close the states ``picks`` with ``extra`` more sections; the better of ``best`` and them."""
-    kap_hist, lead, shift = beam.kap_hist, beam.lead, search.settings.lead_shift
+    kap_hist, lead = beam.kap_hist, beam.lead
+    shift = search.settings.lead_shift if search.prefix is None else 0.0
     starts = np.concatenate(
         [kap_hist[picks], np.repeat(kap_hist[picks][:, -1:], extra, axis=1)], axis=1
     )

@@ -1,0 +1,113 @@
+"""``aftir tour``: one deployment that visits many targets, timed and checked, in a run directory.
+
+A thin command line over :func:`aftir_rl.planning.ftl.tour.plan_tour`. Writes ``DIR/
+trajectory.json`` (the tour's motion with its timing: ``aftir view DIR`` plays it, ``aftir check
+DIR`` re-checks it), ``DIR/tour.json`` (order, legs, durations) and ``DIR/summary.json`` (the
+tank), and prints the tour's duration as a share of one deployment per target.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aftir_rl.cli.args import (
+    OneLineParser,
+    add_int_option,
+    add_margin_option,
+    add_seconds_option,
+    add_seed_option,
+    check_margin,
+)
+from aftir_rl.cli.guard import cli
+from aftir_rl.core.config import DEFAULT_MARGIN
+from aftir_rl.core.errors import ConfigError
+
+__all__ = ["MAX_TOUR_TARGETS", "build_parser", "main"]
+
+#: The most targets of one tour.
+MAX_TOUR_TARGETS = 100
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The options of ``aftir tour``."""
+    parser = OneLineParser(
+        prog="aftir tour",
+        description="Plan one follow-the-leader deployment that visits every target (the order "
+        "by OR-Tools over the legs' durations), timed under the arm's limits; needs "
+        'pip install "aftir_rl[robot]".',
+    )
+    parser.add_argument("-o", "--output", required=True, metavar="DIR", help="the run directory")
+    parser.add_argument(
+        "--targets", metavar="FILE", help="a YAML file with 'targets: [[x, y, z], ...]' in cm"
+    )
+    add_int_option(
+        parser, "--random", (1, MAX_TOUR_TARGETS), "N random targets at least 10 cm from every "
+        "surface, instead of --targets"
+    )  # fmt: skip
+    parser.add_argument("--bay", type=int, choices=(1, 2), default=2, help="--random's bay (2)")
+    add_seed_option(parser, "seed of --random (default 0)")
+    parser.add_argument("--tank", default="b737_center", help="tank name or YAML (b737_center)")
+    add_margin_option(parser, f"clearance the arm keeps (default {DEFAULT_MARGIN:g} cm)")
+    add_seconds_option(parser, "--solver-seconds", 2.0, "OR-Tools' time for the order (2)")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    return parser
+
+
+def _targets(args: argparse.Namespace, tank: Any) -> np.ndarray:
+    """The tour's targets: from ``--targets`` or drawn by ``--random``."""
+    from aftir_rl.core.config import read_yaml, to_float
+    from aftir_rl.core.tank.loading import MAX_COORD
+    from aftir_rl.planning.posture.context import random_free_targets
+    from aftir_rl.planning.posture.planner import Planner
+
+    if (args.targets is None) == (args.random is None):
+        raise ConfigError("give --targets FILE or --random N (one of them)")
+    if args.random is not None:
+        drawn = random_free_targets(Planner(tank), args.random, args.seed, clearance=10.0)
+        return np.array(drawn[f"bay{args.bay}"])
+    points = read_yaml(args.targets).get("targets")
+    if not isinstance(points, list) or not 0 < len(points) <= MAX_TOUR_TARGETS:
+        raise ConfigError(f"{args.targets}: targets: expected a list of 1 to 100 [x, y, z]")
+    out = []
+    for i, point in enumerate(points):
+        if not isinstance(point, list) or len(point) != 3:
+            raise ConfigError(f"{args.targets}: targets[{i}]: expected [x, y, z] in cm")
+        out.append([to_float(v, f"{args.targets}: targets[{i}]", MAX_COORD) for v in point])
+    return np.array(out)
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``aftir tour``."""
+    import sys
+
+    from aftir_rl.core.files import write_json
+    from aftir_rl.core.tank import keep_run_tank, load_tank
+    from aftir_rl.planning.ftl.tour import plan_tour
+
+    args = build_parser().parse_args(argv)
+    check_margin(args.margin)
+    if not 0 < args.solver_seconds <= 600:
+        raise ConfigError("--solver-seconds must be in (0, 600]")
+    tank = load_tank(args.tank)
+    targets = _targets(args, tank)
+    say = None if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
+    tour = plan_tour(tank, targets, args.margin, args.solver_seconds, say)
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    name = keep_run_tank(args.tank, out)
+    write_json(out / "trajectory.json", tour.trajectory_json())
+    write_json(out / "tour.json", {"tank": name, **tour.report_json()})
+    write_json(out / "summary.json", {"tank": name, "method": "ftl-tour"})
+    reached = len(tour.order)
+    print(
+        f"tour of {reached} targets ({len(tour.failures)} unreachable): {tour.duration:.1f} s, "
+        f"{100 * tour.duration / tour.separate_s:.0f}% of {tour.separate_s:.1f} s for one "
+        f"deployment each; planned in {tour.seconds:.1f} s; {out}"
+    )
+    return 0

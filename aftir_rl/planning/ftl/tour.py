@@ -1,0 +1,407 @@
+"""Inspection tours: one deployment that visits many targets, retracting only where routes part.
+
+:func:`plan_tour` plans a follow-the-leader route to every target, then grows a tree of routes:
+a target's route may continue a prefix of another's (:func:`plan_motion`'s ``prefix``), so the
+arm at one target retracts only to where the next target's route departs from its own. The
+cost of going from target ``i`` to ``j`` is the time-optimal duration of retracting ``i`` to
+their common prefix plus deploying ``j`` from it (:mod:`aftir_rl.planning.timing`, each leg from
+rest to rest); the visiting order is a travelling-salesman tour over those costs from the panel
+and back, solved by OR-Tools (the ``robot`` extra). docs/robot.md has the details and measurements.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from aftir_rl.core.config import DEFAULT_MARGIN
+from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.extras import require
+from aftir_rl.core.robot import forward_kinematics
+from aftir_rl.core.tank import Tank
+from aftir_rl.planning.ftl.model import FTLMotion, Route, ftl_motion, kappa_to_angles
+from aftir_rl.planning.ftl.plan import SEARCH_VARIANTS, motion_clearance, plan_motion
+from aftir_rl.planning.timing import TimedMotion, joint_positions, time_motion
+
+__all__ = ["Tour", "plan_tour"]
+
+#: Prefixes of the tree a new target's route is tried from (the nearest ends first).
+BRANCH_TRIES = 8
+
+
+@dataclass
+class Tour:
+    """A planned tour: the order, the one motion that visits every target, its time.
+
+    Attributes:
+        targets: the targets asked for [cm], ``(K, 3)``.
+        order: the reached targets' indices in visiting order.
+        motion: ``dis (T,)``, ``theta``, ``phi (T, N)`` of the whole deployment, in order.
+        timing: its schedule (each leg from rest to rest).
+        arrivals: the motion entry at which each target of ``order`` is reached.
+        legs: per leg ``{"from", "to", "depart_cm", "duration_s"}`` (``None``: the panel).
+        branches: per reached target the target whose route it continues and the sections
+            shared (``None`` and 0 for a route of its own).
+        separate_s: the duration of one deployment and retraction per target.
+        failures: ``(index, reason)`` of the targets no motion reaches.
+        min_clearance_cm: the least clearance of the arm's surface along the motion.
+        section_length: ``l`` [cm].
+        margin_cm: the margin the motion keeps.
+        seconds: planning time [s].
+
+    """
+
+    targets: NDArray[np.float64]
+    order: list[int]
+    motion: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+    timing: TimedMotion
+    arrivals: list[int]
+    legs: list[dict[str, Any]]
+    branches: dict[int, tuple[int | None, int]]
+    separate_s: float
+    failures: list[tuple[int, str]]
+    min_clearance_cm: float
+    section_length: float
+    margin_cm: float
+    seconds: float = 0.0
+
+    @property
+    def duration(self) -> float:
+        """The tour's duration [s]."""
+        return self.timing.duration
+
+    def trajectory_json(self) -> dict[str, Any]:
+        """The tour as ``trajectory.json`` (the motion contract, every entry with its time)."""
+        dis, theta, phi = self.motion
+        entries = [
+            {"dis": float(d), "theta": th.tolist(), "phi": ph.tolist(), "t": float(t)}
+            for d, th, ph, t in zip(dis, theta, phi, self.timing.t)
+        ]
+        return {
+            "complete": not self.failures,
+            "method": "ftl-tour",
+            "margin_cm": self.margin_cm,
+            "section_length": self.section_length,
+            "seconds": self.seconds,
+            "n_sections": int(theta.shape[1]),
+            "motion": entries,
+            "waypoint_index": self.arrivals,
+            "min_clearance_cm": self.min_clearance_cm,
+            "duration_s": self.duration,
+            "timing": self.timing.to_json(),
+        }
+
+    def report_json(self) -> dict[str, Any]:
+        """``tour.json``: order, legs, branches, durations and their ratio."""
+        return {
+            "targets": self.targets.tolist(),
+            "order": self.order,
+            "legs": self.legs,
+            "branches": [
+                {"target": j, "continues": i, "sections_shared": d}
+                for j, (i, d) in self.branches.items()
+            ],
+            "failures": [{"target": i, "reason": r} for i, r in self.failures],
+            "duration_s": self.duration,
+            "separate_deployments_s": self.separate_s,
+            "ratio": self.duration / self.separate_s if self.separate_s else None,
+            "min_clearance_cm": self.min_clearance_cm,
+            "seconds": self.seconds,
+        }
+
+
+@dataclass
+class _Tree:
+    """The routes planned so far (by target index) and where each came from."""
+
+    targets: NDArray[np.float64]
+    routes: dict[int, Route] = field(default_factory=dict)
+    branches: dict[int, tuple[int | None, int]] = field(default_factory=dict)
+
+    def prefixes(
+        self, target: NDArray[np.float64], l: float, among: Sequence[int] | None = None
+    ) -> list[tuple[float, int, Route]]:
+        """Distinct prefixes of the routes (or ``among``'s) ending 0.5-6 sections from it."""
+        found: dict[bytes, tuple[float, int, Route]] = {}
+        for i in self.routes if among is None else among:
+            route = self.routes[i]
+            theta, phi = kappa_to_angles(route.kappa)
+            ends = forward_kinematics(route.lead, theta, phi, l)[1:-1, :3, 3]  # after 1..M-1
+            for d, end in enumerate(ends, start=1):
+                gap = float(np.linalg.norm(end - target))
+                key = np.append(route.kappa[:d].ravel(), route.lead).tobytes()
+                if 0.5 * l <= gap <= 6.0 * l and key not in found:
+                    found[key] = (gap, i, Route(route.lead, route.kappa[:d], l))
+        return sorted(found.values(), key=lambda item: item[0])[:BRANCH_TRIES]
+
+
+def _shared(a: Route, b: Route, h0: float) -> tuple[float, int]:
+    """The arc length [cm] up to which two routes are the same, and their shared sections."""
+    if a.lead != b.lead:
+        return max(min(a.lead, b.lead), h0), 0
+    d = 0
+    while d < min(len(a.kappa), len(b.kappa)) and np.array_equal(a.kappa[d], b.kappa[d]):
+        d += 1
+    return max(a.lead + d * a.section_length, h0), d
+
+
+def _part(motion: FTLMotion, s0: float) -> slice:
+    """The entries of a deployment from arc length ``s0`` (its entry there) to the end."""
+    first = int(np.searchsorted(motion.s, s0 - 1e-9))
+    return slice(min(first, len(motion) - 1), len(motion))
+
+
+def _branch(
+    tank: Tank, tree: _Tree, j: int, margin: float, among: Sequence[int] | None = None
+) -> bool:
+    """Plan target ``j``'s route as a continuation of a prefix of the tree; whether one was."""
+    target = tree.targets[j]
+    for _, i, prefix in tree.prefixes(target, tank.arm.section_length, among):
+        if i == j:
+            continue
+        plan = plan_motion(tank, target, margin=margin, prefix=prefix, variants=SEARCH_VARIANTS[:1])
+        if plan.complete and plan.motion is not None:
+            tree.routes[j] = plan.motion.route
+            tree.branches[j] = (i, prefix.n_route_sections)
+            return True
+    return False
+
+
+def _grow(
+    tank: Tank, targets: NDArray[np.float64], margin: float, say: Callable[[str], None]
+) -> tuple[_Tree, list[tuple[int, str]]]:
+    """The tree of routes, and the targets no motion reaches (with the reason).
+
+    Nearest the panel first, each target continues a prefix of the tree where it can, else gets
+    a route of its own (a root); then each root but the first tries again, from the whole tree.
+    """
+    tree, failures = _Tree(targets), []
+    order = np.argsort(np.linalg.norm(targets, axis=1)).tolist()
+    for j in order:
+        if not tree.routes or not _branch(tank, tree, j, margin):
+            plan = plan_motion(tank, targets[j], margin=margin)
+            if plan.complete and plan.motion is not None:
+                tree.routes[j], tree.branches[j] = plan.motion.route, (None, 0)
+            else:
+                failures.append((j, plan.reason or "no motion"))
+        say(f"target {j}: {'no motion' if j not in tree.routes else 'planned'}")
+    # the routes that do not share a section with the trunk most share try again from it
+    h0 = min(float(tank.start_point[2]), 20.0)
+
+    def family(k: int) -> list[int]:
+        return [i for i in tree.routes if _shared(tree.routes[i], tree.routes[k], h0)[1] > 0]
+
+    trunk = max(tree.routes, key=lambda k: len(family(k)))
+    for j in order:
+        if j in tree.routes and j not in family(trunk):
+            _branch(tank, tree, j, margin, among=family(trunk))
+    return tree, sorted(failures)
+
+
+def _order(costs: NDArray[np.float64], seconds: float) -> list[int]:
+    """The cheapest cycle from node 0 through every node (OR-Tools routing), without node 0."""
+    cp = require("ortools.constraint_solver.pywrapcp", "robot")
+    enums = require("ortools.constraint_solver.routing_enums_pb2", "robot")
+    cents = np.rint(costs * 1000).astype(np.int64)  # milliseconds
+    manager = cp.RoutingIndexManager(len(costs), 1, 0)
+    model = cp.RoutingModel(manager)
+    arc = model.RegisterTransitCallback(
+        lambda a, b: int(cents[manager.IndexToNode(a), manager.IndexToNode(b)])
+    )
+    model.SetArcCostEvaluatorOfAllVehicles(arc)
+    params = cp.DefaultRoutingSearchParameters()
+    params.first_solution_strategy = enums.FirstSolutionStrategy.PATH_CHEAPEST_ARC
+    params.local_search_metaheuristic = enums.LocalSearchMetaheuristic.GUIDED_LOCAL_SEARCH
+    params.time_limit.FromMilliseconds(int(seconds * 1000))
+    solution = model.SolveWithParameters(params)
+    node, out = model.Start(0), []
+    while not model.IsEnd(node):
+        out.append(manager.IndexToNode(node))
+        node = solution.Value(model.NextVar(node))
+    return [n for n in out if n != 0]
+
+
+def _timed_legs(pieces: list[tuple[NDArray[np.float64], ...]], tank: Tank) -> TimedMotion:
+    """One schedule of the pieces in turn, each from rest to rest (the path reverses between)."""
+    arm, parts, offset = tank.arm, [], 0.0
+    for k, (dis, theta, phi) in enumerate(pieces):
+        timed = time_motion(dis, theta, phi, arm.section_length, arm.limits)
+        skip = 1 if k else 0  # the first entry is the last of the previous piece
+        parts.append((timed, skip, offset))
+        offset += timed.duration
+    first = parts[0][0]
+
+    def stack(name: str) -> NDArray[np.float64]:
+        return np.concatenate([getattr(p, name)[skip:] for p, skip, _ in parts])
+
+    return TimedMotion(
+        t=np.concatenate([p.t[skip:] + off for p, skip, off in parts]),
+        positions=stack("positions"),
+        velocities=stack("velocities"),
+        accelerations=stack("accelerations"),
+        cables=stack("cables"),
+        cable_velocities=stack("cable_velocities"),
+        cable_accelerations=stack("cable_accelerations"),
+        limits=first.limits,
+        seconds=sum(p.seconds for p, _, _ in parts),
+    )
+
+
+def plan_tour(
+    tank: Tank,
+    targets: ArrayLike,
+    margin: float = DEFAULT_MARGIN,
+    solver_seconds: float = 2.0,
+    progress: Callable[[str], None] | None = None,
+) -> Tour:
+    """One follow-the-leader deployment that visits every reachable target and comes back.
+
+    Targets no motion reaches are left out and listed in ``failures``; raises
+    :class:`~aftir_rl.core.errors.PlanningError` when none is reached.
+    """
+    start, say = time.perf_counter(), progress or (lambda text: None)
+    targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
+    tree, failures = _grow(tank, targets, margin, say)
+    if not tree.routes:
+        raise PlanningError("no target of the tour has a motion: " + failures[0][1])
+    roots = sum(i is None for i, _ in tree.branches.values())
+    say(f"route tree: {len(tree.routes)} routes from {roots} of their own")
+    motions = _deployments(tank, tree, margin)
+    tour = _assemble(tank, targets, tree, motions, solver_seconds)
+    tour.failures, tour.margin_cm = failures, margin
+    tour.seconds = time.perf_counter() - start
+    return tour
+
+
+def _deployments(tank: Tank, tree: _Tree, margin: float) -> dict[int, FTLMotion]:
+    """Each route's deployment with the same number of sections (the tour's arm)."""
+    arm = tank.arm
+    n = max(route.min_sections() for route in tree.routes.values())
+    h0 = min(float(tank.start_point[2]), 20.0)
+    motions = {j: ftl_motion(r, n, h0, theta_max=arm.theta_max) for j, r in tree.routes.items()}
+    for j, motion in motions.items():
+        if motion_clearance(tank, motion) < margin:  # checked again as one motion at the end
+            raise PlanningError(f"target {j}'s deployment with {n} sections misses the margin")
+    return motions
+
+
+@dataclass
+class _Legs:
+    """The legs between targets: where two routes part, and the timed parts of deployments."""
+
+    tank: Tank
+    tree: _Tree
+    motions: dict[int, FTLMotion]
+    suffix: dict[tuple[int, float], float] = field(default_factory=dict)
+
+    @property
+    def h0(self) -> float:
+        return min(float(self.tank.start_point[2]), 20.0)
+
+    def depart(self, a: int | None, b: int | None) -> float:
+        """Where the leg from ``a`` to ``b`` turns back (``None``: the panel)."""
+        if a is None or b is None:
+            return self.h0
+        return _shared(self.tree.routes[a], self.tree.routes[b], self.h0)[0]
+
+    def duration_from(self, j: int, s0: float) -> float:
+        """The time-optimal duration of target ``j``'s deployment from arc length ``s0`` [cm]."""
+        if (j, s0) not in self.suffix:
+            m, part, arm = self.motions[j], _part(self.motions[j], s0), self.tank.arm
+            timed = time_motion(m.dis[part], m.theta[part], m.phi[part], arm.section_length,
+                                arm.limits)  # fmt: skip
+            self.suffix[j, s0] = timed.duration
+        return self.suffix[j, s0]
+
+    def costs(self, index: list[int]) -> NDArray[np.float64]:
+        """Leg durations between the panel (node 0) and the targets ``index`` (nodes 1..)."""
+        out = np.zeros((len(index) + 1,) * 2)
+        for a, i in enumerate([None, *index]):
+            for b, j in enumerate([None, *index]):
+                if a != b:
+                    s0 = self.depart(i, j)
+                    out[a, b] = sum(self.duration_from(k, s0) for k in (i, j) if k is not None)
+        return out
+
+    def pieces(self, order: list[int]) -> tuple[list[tuple[Any, ...]], list[dict[str, Any]]]:
+        """The motion's pieces in turn (``(dis, theta, phi, target reached or None)``) and legs."""
+        pieces, legs = [], []
+        stops: list[int | None] = [None, *order, None]
+        for a, b in zip(stops[:-1], stops[1:]):
+            s0 = self.depart(a, b)
+            ends = [j for j in (a, b) if j is not None]
+            legs.append({"from": a, "to": b, "depart_cm": s0,
+                         "duration_s": sum(self.duration_from(j, s0) for j in ends)})  # fmt: skip
+            for j, step in ((a, -1), (b, 1)):  # retract a to s0, then deploy b from it
+                if j is not None:
+                    m, part = self.motions[j], _part(self.motions[j], s0)
+                    arrays = (m.dis[part][::step], m.theta[part][::step], m.phi[part][::step])
+                    pieces.append((*arrays, j if step == 1 else None))
+        return _bridged(pieces, self.tank.arm.section_length), legs
+
+
+def _assemble(
+    tank: Tank,
+    targets: NDArray[np.float64],
+    tree: _Tree,
+    motions: dict[int, FTLMotion],
+    solver_seconds: float,
+) -> Tour:
+    """Order the targets by the legs' durations and join their motions into one."""
+    legs_of, index = _Legs(tank, tree, motions), sorted(motions)
+    order = index
+    if len(index) > 1:
+        order = [index[n - 1] for n in _order(legs_of.costs(index), solver_seconds)]
+    pieces, legs = legs_of.pieces(order)
+    arrivals, total = [], 0
+    for n, piece in enumerate(pieces):
+        total += len(piece[0]) - (1 if n else 0)
+        if piece[3] is not None:
+            arrivals.append(total - 1)
+    dis, theta, phi = (
+        np.concatenate([p[c][1 if n else 0 :] for n, p in enumerate(pieces)]) for c in range(3)
+    )
+    whole = FTLMotion(tree.routes[order[0]], theta.shape[1], np.zeros(len(dis)), dis, theta,
+                      phi, ())  # fmt: skip
+    return Tour(
+        targets=targets,
+        order=order,
+        motion=(dis, theta, phi),
+        timing=_timed_legs([p[:3] for p in pieces], tank),
+        arrivals=arrivals,
+        legs=legs,
+        branches={j: tree.branches[j] for j in order},
+        separate_s=2 * sum(legs_of.duration_from(j, legs_of.h0) for j in index),
+        failures=[],
+        min_clearance_cm=motion_clearance(tank, whole),
+        section_length=tank.arm.section_length,
+        margin_cm=DEFAULT_MARGIN,
+    )
+
+
+def _bridged(pieces: list[tuple[Any, ...]], l: float) -> list[tuple[Any, ...]]:
+    """The pieces, with a straight joint-space move where one does not start where the last ends.
+
+    (The same prefix deployed to slightly different postures, or a straight arm at two
+    heights.) Dense enough that no backbone point moves 0.5 cm a step.
+    """
+    out = [pieces[0]]
+    for nxt in pieces[1:]:
+        prev = out[-1]
+        a = joint_positions(prev[0][-1:], prev[1][-1:], prev[2][-1:])[0]
+        b = joint_positions(nxt[0][:1], nxt[1][:1], nxt[2][:1])[0]
+        if np.abs(a - b).max() > 1e-9:
+            n = (len(a) - 1) // 2
+            # a joint change δ moves a point at most δ times its arc distance from the joint
+            reach = abs(a[0] - b[0]) + float(np.abs(a[1:] - b[1:]).max()) * n * l
+            u = np.linspace(0.0, 1.0, max(2, int(np.ceil(reach / 0.5)) + 1))[:, None]
+            q = (1 - u) * a + u * b
+            theta, phi = kappa_to_angles(q[:, 1:].reshape(len(q), n, 2))
+            out.append((q[:, 0], theta, phi, None))
+        out.append(nxt)
+    return out

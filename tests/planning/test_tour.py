@@ -1,0 +1,67 @@
+"""Inspection tours: the order against brute force, the tour against its own contract."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+
+from aftir_rl.cli import check as check_cli
+from aftir_rl.cli import tour as tour_cli
+from aftir_rl.core.robot import forward_kinematics
+from aftir_rl.planning.ftl import tour as tour_module
+from aftir_rl.planning.ftl.model import Route
+
+pytest.importorskip("ortools")
+pytest.importorskip("toppra")
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_order_is_the_cheapest_cycle(seed):
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(0, 100, (7, 2))
+    costs = np.linalg.norm(points[:, None] - points[None], axis=2) + rng.uniform(0, 5, (7, 7))
+    order = tour_module._order(costs, 1.0)
+
+    def length(cycle):
+        stops = [0, *cycle, 0]
+        return sum(costs[a, b] for a, b in zip(stops[:-1], stops[1:]))
+
+    best = min(itertools.permutations(range(1, 7)), key=length)
+    assert sorted(order) == list(range(1, 7))
+    assert length(order) == pytest.approx(length(best), abs=1e-2)
+
+
+def test_shared_prefixes():
+    kappa = np.array([[0.1, 0.0], [0.2, 0.1], [0.0, 0.3]])
+    a = Route(15.0, kappa, 50.0)
+    assert tour_module._shared(a, Route(15.0, kappa[:2], 50.0), 10.0) == (115.0, 2)
+    other = kappa.copy()
+    other[1, 0] += 1e-9
+    assert tour_module._shared(a, Route(15.0, other, 50.0), 10.0) == (65.0, 1)
+    assert tour_module._shared(a, Route(30.0, kappa, 50.0), 10.0) == (15.0, 0)  # the straight lead
+    assert tour_module._shared(Route(-10.0, kappa, 50.0), a, 10.0) == (10.0, 0)  # the start
+
+
+@pytest.mark.slow
+def test_a_tour_visits_every_target_and_passes_the_check(tmp_path, capsys):
+    out = tmp_path / "tour"
+    argv = ["--random", "4", "--bay", "2", "--seed", "3", "-o", str(out), "--quiet"]
+    assert tour_cli.main(argv) == 0
+    assert "% of" in capsys.readouterr().out
+    report = json.loads((out / "tour.json").read_text())
+    trajectory = json.loads((out / "trajectory.json").read_text())
+    assert not report["failures"] and sorted(report["order"]) == [0, 1, 2, 3]
+    assert report["duration_s"] < report["separate_deployments_s"]
+    # every target is reached by the entry the tour names, by forward kinematics
+    motion, targets = trajectory["motion"], np.array(report["targets"])
+    for j, entry in zip(report["order"], trajectory["waypoint_index"]):
+        posture = motion[entry]
+        tip = forward_kinematics(posture["dis"], posture["theta"], posture["phi"], 50.0)[-1, :3, 3]
+        assert np.linalg.norm(tip - targets[j]) < 1e-3
+    # ends where it started (the panel), at rest
+    assert motion[0] == {**motion[-1], "t": 0.0}
+    assert not any(trajectory["timing"]["velocities"][-1])
+    assert check_cli.main([str(out)]) == 0
