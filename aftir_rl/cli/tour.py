@@ -101,7 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
     name = keep_run_tank(args.tank, out)
-    write_json(out / "trajectory.json", tour.trajectory_json())
+    write_json(out / "trajectory.json", tour.trajectory_json(), compact=True)
     write_json(out / "tour.json", {"tank": name, **tour.report_json()})
     write_json(out / "summary.json", {"tank": name, "method": "ftl-tour"})
     reached = len(tour.order)

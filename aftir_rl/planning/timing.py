@@ -88,10 +88,15 @@ class TimedMotion:
             "limits": self.limits.to_json(),
             "joint_names": joint_names(n),
             "t": self.t.tolist(),
-            "velocities": self.velocities.tolist(),
-            "accelerations": self.accelerations.tolist(),
+            "velocities": _rounded(self.velocities),
+            "accelerations": _rounded(self.accelerations),
             "seconds": self.seconds,
         }
+
+
+def _rounded(rates: NDArray[np.float64]) -> list[list[float]]:
+    """Rates to 9 significant digits (a tenth of the file; 5e-10 of a limit at most)."""
+    return [[float(f"{v:.9g}") for v in row] for row in rates.tolist()]
 
 
 def _limit_rows(n: int, limits: ActuatorLimits, what: str) -> NDArray[np.float64]:
