@@ -1,8 +1,8 @@
 """Inspection tours: one deployment that visits many targets, retracting only where routes part.
 
-:func:`plan_tour` plans a follow-the-leader route to every target, then grows a tree of routes:
-a target's route may continue a prefix of another's (:func:`plan_motion`'s ``prefix``), so the
-arm at one target retracts only to where the next target's route departs from its own. The
+:func:`plan_tour` grows a tree of follow-the-leader routes: a target's route continues a prefix
+of another's where it can (:func:`plan_motion`'s ``prefix``), so the arm at one target retracts
+only to where the next target's route departs from its own. The
 cost of going from target ``i`` to ``j`` is the time-optimal duration of retracting ``i`` to
 their common prefix plus deploying ``j`` from it (:mod:`aftir_rl.planning.timing`, each leg from
 rest to rest); the visiting order is a travelling-salesman tour over those costs from the panel
@@ -164,7 +164,7 @@ def _branch(
     for _, i, prefix in tree.prefixes(target, tank.arm.section_length, among):
         if i == j:
             continue
-        plan = plan_motion(tank, target, margin=margin, prefix=prefix, variants=SEARCH_VARIANTS[:1])
+        plan = plan_motion(tank, target, margin=margin, prefix=prefix, variants=SEARCH_VARIANTS[:2])
         if plan.complete and plan.motion is not None:
             tree.routes[j] = plan.motion.route
             tree.branches[j] = (i, prefix.n_route_sections)
