@@ -37,12 +37,12 @@ def test_the_order_is_the_cheapest_cycle(seed):
 def test_shared_prefixes():
     kappa = np.array([[0.1, 0.0], [0.2, 0.1], [0.0, 0.3]])
     a = Route(15.0, kappa, 50.0)
-    assert tour_module._shared(a, Route(15.0, kappa[:2], 50.0), 10.0) == (115.0, 2)
+    assert tour_module._shared(a, Route(15.0, kappa[:2], 50.0)) == (115.0, 2)
     other = kappa.copy()
     other[1, 0] += 1e-9
-    assert tour_module._shared(a, Route(15.0, other, 50.0), 10.0) == (65.0, 1)
-    assert tour_module._shared(a, Route(30.0, kappa, 50.0), 10.0) == (15.0, 0)  # the straight lead
-    assert tour_module._shared(Route(-10.0, kappa, 50.0), a, 10.0) == (10.0, 0)  # the start
+    assert tour_module._shared(a, Route(15.0, other, 50.0)) == (65.0, 1)
+    assert tour_module._shared(a, Route(30.0, kappa, 50.0)) == (15.0, 0)  # the straight lead
+    assert tour_module._shared(Route(-10.0, kappa, 50.0), a) == (-10.0, 0)  # in the guide
 
 
 @pytest.mark.slow
@@ -61,7 +61,7 @@ def test_a_tour_visits_every_target_and_passes_the_check(tmp_path, capsys):
         posture = motion[entry]
         tip = forward_kinematics(posture["dis"], posture["theta"], posture["phi"], 50.0)[-1, :3, 3]
         assert np.linalg.norm(tip - targets[j]) < 1e-3
-    # ends where it started (the panel), at rest
-    assert motion[0] == {**motion[-1], "t": 0.0}
+    # starts and ends straight in the guide (the panel), at rest
+    assert motion[0] == {**motion[-1], "t": 0.0} and not any(motion[0]["theta"])
     assert not any(trajectory["timing"]["velocities"][-1])
     assert check_cli.main([str(out)]) == 0

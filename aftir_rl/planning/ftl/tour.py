@@ -140,20 +140,27 @@ class _Tree:
         return sorted(found.values(), key=lambda item: item[0])[:BRANCH_TRIES]
 
 
-def _shared(a: Route, b: Route, h0: float) -> tuple[float, int]:
-    """The arc length [cm] up to which two routes are the same, and their shared sections."""
+def _shared(a: Route, b: Route) -> tuple[float, int]:
+    """The arc length [cm] up to which two routes are the same, and their shared sections.
+
+    Up to the shorter straight lead when they differ there (the arm is straight on the axis).
+    """
     if a.lead != b.lead:
-        return max(min(a.lead, b.lead), h0), 0
+        return min(a.lead, b.lead), 0
     d = 0
     while d < min(len(a.kappa), len(b.kappa)) and np.array_equal(a.kappa[d], b.kappa[d]):
         d += 1
-    return max(a.lead + d * a.section_length, h0), d
+    return a.lead + d * a.section_length, d
+
+
+#: Where a leg from or to the panel turns: before every deployment's first entry.
+PANEL = -np.inf
 
 
 def _part(motion: FTLMotion, s0: float) -> slice:
-    """The entries of a deployment from arc length ``s0`` (its entry there) to the end."""
-    first = int(np.searchsorted(motion.s, s0 - 1e-9))
-    return slice(min(first, len(motion) - 1), len(motion))
+    """The entries of a deployment from its last entry at or before arc length ``s0`` [cm]."""
+    first = int(np.searchsorted(motion.s, s0 + 1e-9, side="right")) - 1
+    return slice(max(first, 0), len(motion))
 
 
 def _branch(
@@ -190,11 +197,10 @@ def _grow(
             else:
                 failures.append((j, plan.reason or "no motion"))
         say(f"target {j}: {'no motion' if j not in tree.routes else 'planned'}")
-    # the routes that do not share a section with the trunk most share try again from it
-    h0 = min(float(tank.start_point[2]), 20.0)
 
+    # the routes that do not share a section with the trunk most share try again from it
     def family(k: int) -> list[int]:
-        return [i for i in tree.routes if _shared(tree.routes[i], tree.routes[k], h0)[1] > 0]
+        return [i for i in tree.routes if _shared(tree.routes[i], tree.routes[k])[1] > 0]
 
     trunk = max(tree.routes, key=lambda k: len(family(k)))
     for j in order:
@@ -274,6 +280,10 @@ def plan_tour(
     motions = _deployments(tank, tree, margin)
     tour = _assemble(tank, targets, tree, motions, solver_seconds)
     tour.failures, tour.margin_cm = failures, margin
+    if tour.min_clearance_cm < margin:  # where two legs meet, a joining move grazes the tank
+        raise PlanningError(
+            f"the joined tour keeps only {tour.min_clearance_cm:.2f} cm of the margin {margin:g} cm"
+        )
     tour.seconds = time.perf_counter() - start
     return tour
 
@@ -299,15 +309,11 @@ class _Legs:
     motions: dict[int, FTLMotion]
     suffix: dict[tuple[int, float], float] = field(default_factory=dict)
 
-    @property
-    def h0(self) -> float:
-        return min(float(self.tank.start_point[2]), 20.0)
-
     def depart(self, a: int | None, b: int | None) -> float:
         """Where the leg from ``a`` to ``b`` turns back (``None``: the panel)."""
         if a is None or b is None:
-            return self.h0
-        return _shared(self.tree.routes[a], self.tree.routes[b], self.h0)[0]
+            return PANEL
+        return _shared(self.tree.routes[a], self.tree.routes[b])[0]
 
     def duration_from(self, j: int, s0: float) -> float:
         """The time-optimal duration of target ``j``'s deployment from arc length ``s0`` [cm]."""
@@ -335,7 +341,7 @@ class _Legs:
         for a, b in zip(stops[:-1], stops[1:]):
             s0 = self.depart(a, b)
             ends = [j for j in (a, b) if j is not None]
-            legs.append({"from": a, "to": b, "depart_cm": s0,
+            legs.append({"from": a, "to": b, "depart_cm": s0 if s0 > PANEL else None,
                          "duration_s": sum(self.duration_from(j, s0) for j in ends)})  # fmt: skip
             for j, step in ((a, -1), (b, 1)):  # retract a to s0, then deploy b from it
                 if j is not None:
@@ -376,7 +382,7 @@ def _assemble(
         arrivals=arrivals,
         legs=legs,
         branches={j: tree.branches[j] for j in order},
-        separate_s=2 * sum(legs_of.duration_from(j, legs_of.h0) for j in index),
+        separate_s=2 * sum(legs_of.duration_from(j, PANEL) for j in index),
         failures=[],
         min_clearance_cm=motion_clearance(tank, whole),
         section_length=tank.arm.section_length,
