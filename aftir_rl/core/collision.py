@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from aftir_rl.core.interrupts import held
 from aftir_rl.core.robot import ArmSpec, Posture, body_points
 from aftir_rl.core.tank import Solid, Tank, TankDistance
 from aftir_rl.core.tank.solids import rotation_z_to
@@ -143,26 +144,26 @@ class CollisionScene:
     def _touches(self, posture: Posture) -> bool:
         """Whether python-fcl finds a capsule of the arm touching a solid or wall."""
         data = fcl.CollisionData()
-        self._scene.collide(self._place(posture), data, fcl.defaultCollisionCallback)
+        with held():  # a Ctrl-C inside fcl's callback would be printed and lost
+            self._scene.collide(self._place(posture), data, fcl.defaultCollisionCallback)
         return bool(data.result.is_collision)
 
     def clearance(self, posture: Posture) -> float:
         """Smallest distance between the arm's body and any solid or wall [cm] (≤ 0 on contact)."""
         data = fcl.DistanceData()
-        self._scene.distance(self._place(posture), data, fcl.defaultDistanceCallback)
+        with held():
+            self._scene.distance(self._place(posture), data, fcl.defaultDistanceCallback)
         return _finite_or_inf(data.result.min_distance)
 
     def check(self, posture: Posture) -> CollisionReport:
         """Collision, clearance and panel rule of one posture, and what it hits."""
         panel = self.panel_ok(posture)
         manager = self._place(posture)
-        data = fcl.CollisionData()
-        self._scene.collide(manager, data, fcl.defaultCollisionCallback)
-        hit = ""
-        if data.result.is_collision:
-            hit = self._hit_name(manager)
-        dist = fcl.DistanceData()
-        self._scene.distance(manager, dist, fcl.defaultDistanceCallback)
+        data, dist = fcl.CollisionData(), fcl.DistanceData()
+        with held():
+            self._scene.collide(manager, data, fcl.defaultCollisionCallback)
+            hit = self._hit_name(manager) if data.result.is_collision else ""
+            self._scene.distance(manager, dist, fcl.defaultDistanceCallback)
         clearance = _finite_or_inf(dist.result.min_distance)
         if data.result.is_collision:
             clearance = min(clearance, 0.0)
