@@ -95,7 +95,7 @@ class TimedMotion:
 
 
 def _rounded(rates: NDArray[np.float64]) -> list[list[float]]:
-    """Rates to 9 significant digits (a tenth of the file; 5e-10 of a limit at most)."""
+    """Rates to 9 significant digits: a smaller file, off by 5e-10 of a limit at most."""
     return [[float(f"{v:.9g}") for v in row] for row in rates.tolist()]
 
 

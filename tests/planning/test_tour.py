@@ -61,6 +61,8 @@ def test_a_tour_visits_every_target_and_passes_the_check(tmp_path, capsys):
         posture = motion[entry]
         tip = forward_kinematics(posture["dis"], posture["theta"], posture["phi"], 50.0)[-1, :3, 3]
         assert np.linalg.norm(tip - targets[j]) < 1e-3
+    # time always moves on (a JointTrajectory's points strictly increase in time)
+    assert all(b > a for a, b in zip(trajectory["timing"]["t"], trajectory["timing"]["t"][1:]))
     # starts and ends straight in the guide (the panel), at rest
     assert motion[0] == {**motion[-1], "t": 0.0} and not any(motion[0]["theta"])
     assert not any(trajectory["timing"]["velocities"][-1])

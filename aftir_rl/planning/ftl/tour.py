@@ -396,8 +396,8 @@ def _bridged(pieces: list[tuple[Any, ...]], l: float) -> list[tuple[Any, ...]]:
     (The same prefix deployed to slightly different postures, or a straight arm at two
     heights.) Dense enough that no backbone point moves 0.5 cm a step.
     """
-    out = [pieces[0]]
-    for nxt in pieces[1:]:
+    out = [_moving(pieces[0])]
+    for nxt in map(_moving, pieces[1:]):
         prev = out[-1]
         a = joint_positions(prev[0][-1:], prev[1][-1:], prev[2][-1:])[0]
         b = joint_positions(nxt[0][:1], nxt[1][:1], nxt[2][:1])[0]
@@ -411,3 +411,10 @@ def _bridged(pieces: list[tuple[Any, ...]], l: float) -> list[tuple[Any, ...]]:
             out.append((q[:, 0], theta, phi, None))
         out.append(nxt)
     return out
+
+
+def _moving(piece: tuple[Any, ...]) -> tuple[Any, ...]:
+    """A piece without the entries that repeat the one before (a schedule needs time to move)."""
+    q = joint_positions(piece[0], piece[1], piece[2])
+    keep = np.concatenate([[True], np.abs(np.diff(q, axis=0)).max(axis=1) > 1e-9])
+    return (piece[0][keep], piece[1][keep], piece[2][keep], *piece[3:])
