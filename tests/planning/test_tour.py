@@ -34,6 +34,11 @@ def test_the_order_is_the_cheapest_cycle(seed):
     assert length(order) == pytest.approx(length(best), abs=1e-2)
 
 
+def test_nearest_first_visits_every_node_once():
+    costs = np.array([[0, 5, 1, 9], [5, 0, 2, 1], [1, 2, 0, 7], [9, 1, 7, 0]], dtype=float)
+    assert tour_module._nearest_first(costs) == [2, 1, 3]
+
+
 def test_shared_prefixes():
     kappa = np.array([[0.1, 0.0], [0.2, 0.1], [0.0, 0.3]])
     a = Route(15.0, kappa, 50.0)

@@ -185,7 +185,8 @@ def _grow(
     """The tree of routes, and the targets no motion reaches (with the reason).
 
     Nearest the panel first, each target continues a prefix of the tree where it can, else gets
-    a route of its own (a root); then each root but the first tries again, from the whole tree.
+    a route of its own (a root); then every route that shares no section with the largest
+    family of routes tries again from that family's prefixes.
     """
     tree, failures = _Tree(targets), []
     order = np.argsort(np.linalg.norm(targets, axis=1)).tolist()
@@ -213,11 +214,11 @@ def _order(costs: NDArray[np.float64], seconds: float) -> list[int]:
     """The cheapest cycle from node 0 through every node (OR-Tools routing), without node 0."""
     cp = require("ortools.constraint_solver.pywrapcp", "robot")
     enums = require("ortools.constraint_solver.routing_enums_pb2", "robot")
-    cents = np.rint(costs * 1000).astype(np.int64)  # milliseconds
+    millis = np.rint(costs * 1000).astype(np.int64)
     manager = cp.RoutingIndexManager(len(costs), 1, 0)
     model = cp.RoutingModel(manager)
     arc = model.RegisterTransitCallback(
-        lambda a, b: int(cents[manager.IndexToNode(a), manager.IndexToNode(b)])
+        lambda a, b: int(millis[manager.IndexToNode(a), manager.IndexToNode(b)])
     )
     model.SetArcCostEvaluatorOfAllVehicles(arc)
     params = cp.DefaultRoutingSearchParameters()
@@ -225,11 +226,22 @@ def _order(costs: NDArray[np.float64], seconds: float) -> list[int]:
     params.local_search_metaheuristic = enums.LocalSearchMetaheuristic.GUIDED_LOCAL_SEARCH
     params.time_limit.FromMilliseconds(int(seconds * 1000))
     solution = model.SolveWithParameters(params)
+    if solution is None:  # none within the time: the cheapest next target each time
+        return _nearest_first(costs)
     node, out = model.Start(0), []
     while not model.IsEnd(node):
         out.append(manager.IndexToNode(node))
         node = solution.Value(model.NextVar(node))
     return [n for n in out if n != 0]
+
+
+def _nearest_first(costs: NDArray[np.float64]) -> list[int]:
+    """A cycle from node 0 that goes to the cheapest unvisited node each time."""
+    out, left = [0], set(range(1, len(costs)))
+    while left:
+        out.append(min(left, key=lambda n: costs[out[-1], n]))
+        left.remove(out[-1])
+    return out[1:]
 
 
 def _timed_legs(pieces: list[tuple[NDArray[np.float64], ...]], tank: Tank) -> TimedMotion:
