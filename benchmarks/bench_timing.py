@@ -45,9 +45,7 @@ def main() -> None:
             row["seconds"] = time.perf_counter() - start
             if plan.complete and plan.timing is not None and plan.motion is not None:
                 m, timing = plan.motion, plan.timing
-                run = TimedRun(m.dis, m.theta, m.phi, timing.t, timing.velocities,
-                               timing.accelerations, timing.limits, m.route.section_length,
-                               plan.margin_cm, None)  # fmt: skip
+                run = TimedRun(m.dis, m.theta, m.phi, timing, plan.section_length, plan.margin_cm)
                 problems = check_motion(run, tank)
                 row.update(duration_s=timing.duration, timing_ms=timing.seconds * 1e3,
                            check=problems[0] if problems else "ok")  # fmt: skip

@@ -29,9 +29,7 @@ from aftir_rl.planning.posture.planner import Planner
 def _checked(tank, tour) -> list[str]:
     """``aftir check``'s problems with the tour (empty: it passes)."""
     dis, theta, phi = tour.motion
-    run = TimedRun(dis, theta, phi, tour.timing.t, tour.timing.velocities,
-                   tour.timing.accelerations, tour.timing.limits, tour.section_length,
-                   tour.margin_cm, None)  # fmt: skip
+    run = TimedRun(dis, theta, phi, tour.timing, tour.section_length, tour.margin_cm)
     return check_motion(run, tank)
 
 

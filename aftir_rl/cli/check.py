@@ -44,5 +44,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
         print(f"{args.run}: {problems[0]}{more}")
         return 1
-    print(f"{args.run}: ok ({len(run.t)} entries, {run.t[-1]:.2f} s, margin {run.margin_cm:g} cm)")
+    facts = f"{len(run.dis)} entries, {run.timing.duration:.2f} s, margin {run.margin_cm:g} cm"
+    print(f"{args.run}: ok ({facts})")
     return 0

@@ -53,5 +53,5 @@ def main(argv: Sequence[str] | None = None) -> int:
     text = export_motion(run, args.format, args.space)
     with atomic_open(args.output) as out:
         out.write(text)
-    print(f"wrote {args.output} ({len(run.t)} points, {run.t[-1]:.2f} s, {args.space})")
+    print(f"wrote {args.output} ({len(run.dis)} points, {run.timing.duration:.2f} s, {args.space})")
     return 0

@@ -12,6 +12,9 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from aftir_rl.core.config import brief, to_float
 from aftir_rl.core.errors import ConfigError
 
@@ -84,6 +87,19 @@ class ActuatorLimits:
             return cls(**values)
         except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from None
+
+    def rate_bounds(self, n_sections: int, kind: str) -> NDArray[np.float64]:
+        """Speed (``kind="speed"``) or acceleration bounds, ``(1 + 5N,)``.
+
+        In order: ``dis``, the ``2N`` bending-vector components and the ``3N`` cables.
+        """
+        module, bend, cable = (
+            (self.module_speed, self.bend_rate, self.cable_speed)
+            if kind == "speed"
+            else (self.module_accel, self.bend_accel, self.cable_accel)
+        )
+        n = n_sections
+        return np.concatenate([[module], np.full(2 * n, bend), np.full(3 * n, cable)])
 
     def to_json(self) -> dict[str, float]:
         """The limits as a plain mapping (the keys of ``arm.limits``)."""

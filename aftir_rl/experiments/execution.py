@@ -21,13 +21,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.core.actuation import ActuatorLimits
-from aftir_rl.core.cables import cable_lengths, cable_matrix, cable_names
+from aftir_rl.core.cables import cable_names
 from aftir_rl.core.collision import CollisionScene
 from aftir_rl.core.errors import CheckpointError
-from aftir_rl.core.files import read_json, run_file
 from aftir_rl.core.robot import Posture, body_points
 from aftir_rl.core.tank import Tank, load_tank, resolve_run_tank
-from aftir_rl.planning.timing import joint_names, joint_positions
+from aftir_rl.planning.timing import TimedMotion, joint_names
 from aftir_rl.viz.runs import read_run
 
 __all__ = [
@@ -53,18 +52,15 @@ MAX_MOVE_CM = 1.1
 
 @dataclass
 class TimedRun:
-    """A timed motion read from a run: postures, times, joint rates, limits and context."""
+    """A timed motion read from a run: its postures, their schedule and the run's context."""
 
     dis: NDArray[np.float64]
     theta: NDArray[np.float64]
     phi: NDArray[np.float64]
-    t: NDArray[np.float64]
-    velocities: NDArray[np.float64]
-    accelerations: NDArray[np.float64]
-    limits: ActuatorLimits
+    timing: TimedMotion
     section_length: float
     margin_cm: float
-    tank: str | None
+    tank: str | None = None
 
 
 def _array(value: Any, shape: tuple[int, int], where: str, path: Path) -> NDArray[np.float64]:
@@ -80,43 +76,46 @@ def _array(value: Any, shape: tuple[int, int], where: str, path: Path) -> NDArra
     return out
 
 
+def _folder(run: str | Path) -> Path:
+    """The run directory of ``run`` (a run directory or its ``trajectory.json``)."""
+    return Path(run).parent if Path(run).name == "trajectory.json" else Path(run)
+
+
 def read_timed(run: str | Path) -> TimedRun:
-    """The timed motion of a run directory (or of its ``trajectory.json``).
+    """The timed motion of a run directory (or of its ``trajectory.json``), each file read once.
 
     Raises:
         CheckpointError: no motion, no timing, or a file of the wrong shape (one line).
 
     """
-    folder = Path(run).parent if Path(run).name == "trajectory.json" else Path(run)
-    data_run = read_run(folder)
-    if data_run.dis is None or data_run.theta is None or data_run.phi is None:
-        raise CheckpointError(f"{folder}: no motion in trajectory.json")
-    path = run_file(folder, "trajectory.json")
-    data = read_json(path, "trajectory.json")
-    timing = data.get("timing") if isinstance(data, dict) else None
+    data = read_run(_folder(run), keep=("timing", "timing_note", "margin_cm"))
+    path = _folder(run) / "trajectory.json"
+    if data.dis is None or data.theta is None or data.phi is None:
+        raise CheckpointError(f"{_folder(run)}: no motion in trajectory.json")
+    timing = data.kept.get("timing")
     if not isinstance(timing, dict):
-        note = data.get("timing_note") if isinstance(data, dict) else None
+        note = data.kept.get("timing_note")
         raise CheckpointError(
             f"{path}: the motion has no timing" + (f" ({note})"[:200] if note else "")
         )
-    m, n = data_run.theta.shape
-    t = _array([timing.get("t")], (1, m), "t", path)[0]
+    m, n = data.theta.shape
     try:
         limits = ActuatorLimits.from_mapping(timing.get("limits"), f"{path}: timing.limits")
-        margin = float(data.get("margin_cm", 1.0))
+        margin = float(data.kept.get("margin_cm", 1.0))
     except (TypeError, ValueError) as exc:
         raise CheckpointError(str(exc)) from None
+    velocities, accelerations = (
+        _array(timing.get(key), (m, 1 + 2 * n), key, path)
+        for key in ("velocities", "accelerations")
+    )
+    t = _array([timing.get("t")], (1, m), "t", path)[0]
+    postures = (data.dis, data.theta, data.phi)
     return TimedRun(
-        dis=data_run.dis,
-        theta=data_run.theta,
-        phi=data_run.phi,
-        t=t,
-        velocities=_array(timing.get("velocities"), (m, 1 + 2 * n), "velocities", path),
-        accelerations=_array(timing.get("accelerations"), (m, 1 + 2 * n), "accelerations", path),
-        limits=limits,
-        section_length=data_run.section_length,
+        *postures,
+        timing=TimedMotion.from_rates(postures, t, (velocities, accelerations), limits),
+        section_length=data.section_length,
         margin_cm=margin if math.isfinite(margin) else 1.0,
-        tank=data_run.tank,
+        tank=data.tank,
     )
 
 
@@ -127,32 +126,21 @@ def timed_run_tank(run: str | Path, tank: str | None = None) -> tuple[TimedRun, 
     that names none is taken to be in the default tank.
     """
     timed = read_timed(run)
-    folder = Path(run).parent if Path(run).name == "trajectory.json" else Path(run)
     if tank is None and timed.tank is not None:
-        tank = resolve_run_tank(timed.tank, folder)
+        tank = resolve_run_tank(timed.tank, _folder(run))
     return timed, load_tank() if tank is None else load_tank(tank)
-
-
-def _rate_bounds(limits: ActuatorLimits, n: int, what: str) -> NDArray[np.float64]:
-    """The joints' speed or acceleration bounds ``(1 + 2N,)``."""
-    module, bend = (
-        (limits.module_speed, limits.bend_rate)
-        if what == "speed"
-        else (limits.module_accel, limits.bend_accel)
-    )
-    return np.concatenate([[module], np.full(2 * n, bend)])
 
 
 def _time_problems(run: TimedRun) -> list[str]:
     """Times that start at 0 and never decrease, and stand still only where the arm does."""
-    dt = np.diff(run.t)
+    t = run.timing.t
+    dt = np.diff(t)
     problems = []
-    if run.t[0] != 0.0:
-        problems.append(f"the motion starts at t = {run.t[0]:g} s, not 0")
+    if t[0] != 0.0:
+        problems.append(f"the motion starts at t = {t[0]:g} s, not 0")
     if np.any(dt < 0):
         problems.append(f"time goes back after entry {int(np.argmax(dt < 0))}")
-    q = joint_positions(run.dis, run.theta, run.phi)
-    moved = np.abs(np.diff(q, axis=0)).max(axis=1) > 1e-9
+    moved = np.abs(np.diff(run.timing.positions, axis=0)).max(axis=1) > 1e-9
     if np.any((dt <= 0) & moved):
         problems.append(f"entry {int(np.argmax((dt <= 0) & moved)) + 1} moves in no time")
     return problems
@@ -166,24 +154,22 @@ def _worst(ratio: NDArray[np.float64], names: list[str]) -> tuple[float, str, in
 
 def _limit_problems(run: TimedRun) -> list[str]:
     """The stored rates within the limits, and the rates between entries within the slack."""
-    n = run.theta.shape[1]
-    names, problems = joint_names(n), []
-    speed, accel = _rate_bounds(run.limits, n, "speed"), _rate_bounds(run.limits, n, "accel")
-    for label, values, bound, slack in (
-        ("speed", run.velocities, speed, 1e-6),
-        ("acceleration", run.accelerations, accel, 1e-6),
+    timing, n = run.timing, run.theta.shape[1]
+    joints, names, problems = 1 + 2 * n, joint_names(n), []
+    speed, accel = timing.limits.rate_bounds(n, "speed"), timing.limits.rate_bounds(n, "accel")
+    for label, values, bound in (
+        ("speed", timing.velocities, speed[:joints]),
+        ("acceleration", timing.accelerations, accel[:joints]),
     ):
         ratio, name, row = _worst(np.abs(values) / bound, names)
-        if ratio > 1 + slack:
+        if ratio > 1 + 1e-6:
             problems.append(f"{name}'s {label} at entry {row} is {ratio:.3f} times its limit")
-    # independent of the stored rates: positions over times
-    moving = np.diff(run.t) > 0
-    q = joint_positions(run.dis, run.theta, run.phi)
-    cables = cable_lengths(run.theta, run.phi, run.limits).reshape(len(q), -1)
-    dt = np.diff(run.t)[moving][:, None]
+    # independent of the stored rates: positions (from the postures) over times
+    moving = np.diff(timing.t) > 0
+    dt = np.diff(timing.t)[moving][:, None]
     for label, values, bound, names_of in (
-        ("joint", q, speed, names),
-        ("cable", cables, np.full(3 * n, run.limits.cable_speed), cable_names(n)),
+        ("joint", timing.positions, speed[:joints], names),
+        ("cable", timing.cables, speed[joints:], cable_names(n)),
     ):
         average = np.abs(np.diff(values, axis=0)[moving]) / dt
         if len(average):
@@ -192,8 +178,9 @@ def _limit_problems(run: TimedRun) -> list[str]:
                 problems.append(
                     f"{label} {name} moves {ratio:.3f} times its speed limit after {row}"
                 )
-    if np.abs(cables).max(initial=0.0) > run.limits.cable_travel:
-        problems.append(f"a cable changes by {np.abs(cables).max():.2f} cm, past its travel")
+    travel = np.abs(timing.cables).max(initial=0.0)
+    if travel > timing.limits.cable_travel:
+        problems.append(f"a cable changes by {travel:.2f} cm, past its travel")
     return problems
 
 
@@ -227,24 +214,19 @@ def _geometry_problems(run: TimedRun, tank: Tank) -> list[str]:
 
 def check_motion(run: TimedRun, tank: Tank) -> list[str]:
     """What is wrong with a timed motion (empty: it passes), each as one line."""
-    if len(run.t) != len(run.dis):
+    if len(run.timing.t) != len(run.dis):
         return ["the timing and the motion have different lengths"]
     return _time_problems(run) + _limit_problems(run) + _geometry_problems(run, tank)
 
 
 def _rows(run: TimedRun, space: str) -> tuple[list[str], list[NDArray[np.float64]]]:
     """Names and ``(positions, velocities, accelerations)`` in ``space``."""
-    n = run.theta.shape[1]
-    q = joint_positions(run.dis, run.theta, run.phi)
+    timing, n = run.timing, run.theta.shape[1]
     if space == "joints":
-        return joint_names(n), [q, run.velocities, run.accelerations]
-    to_cables = cable_matrix(n, run.limits)  # linear: rates map like lengths
-    cables = cable_lengths(run.theta, run.phi, run.limits).reshape(len(q), -1)
-    return ["dis"] + cable_names(n), [
-        np.concatenate([q[:, :1], cables], axis=1),
-        np.concatenate([run.velocities[:, :1], run.velocities[:, 1:] @ to_cables.T], axis=1),
-        np.concatenate([run.accelerations[:, :1], run.accelerations[:, 1:] @ to_cables.T], axis=1),
-    ]
+        return joint_names(n), [timing.positions, timing.velocities, timing.accelerations]
+    dis = (timing.positions[:, :1], timing.velocities[:, :1], timing.accelerations[:, :1])
+    cables = (timing.cables, timing.cable_velocities, timing.cable_accelerations)
+    return ["dis"] + cable_names(n), [np.concatenate(pair, axis=1) for pair in zip(dis, cables)]
 
 
 def export_motion(run: TimedRun, fmt: str, space: str = "joints") -> str:
@@ -261,10 +243,10 @@ def export_motion(run: TimedRun, fmt: str, space: str = "joints") -> str:
                 *(f"{k}_acceleration" for k in names),
             ]
         )
-        for i in range(len(run.t)):
+        for i, t in enumerate(run.timing.t.tolist()):
             writer.writerow(
                 [
-                    repr(float(run.t[i])),
+                    repr(t),
                     *map(repr, pos[i].tolist()),
                     *map(repr, vel[i].tolist()),
                     *map(repr, acc[i].tolist()),
@@ -272,7 +254,7 @@ def export_motion(run: TimedRun, fmt: str, space: str = "joints") -> str:
             )
         return out.getvalue()
     points = []
-    for i, t in enumerate(run.t.tolist()):
+    for i, t in enumerate(run.timing.t.tolist()):
         sec = int(math.floor(t))
         points.append(
             {

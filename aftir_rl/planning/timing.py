@@ -12,6 +12,7 @@ details and the measurements.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.actuation import ActuatorLimits
-from aftir_rl.core.cables import cable_lengths, cable_names
+from aftir_rl.core.cables import cable_lengths, cable_matrix, cable_names
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.extras import require
 from aftir_rl.core.robot import angles_to_kappa
@@ -65,6 +66,36 @@ class TimedMotion:
     limits: ActuatorLimits
     seconds: float = 0.0
 
+    @classmethod
+    def from_rates(
+        cls,
+        postures: tuple[ArrayLike, ArrayLike, ArrayLike],
+        t: ArrayLike,
+        rates: tuple[NDArray[np.float64], NDArray[np.float64]],
+        limits: ActuatorLimits,
+        seconds: float = 0.0,
+    ) -> TimedMotion:
+        """A schedule from postures ``(dis, theta, phi)``, times and joint rates.
+
+        ``rates``: the joints' ``(velocities, accelerations)``; the cables' follow from them (a
+        linear map).
+        """
+        dis, theta, phi = postures
+        velocities, accelerations = rates
+        theta = np.asarray(theta, dtype=np.float64)
+        to_cables = cable_matrix(theta.shape[1], limits).T
+        return cls(
+            t=np.asarray(t, dtype=np.float64),
+            positions=joint_positions(dis, theta, phi),
+            velocities=velocities,
+            accelerations=accelerations,
+            cables=cable_lengths(theta, phi, limits).reshape(len(theta), -1),
+            cable_velocities=velocities[:, 1:] @ to_cables,
+            cable_accelerations=accelerations[:, 1:] @ to_cables,
+            limits=limits,
+            seconds=seconds,
+        )
+
     @property
     def duration(self) -> float:
         """The motion's duration [s]."""
@@ -99,17 +130,6 @@ def _rounded(rates: NDArray[np.float64]) -> list[list[float]]:
     return [[float(f"{v:.9g}") for v in row] for row in rates.tolist()]
 
 
-def _limit_rows(n: int, limits: ActuatorLimits, what: str) -> NDArray[np.float64]:
-    """Symmetric bounds ``(1 + 5N, 2)`` of the stacked coordinates' speed or acceleration."""
-    module, bend, cable = (
-        (limits.module_speed, limits.bend_rate, limits.cable_speed)
-        if what == "speed"
-        else (limits.module_accel, limits.bend_accel, limits.cable_accel)
-    )
-    high = np.concatenate([[module], np.full(2 * n, bend), np.full(3 * n, cable)])
-    return np.stack([-high, high], axis=1)
-
-
 def _path_parameter(stacked: NDArray[np.float64], section_length: float) -> NDArray[np.float64]:
     """Cumulative joint-space distance ``s`` of the entries (``dis`` in section lengths)."""
     n = (stacked.shape[1] - 1) // 5
@@ -131,8 +151,6 @@ def time_motion(
     last. Raises :class:`PlanningError` when a cable leaves its travel or the solver fails, and
     :class:`~aftir_rl.core.errors.MissingExtraError` without the ``robot`` extra.
     """
-    import time
-
     start = time.perf_counter()
     ta = require("toppra", "robot")
     limits = limits or ActuatorLimits()
@@ -149,45 +167,36 @@ def time_motion(
     stacked = np.concatenate([joints, cables], axis=1)
     ss = _path_parameter(stacked, section_length)
     keep = np.concatenate([[True], np.diff(ss) > 1e-9])  # entries that move
-    if keep.sum() < 2:
-        zeros = np.zeros_like(joints)
-        return TimedMotion(np.zeros(len(joints)), joints, zeros, zeros, cables,
-                           np.zeros_like(cables), np.zeros_like(cables), limits)  # fmt: skip
-    sd, sdd, path = _toppra(ta, ss[keep], stacked[keep], theta.shape[1], limits)
-    moving = np.flatnonzero(keep)
-    index = np.searchsorted(moving, np.arange(len(joints)), side="right") - 1  # entry → gridpoint
-    ds = np.diff(ss[keep])
-    t_grid = np.concatenate([[0.0], np.cumsum(2 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300))])
-    first, second = path(ss[keep], 1), path(ss[keep], 2)
-    accel_grid = np.concatenate([sdd, sdd[-1:]])  # each gridpoint's interval (the last: its own)
-    velocity = first * sd[:, None]
-    acceleration = second * sd[:, None] ** 2 + first * accel_grid[:, None]
-    # entries that do not move share their gridpoint's time; only the last is moving on
-    same = np.concatenate([index[1:] == index[:-1], [False]])
-    velocity, acceleration = velocity[index], acceleration[index]
-    velocity[same], acceleration[same] = 0.0, 0.0
-    m = joints.shape[1]
-    return TimedMotion(
-        t=t_grid[index],
-        positions=joints,
-        velocities=velocity[:, :m],
-        accelerations=acceleration[:, :m],
-        cables=cables,
-        cable_velocities=velocity[:, m:],
-        cable_accelerations=acceleration[:, m:],
-        limits=limits,
-        seconds=time.perf_counter() - start,
+    velocity, acceleration = np.zeros_like(joints), np.zeros_like(joints)
+    t = np.zeros(len(joints))
+    if keep.sum() >= 2:
+        sd, sdd, path = _toppra(ta, ss[keep], stacked[keep], limits)
+        index = np.searchsorted(np.flatnonzero(keep), np.arange(len(joints)), side="right") - 1
+        ds = np.diff(ss[keep])
+        t = np.concatenate([[0.0], np.cumsum(2 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300))])
+        m = joints.shape[1]
+        first, second = path(ss[keep], 1)[:, :m], path(ss[keep], 2)[:, :m]
+        accel_grid = np.concatenate([sdd, sdd[-1:]])  # a gridpoint's interval (the last: its own)
+        velocity = (first * sd[:, None])[index]
+        acceleration = (second * sd[:, None] ** 2 + first * accel_grid[:, None])[index]
+        # entries that do not move share their gridpoint's time; only the last moves on
+        same = np.concatenate([index[1:] == index[:-1], [False]])
+        velocity[same], acceleration[same], t = 0.0, 0.0, t[index]
+    return TimedMotion.from_rates(
+        (dis, theta, phi), t, (velocity, acceleration), limits, time.perf_counter() - start
     )
 
 
 def _toppra(
-    ta: Any, ss: NDArray[np.float64], stacked: NDArray[np.float64], n: int, limits: ActuatorLimits
+    ta: Any, ss: NDArray[np.float64], stacked: NDArray[np.float64], limits: ActuatorLimits
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], Any]:
     """TOPP-RA's ``ṡ`` at the gridpoints ``ss``, ``s̈`` per interval, and the spline path."""
+    n = (stacked.shape[1] - 1) // 5
+    speed_bound, accel_bound = limits.rate_bounds(n, "speed"), limits.rate_bounds(n, "accel")
     path = ta.SplineInterpolator(ss, stacked)
-    speed = ta.constraint.JointVelocityConstraint(_limit_rows(n, limits, "speed"))
+    speed = ta.constraint.JointVelocityConstraint(np.stack([-speed_bound, speed_bound], 1))
     accel = ta.constraint.JointAccelerationConstraint(
-        _limit_rows(n, limits, "accel"),
+        np.stack([-accel_bound, accel_bound], 1),
         discretization_scheme=ta.constraint.DiscretizationType.Interpolation,
     )
     solver = ta.algorithm.TOPPRA(

@@ -54,6 +54,8 @@ class RunData:
         facts: short ``key: value`` lines shown beside the plot (complete, margin, method...).
         notes: what could not be shown, and why.
         tank: the tank named by the run's files, if any.
+        kept: the top-level values of ``trajectory.json`` asked for by :func:`read_run`'s
+            ``keep``, as read (unchecked).
 
     """
 
@@ -70,6 +72,7 @@ class RunData:
     facts: dict[str, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     tank: str | None = None
+    kept: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n_motion(self) -> int:
@@ -160,10 +163,11 @@ def _motion_entries(data: dict[str, Any], path: Path) -> tuple[list[Any], list[i
     return motion, waypoints
 
 
-def _read_trajectory(run: RunData, path: Path) -> None:
+def _read_trajectory(run: RunData, path: Path, keep: Sequence[str] = ()) -> None:
     data = read_json(path, path.name)
     if not isinstance(data, dict):
         raise _bad(path, "expected a JSON object")
+    run.kept = {key: data[key] for key in keep if key in data}
     for key in ("complete", "method", "margin_cm", "inserting"):
         if key in data and not isinstance(data[key], (dict, list)):
             run.facts[key] = str(data[key])
@@ -186,8 +190,11 @@ def _read_trajectory(run: RunData, path: Path) -> None:
     run.facts["motion"] = f"{len(parsed)} postures, {n} sections of {l:g} cm"
 
 
-def read_run(run_dir: str | Path) -> RunData:
+def read_run(run_dir: str | Path, keep: Sequence[str] = ()) -> RunData:
     """Read a run directory's JSON files (``path.json``, ``trajectory.json``, ``summary.json``...).
+
+    ``keep``: top-level keys of ``trajectory.json`` to keep in :attr:`RunData.kept` (each file
+    is read once).
 
     Raises:
         CheckpointError: the directory is missing, holds none of :data:`RUN_FILES`, or one of
@@ -209,7 +216,7 @@ def read_run(run_dir: str | Path) -> RunData:
     if "path.json" in present:
         _read_path(run, run_file(path, "path.json"))
     if "trajectory.json" in present:
-        _read_trajectory(run, run_file(path, "trajectory.json"))
+        _read_trajectory(run, run_file(path, "trajectory.json"), keep)
     if run.cells_cm is None and run.cells is None and run.dis is None:
         run.notes.append(
             f"no path.json or trajectory.json (found {', '.join(present)}): no path to draw"

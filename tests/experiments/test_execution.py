@@ -82,7 +82,8 @@ def test_a_broken_motion_fails_in_one_line(run_dir, tmp_path, capsys, edit, prob
 def test_a_posture_in_the_wall_is_found(run_dir, tmp_path, tank):
     problems = check_motion(read_timed(_edited(run_dir, tmp_path, _into_the_wall)), tank)
     assert any("the backbone moves" in p for p in problems)
-    assert any(p.startswith(f"entry {len(read_timed(run_dir).t) - 1} keeps") for p in problems)
+    last = len(read_timed(run_dir).dis) - 1
+    assert any(p.startswith(f"entry {last} keeps") for p in problems)
 
 
 def test_unreadable_timing_exits_2(run_dir, tmp_path, capsys):
@@ -107,15 +108,16 @@ def test_jointtrajectory_json_matches_the_trajectory(run_dir, tmp_path):
     assert export_cli.main([str(run_dir), "-o", str(out)]) == 0
     message = json.loads(out.read_text())
     run = read_timed(run_dir)
-    assert message["joint_names"][0] == "dis" and len(message["points"]) == len(run.t)
+    assert message["joint_names"][0] == "dis" and len(message["points"]) == len(run.timing.t)
     positions = np.array([p["positions"] for p in message["points"]])
     np.testing.assert_array_equal(positions, joint_positions(run.dis, run.theta, run.phi))
     times = [
         p["time_from_start"]["sec"] + p["time_from_start"]["nanosec"] * 1e-9
         for p in message["points"]
     ]
-    np.testing.assert_allclose(times, run.t, atol=1e-9)
-    np.testing.assert_array_equal([p["velocities"] for p in message["points"]], run.velocities)
+    np.testing.assert_allclose(times, run.timing.t, atol=1e-9)
+    velocities = [p["velocities"] for p in message["points"]]
+    np.testing.assert_array_equal(velocities, run.timing.velocities)
     # the bending vectors give back the postures' angles
     kx, ky = positions[:, 1::2], positions[:, 2::2]
     np.testing.assert_allclose(np.hypot(kx, ky), run.theta, atol=1e-12)
@@ -130,16 +132,16 @@ def test_cable_csv_matches_the_cables(run_dir, tmp_path):
         rows = list(csv.DictReader(f))
     run = read_timed(run_dir)
     n = run.theta.shape[1]
-    assert len(rows) == len(run.t)
-    cables = cable_lengths(run.theta, run.phi, run.limits)
+    assert len(rows) == len(run.timing.t)
+    cables = cable_lengths(run.theta, run.phi, run.timing.limits)
     for i in (0, len(rows) // 2, len(rows) - 1):
-        assert float(rows[i]["time_s"]) == run.t[i]
+        assert float(rows[i]["time_s"]) == run.timing.t[i]
         assert float(rows[i]["dis"]) == run.dis[i]
         got = [float(rows[i][f"section_{s + 1}_cable_{j}"]) for s in range(n) for j in range(3)]
         np.testing.assert_allclose(got, cables[i].ravel(), atol=1e-12)
     # the cable rates are the cables' change over time (finite differences, mid-motion)
     mid = len(rows) // 2
-    dt = run.t[mid + 1] - run.t[mid - 1]
+    dt = run.timing.t[mid + 1] - run.timing.t[mid - 1]
     name = f"section_{n}_cable_0"
     rate = (float(rows[mid + 1][name]) - float(rows[mid - 1][name])) / dt
     assert math.isclose(float(rows[mid][f"{name}_velocity"]), rate, rel_tol=0.1, abs_tol=1e-3)
@@ -148,4 +150,4 @@ def test_cable_csv_matches_the_cables(run_dir, tmp_path):
 def test_export_and_check_agree_in_the_library(run_dir, tank):
     run = read_timed(run_dir / "trajectory.json")
     assert check_motion(run, tank) == []
-    assert export_motion(run, "csv").count("\n") == len(run.t) + 1
+    assert export_motion(run, "csv").count("\n") == len(run.timing.t) + 1

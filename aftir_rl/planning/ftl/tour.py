@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -244,30 +244,21 @@ def _nearest_first(costs: NDArray[np.float64]) -> list[int]:
     return out[1:]
 
 
-def _timed_legs(pieces: list[tuple[NDArray[np.float64], ...]], tank: Tank) -> TimedMotion:
-    """One schedule of the pieces in turn, each from rest to rest (the path reverses between)."""
-    arm, parts, offset = tank.arm, [], 0.0
-    for k, (dis, theta, phi) in enumerate(pieces):
-        timed = time_motion(dis, theta, phi, arm.section_length, arm.limits)
-        skip = 1 if k else 0  # the first entry is the last of the previous piece
-        parts.append((timed, skip, offset))
-        offset += timed.duration
-    first = parts[0][0]
+def _joined(pieces: list[tuple[Any, ...]], postures: tuple[Any, ...], limits: Any) -> TimedMotion:
+    """One schedule of the pieces in turn (each from rest to rest: the path reverses between).
 
-    def stack(name: str) -> NDArray[np.float64]:
-        return np.concatenate([getattr(p, name)[skip:] for p, skip, _ in parts])
-
-    return TimedMotion(
-        t=np.concatenate([p.t[skip:] + off for p, skip, off in parts]),
-        positions=stack("positions"),
-        velocities=stack("velocities"),
-        accelerations=stack("accelerations"),
-        cables=stack("cables"),
-        cable_velocities=stack("cable_velocities"),
-        cable_accelerations=stack("cable_accelerations"),
-        limits=first.limits,
-        seconds=sum(p.seconds for p, _, _ in parts),
-    )
+    A piece is ``(dis, theta, phi, target reached or None, its schedule)``; each after the
+    first starts with the last entry of the one before, which is kept once (``postures``: the
+    pieces' postures so joined).
+    """
+    timed = [p[4] for p in pieces]
+    kept = [slice(1 if k else 0, None) for k in range(len(timed))]
+    offsets = np.concatenate([[0.0], np.cumsum([x.duration for x in timed])])
+    t = np.concatenate([x.t[keep] + off for x, keep, off in zip(timed, kept, offsets)])
+    velocities = np.concatenate([x.velocities[keep] for x, keep in zip(timed, kept)])
+    accelerations = np.concatenate([x.accelerations[keep] for x, keep in zip(timed, kept)])
+    seconds = sum(x.seconds for x in timed)
+    return TimedMotion.from_rates(postures, t, (velocities, accelerations), limits, seconds)
 
 
 def plan_tour(
@@ -289,7 +280,7 @@ def plan_tour(
         raise PlanningError("no target of the tour has a motion: " + failures[0][1])
     roots = sum(i is None for i, _ in tree.branches.values())
     say(f"route tree: {len(tree.routes)} routes from {roots} of their own")
-    motions = _deployments(tank, tree, margin)
+    motions = _deployments(tank, tree)
     tour = _assemble(tank, targets, tree, motions, solver_seconds)
     tour.failures, tour.margin_cm = failures, margin
     if tour.min_clearance_cm < margin:  # where two legs meet, a joining move grazes the tank
@@ -300,16 +291,23 @@ def plan_tour(
     return tour
 
 
-def _deployments(tank: Tank, tree: _Tree, margin: float) -> dict[int, FTLMotion]:
-    """Each route's deployment with the same number of sections (the tour's arm)."""
+def _deployments(tank: Tank, tree: _Tree) -> dict[int, FTLMotion]:
+    """Each route's deployment with the same number of sections (the tour's arm).
+
+    Without the entries that repeat the one before: deployments with more sections than their
+    route needs repeat a posture at some stages (to 1e-13 cm), and a schedule needs time to move.
+    """
     arm = tank.arm
     n = max(route.min_sections() for route in tree.routes.values())
     h0 = min(float(tank.start_point[2]), 20.0)
-    motions = {j: ftl_motion(r, n, h0, theta_max=arm.theta_max) for j, r in tree.routes.items()}
-    for j, motion in motions.items():
-        if motion_clearance(tank, motion) < margin:  # checked again as one motion at the end
-            raise PlanningError(f"target {j}'s deployment with {n} sections misses the margin")
-    return motions
+    out = {}
+    for j, route in tree.routes.items():
+        m = ftl_motion(route, n, h0, theta_max=arm.theta_max)
+        q = joint_positions(m.dis, m.theta, m.phi)
+        keep = np.concatenate([[True], np.abs(np.diff(q, axis=0)).max(axis=1) > 1e-9])
+        out[j] = replace(m, s=m.s[keep], dis=m.dis[keep], theta=m.theta[keep],
+                         phi=m.phi[keep], stage_index=())  # fmt: skip
+    return out
 
 
 @dataclass
@@ -319,7 +317,7 @@ class _Legs:
     tank: Tank
     tree: _Tree
     motions: dict[int, FTLMotion]
-    suffix: dict[tuple[int, float], float] = field(default_factory=dict)
+    suffix: dict[tuple[int, float], TimedMotion] = field(default_factory=dict)
 
     def depart(self, a: int | None, b: int | None) -> float:
         """Where the leg from ``a`` to ``b`` turns back (``None``: the panel)."""
@@ -327,14 +325,17 @@ class _Legs:
             return PANEL
         return _shared(self.tree.routes[a], self.tree.routes[b])[0]
 
-    def duration_from(self, j: int, s0: float) -> float:
-        """The time-optimal duration of target ``j``'s deployment from arc length ``s0`` [cm]."""
+    def timed_from(self, j: int, s0: float) -> TimedMotion:
+        """The time-optimal schedule of target ``j``'s deployment from arc length ``s0`` [cm]."""
         if (j, s0) not in self.suffix:
             m, part, arm = self.motions[j], _part(self.motions[j], s0), self.tank.arm
-            timed = time_motion(m.dis[part], m.theta[part], m.phi[part], arm.section_length,
-                                arm.limits)  # fmt: skip
-            self.suffix[j, s0] = timed.duration
+            self.suffix[j, s0] = time_motion(m.dis[part], m.theta[part], m.phi[part],
+                                             arm.section_length, arm.limits)  # fmt: skip
         return self.suffix[j, s0]
+
+    def duration_from(self, j: int, s0: float) -> float:
+        """The duration of :meth:`timed_from` [s]."""
+        return self.timed_from(j, s0).duration
 
     def costs(self, index: list[int]) -> NDArray[np.float64]:
         """Leg durations between the panel (node 0) and the targets ``index`` (nodes 1..)."""
@@ -359,8 +360,10 @@ class _Legs:
                 if j is not None:
                     m, part = self.motions[j], _part(self.motions[j], s0)
                     arrays = (m.dis[part][::step], m.theta[part][::step], m.phi[part][::step])
-                    pieces.append((*arrays, j if step == 1 else None))
-        return _bridged(pieces, self.tank.arm.section_length), legs
+                    timed = self.timed_from(j, s0)
+                    pieces.append((*arrays, j if step == 1 else None,
+                                   timed if step == 1 else _backwards(timed)))  # fmt: skip
+        return _bridged(pieces, self.tank), legs
 
 
 def _assemble(
@@ -390,7 +393,7 @@ def _assemble(
         targets=targets,
         order=order,
         motion=(dis, theta, phi),
-        timing=_timed_legs([p[:3] for p in pieces], tank),
+        timing=_joined(pieces, (dis, theta, phi), tank.arm.limits),
         arrivals=arrivals,
         legs=legs,
         branches={j: tree.branches[j] for j in order},
@@ -402,31 +405,39 @@ def _assemble(
     )
 
 
-def _bridged(pieces: list[tuple[Any, ...]], l: float) -> list[tuple[Any, ...]]:
+def _bridged(pieces: list[tuple[Any, ...]], tank: Tank) -> list[tuple[Any, ...]]:
     """The pieces, with a straight joint-space move where one does not start where the last ends.
 
     (The same prefix deployed to slightly different postures, or a straight arm at two
-    heights.) Dense enough that no backbone point moves 0.5 cm a step.
+    heights.) Dense enough that no backbone point moves 0.5 cm a step; timed like the pieces.
     """
-    out = [_moving(pieces[0])]
-    for nxt in map(_moving, pieces[1:]):
+    arm, out = tank.arm, [pieces[0]]
+    for nxt in pieces[1:]:
         prev = out[-1]
         a = joint_positions(prev[0][-1:], prev[1][-1:], prev[2][-1:])[0]
         b = joint_positions(nxt[0][:1], nxt[1][:1], nxt[2][:1])[0]
         if np.abs(a - b).max() > 1e-9:
             n = (len(a) - 1) // 2
             # a joint change δ moves a point at most δ times its arc distance from the joint
-            reach = abs(a[0] - b[0]) + float(np.abs(a[1:] - b[1:]).max()) * n * l
+            reach = abs(a[0] - b[0]) + float(np.abs(a[1:] - b[1:]).max()) * n * arm.section_length
             u = np.linspace(0.0, 1.0, max(2, int(np.ceil(reach / 0.5)) + 1))[:, None]
             q = (1 - u) * a + u * b
             theta, phi = kappa_to_angles(q[:, 1:].reshape(len(q), n, 2))
-            out.append((q[:, 0], theta, phi, None))
+            timed = time_motion(q[:, 0], theta, phi, arm.section_length, arm.limits)
+            out.append((q[:, 0], theta, phi, None, timed))
         out.append(nxt)
     return out
 
 
-def _moving(piece: tuple[Any, ...]) -> tuple[Any, ...]:
-    """A piece without the entries that repeat the one before (a schedule needs time to move)."""
-    q = joint_positions(piece[0], piece[1], piece[2])
-    keep = np.concatenate([[True], np.abs(np.diff(q, axis=0)).max(axis=1) > 1e-9])
-    return (piece[0][keep], piece[1][keep], piece[2][keep], *piece[3:])
+def _backwards(timed: TimedMotion) -> TimedMotion:
+    """A schedule run backwards: the same path from its end (the limits are symmetric)."""
+    return TimedMotion.from_rates(
+        (
+            timed.positions[::-1, 0],
+            *kappa_to_angles(timed.positions[::-1, 1:].reshape(len(timed.t), -1, 2)),
+        ),
+        timed.duration - timed.t[::-1],
+        (-timed.velocities[::-1], timed.accelerations[::-1]),
+        timed.limits,
+        timed.seconds,
+    )
