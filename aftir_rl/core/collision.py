@@ -80,9 +80,9 @@ class CollisionScene:
         self._names = {}
         objects = []
         for solid in solids:
-            obj = solid.fcl_object()
-            self._names[id(obj)] = solid.name or type(solid).__name__.lower()
-            objects.append(obj)
+            for obj in solid.fcl_objects():
+                self._names[id(obj)] = solid.name or type(solid).__name__.lower()
+                objects.append(obj)
         self._objects = objects  # keep the Python objects alive for the manager
         self._scene = fcl.DynamicAABBTreeCollisionManager()
         self._scene.registerObjects(objects)

@@ -42,7 +42,9 @@ _SOLID_GROUPS = {
 
 
 def _solid_group(solid: Solid) -> str:
-    return "baffle" if solid.kind == "box" and solid.name.startswith("baffle") else solid.kind
+    if solid.kind == "plate" or (solid.kind == "box" and solid.name.startswith("baffle")):
+        return "baffle"
+    return solid.kind
 
 
 def _mesh_trace(parts: list[Mesh], name: str, color: str, opacity: float) -> go.Mesh3d:

@@ -34,6 +34,7 @@ _SOLID_STYLE: dict[str, dict[str, Any]] = {
     "box": {"color": "tab:brown", "lw": 0.8},
     "cylinder": {"color": "tab:gray", "lw": 0.8},
     "sphere": {"color": "tab:red", "lw": 0.5},
+    "plate": {"color": "tab:olive", "lw": 0.8},
 }
 
 

@@ -15,6 +15,8 @@ import pytest
 
 from aftir_rl.core.robot import _bend_rotations, body_points
 from aftir_rl.core.tank import load_tank
+from aftir_rl.core.tank.generate import wing_tank
+from aftir_rl.core.tank.loading import tank_from_mapping
 from aftir_rl.core.tank.solids import Box, Cylinder, Sphere
 from aftir_rl.envs.ftl import kernel
 from aftir_rl.envs.ftl.env import ArmFTLVectorEnv
@@ -43,10 +45,12 @@ def random_tank(seed):
     return dataclasses.replace(base, obstacles=tuple(solids))
 
 
-TANKS = ["b737_center", "single_cabin", "open_space_obstacles1", "random"]
+TANKS = ["b737_center", "single_cabin", "open_space_obstacles1", "random", "wing"]
 
 
 def tank_named(name):
+    if name == "wing":  # ribs with rectangular, oval and round holes
+        return tank_from_mapping(wing_tank(3, 5), "wing")
     return random_tank(11) if name == "random" else load_tank(name)
 
 
@@ -77,7 +81,7 @@ def test_sdf_is_the_tanks_signed_distance(name):
     pts[:1000, :2] = np.array(tank.panel.center)[:2] + rng.normal(0, tank.panel.radius, (1000, 2))
     packed = kernel_grid(tank)
     got = np.array(
-        [kernel.sdf(*p, packed.boxes, packed.cylinders, packed.spheres, packed.walls) for p in pts]
+        [kernel.sdf(*p, packed) for p in pts]
     )
     np.testing.assert_allclose(got, tank.distance(pts), rtol=0, atol=1e-9)
 

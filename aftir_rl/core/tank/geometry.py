@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.robot import ArmSpec
 from aftir_rl.core.tank.distance import TankDistance
+from aftir_rl.core.tank.plate import Plate
 from aftir_rl.core.tank.raster import Raster, format_point
 from aftir_rl.core.tank.solids import Box, Solid, Vec3
 
@@ -136,6 +137,7 @@ class Tank:
         start_point: a point just inside the panel; its cell is the grid world's start [cm].
         baffle: the wall between two bays, if any.
         hatch: the opening in the baffle, if any.
+        baffles: more baffles (ribs), each a plate with any holes.
         obstacles: solid obstacles (not the baffle).
         arm: the arm used in this tank.
         targets: reference targets [cm].
@@ -153,6 +155,7 @@ class Tank:
     start_point: Vec3 = (0.0, 0.0, 10.0)
     baffle: Baffle | None = None
     hatch: Hatch | None = None
+    baffles: tuple[Plate, ...] = ()
     obstacles: tuple[Solid, ...] = ()
     arm: ArmSpec = ArmSpec()
     targets: tuple[Vec3, ...] = ()
@@ -211,8 +214,39 @@ class Tank:
 
     @property
     def solids(self) -> tuple[Solid, ...]:
-        """Every solid inside the box: baffle pieces, then obstacles."""
-        return self.baffle_solids + self.obstacles
+        """Every solid inside the box: baffle pieces, baffles with holes, then obstacles."""
+        return self.baffle_solids + self.baffles + self.obstacles
+
+    @cached_property
+    def dividers(self) -> tuple[tuple[int, float, float], ...]:
+        """Every baffle as ``(axis, position, thickness)``, sorted by axis and position."""
+        out = [(p.axis, p.position, p.thickness) for p in self.baffles]
+        if self.baffle is not None:
+            out.append((self.baffle.index, self.baffle.position, self.baffle.thickness))
+        return tuple(sorted(out))
+
+    def bay(self, number: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Corners [cm] of bay ``number`` (1 nearest the low end), between consecutive baffles.
+
+        Raises:
+            ConfigError: the tank has no baffle, baffles across more than one axis, or no such
+                bay.
+
+        """
+        walls = [d for d in self.dividers if d[0] != 2]
+        axes = {d[0] for d in walls}
+        if len(axes) != 1 or not 1 <= number <= len(walls) + 1:
+            raise ConfigError(
+                f"{self.source or self.name}: bay {number!r}: bays need baffles across one "
+                f"horizontal axis; this tank has {len(walls) + 1 if len(axes) == 1 else 'no'} bays"
+            )
+        lo, hi = np.array(self.box_min, float), np.array(self.box_max, float)
+        (k,) = axes
+        if number > 1:
+            lo[k] = walls[number - 2][1] + walls[number - 2][2] / 2
+        if number <= len(walls):
+            hi[k] = walls[number - 1][1] - walls[number - 1][2] / 2
+        return lo, hi
 
     @cached_property
     def enclosure(self) -> Enclosure:
@@ -323,18 +357,16 @@ class Tank:
             f"box {format_point(self.box_min)}..{format_point(self.box_max)} cm, "
             f"raster {' x '.join(map(str, raster.shape))} cells of {raster.cell_size:g} cm, "
             f"{int(raster.obstructed.sum())} obstructed",
-            "legend: # obstructed  . free  S start  H hatch  1-9 reference targets",
+            "legend: # obstructed  . free  S start  H hole in a baffle  1-9 reference targets",
             "",
         ]
         return "\n".join(head) + raster.ascii(marks)
 
     def _in_hatch(self, cell: Sequence[int]) -> bool:
-        """Whether the baffle's plane runs through ``cell`` (a free one there is the hatch)."""
-        if self.baffle is None or self.hatch is None:
-            return False
+        """Whether a baffle's plane runs through ``cell`` (a free one there is a hole in it)."""
         lo = np.array(self.raster.origin) + np.asarray(cell) * self.raster.cell_size
-        k = self.baffle.index
-        return bool(lo[k] < self.baffle.position < lo[k] + self.raster.cell_size)
+        size = self.raster.cell_size
+        return any(lo[k] < position < lo[k] + size for k, position, _ in self.dividers)
 
     def scene_dict(self) -> dict[str, Any]:
         """The scene export of docs/design.md §5 (units cm)."""

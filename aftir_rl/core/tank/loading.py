@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, cast
 
@@ -29,9 +29,20 @@ from aftir_rl.core.config import (
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import atomic_open
 from aftir_rl.core.robot import ArmSpec
-from aftir_rl.core.tank.geometry import Baffle, Hatch, Panel, Tank
-from aftir_rl.core.tank.raster import format_point
-from aftir_rl.core.tank.solids import Box, Cylinder, Solid, Sphere, Vec3
+from aftir_rl.core.tank.geometry import Panel, Tank
+from aftir_rl.core.tank.parts import (
+    MAX_CELLS,
+    MAX_COORD,
+    MAX_SECTIONS,
+    MAX_TARGETS,
+    parse_baffle,
+    parse_baffles,
+    parse_obstacles,
+    positive,
+    require,
+    section,
+)
+from aftir_rl.core.tank.solids import Vec3
 
 __all__ = [
     "TANK_DIR",
@@ -45,91 +56,6 @@ __all__ = [
 
 TANK_DIR = CONFIG_DIR / "tanks"
 
-#: Largest magnitude of any coordinate or size in a tank file [cm] (100 m): beyond, python-fcl
-#: loses the precision of the arm (and crashes near 1e200).
-MAX_COORD = 1e4
-#: Most cells a raster may have (the reference tank has 750); 48 bytes of work memory each.
-MAX_CELLS = 1_000_000
-#: Most obstacles and reference targets in one tank file.
-MAX_OBSTACLES = 256
-MAX_TARGETS = 1000
-#: Most sections of an arm (the papers use at most 12).
-MAX_SECTIONS = 64
-
-
-def _section(data: Mapping[str, Any], key: str, allowed: Iterable[str], src: str) -> dict[str, Any]:
-    value = data[key]
-    if not isinstance(value, Mapping):
-        raise ConfigError(f"{src}: {key}: expected a mapping, got {brief(value)}")
-    unknown = sorted(set(value) - set(allowed), key=str)
-    if unknown:
-        raise ConfigError(
-            f"{src}: {key}: unknown key {brief(unknown[0])}; allowed keys are "
-            f"{', '.join(sorted(allowed))}"
-        )
-    return dict(value)
-
-
-def _require(data: Mapping[str, Any], keys: Iterable[str], where: str) -> None:
-    for key in keys:
-        if key not in data:
-            raise ConfigError(f"{where}: missing key {key!r}")
-
-
-def _positive(value: Any, where: str, allow_zero: bool = False) -> float:
-    x = to_float(value, where, limit=MAX_COORD)
-    if x < 0 or (x == 0 and not allow_zero):
-        raise ConfigError(
-            f"{where}: must be {'non-negative' if allow_zero else 'positive'}, got {x:g}"
-        )
-    return x
-
-
-def _parse_solid(item: Any, where: str) -> Solid:
-    if not isinstance(item, Mapping):
-        raise ConfigError(f"{where}: expected a mapping, got {brief(item)}")
-    kind = item.get("type")
-    kind = kind if isinstance(kind, str) else repr(type(kind))
-    allowed = {
-        "box": {"type", "name", "min", "max"},
-        "cylinder": {"type", "name", "p0", "p1", "radius"},
-        "sphere": {"type", "name", "center", "radius"},
-    }
-    if kind not in allowed:
-        raise ConfigError(
-            f"{where}: type: expected one of box, cylinder, sphere, got {brief(kind)}"
-        )
-    unknown = sorted(set(item) - allowed[kind], key=str)
-    if unknown:
-        raise ConfigError(
-            f"{where}: unknown key {brief(unknown[0])} for a {kind}; allowed keys are "
-            f"{', '.join(sorted(allowed[kind]))}"
-        )
-    _require(item, allowed[kind] - {"name"}, where)
-    name = str(item.get("name", ""))
-    if kind == "box":
-        lo, hi = (
-            to_vector(item["min"], f"{where}: min", limit=MAX_COORD),
-            to_vector(item["max"], f"{where}: max", limit=MAX_COORD),
-        )
-        if any(h <= lo_ for lo_, h in zip(lo, hi)):
-            raise ConfigError(f"{where}: max must exceed min on every axis, got {lo} and {hi}")
-        return Box(lo, hi, name)  # type: ignore[arg-type]
-    if kind == "cylinder":
-        p0, p1 = (
-            to_vector(item["p0"], f"{where}: p0", limit=MAX_COORD),
-            to_vector(item["p1"], f"{where}: p1", limit=MAX_COORD),
-        )
-        if sum(a != b for a, b in zip(p0, p1)) != 1:
-            raise ConfigError(
-                f"{where}: p0 and p1 must differ along exactly one axis (cylinders are "
-                f"axis-aligned), got {p0} and {p1}"
-            )
-        return Cylinder(p0, p1, _positive(item["radius"], f"{where}: radius"), name)  # type: ignore[arg-type]
-    centre = to_vector(item["center"], f"{where}: center", limit=MAX_COORD)
-    return Sphere(centre, _positive(item["radius"], f"{where}: radius"), name)  # type: ignore[arg-type]
-
-
 _TOP_KEYS = {
     "name",
     "description",
@@ -139,6 +65,7 @@ _TOP_KEYS = {
     "start_point",
     "baffle",
     "hatch",
+    "baffles",
     "obstacles",
     "arm",
     "targets",
@@ -171,19 +98,20 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
     if data.get("cell_size") is not None:
         kwargs["cell_size"] = _parse_cell_size(data["cell_size"], lo, hi, src)
     if "panel" in data:
-        panel = _section(data, "panel", {"center", "radius"}, src)
+        panel = section(data, "panel", {"center", "radius"}, src)
         centre = to_vector(panel.get("center", (0, 0, 0)), f"{src}: panel.center", limit=MAX_COORD)
-        radius = _positive(panel.get("radius", 12), f"{src}: panel.radius")
+        radius = positive(panel.get("radius", 12), f"{src}: panel.radius")
         kwargs["panel"] = Panel(centre, radius)  # type: ignore[arg-type]
     if "start_point" in data:
         kwargs["start_point"] = to_vector(
             data["start_point"], f"{src}: start_point", limit=MAX_COORD
         )
-    kwargs["obstacles"] = _parse_obstacles(data, lo, hi, src)
+    kwargs["obstacles"] = parse_obstacles(data, lo, hi, src)
     if data.get("baffle") is not None:
-        kwargs["baffle"], kwargs["hatch"] = _parse_baffle(data, lo, hi, src)
+        kwargs["baffle"], kwargs["hatch"] = parse_baffle(data, lo, hi, src)
     elif data.get("hatch") is not None:
         raise ConfigError(f"{src}: hatch: a hatch needs a baffle")
+    kwargs["baffles"] = parse_baffles(data, lo, hi, src)
     if "arm" in data:
         kwargs["arm"] = _parse_arm(data, src)
     kwargs["targets"] = _parse_targets(data, src)
@@ -194,9 +122,9 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
 
 def _parse_box(data: Mapping[str, Any], src: str) -> tuple[Vec3, Vec3]:
     """The box's corners ``(min, max)`` [cm], each larger on every axis for ``max``."""
-    _require(data, ["box"], src)
-    box = _section(data, "box", {"min", "max"}, src)
-    _require(box, ["min", "max"], f"{src}: box")
+    require(data, ["box"], src)
+    box = section(data, "box", {"min", "max"}, src)
+    require(box, ["min", "max"], f"{src}: box")
     lo, hi = (
         cast(Vec3, to_vector(box["min"], f"{src}: box.min", limit=MAX_COORD)),
         cast(Vec3, to_vector(box["max"], f"{src}: box.max", limit=MAX_COORD)),
@@ -208,7 +136,7 @@ def _parse_box(data: Mapping[str, Any], src: str) -> tuple[Vec3, Vec3]:
 
 def _parse_cell_size(value: Any, lo: Vec3, hi: Vec3, src: str) -> float:
     """The raster's cell size [cm]: it divides the box on every axis into few enough cells."""
-    cell = _positive(value, f"{src}: cell_size")
+    cell = positive(value, f"{src}: cell_size")
     for axis, (a, b) in enumerate(zip(lo, hi)):
         n = (b - a) / cell
         if abs(n - round(n)) > 1e-9:
@@ -228,7 +156,7 @@ def _parse_cell_size(value: Any, lo: Vec3, hi: Vec3, src: str) -> float:
 def _parse_arm(data: Mapping[str, Any], src: str) -> ArmSpec:
     """The ``arm`` section (defaults for the keys it leaves out)."""
     keys = {"section_length", "max_sections", "radius", "theta_max", "limits"}
-    arm = _section(data, "arm", keys, src)
+    arm = section(data, "arm", keys, src)
     try:
         return ArmSpec(
             section_length=to_float(
@@ -258,70 +186,6 @@ def _parse_targets(data: Mapping[str, Any], src: str) -> tuple[Vec3, ...]:
         cast(Vec3, to_vector(t, f"{src}: targets[{i}]", limit=MAX_COORD))
         for i, t in enumerate(targets)
     )
-
-
-def _parse_obstacles(data: Mapping[str, Any], lo: Vec3, hi: Vec3, src: str) -> tuple[Solid, ...]:
-    items = data.get("obstacles") or []
-    if not isinstance(items, list):
-        raise ConfigError(f"{src}: obstacles: expected a list, got {brief(items)}")
-    if len(items) > MAX_OBSTACLES:
-        raise ConfigError(f"{src}: obstacles: {len(items)} obstacles, at most {MAX_OBSTACLES}")
-    out = []
-    for i, item in enumerate(items):
-        solid = _parse_solid(item, f"{src}: obstacles[{i}]")
-        s_lo, s_hi = solid.aabb()
-        if np.any(s_lo < np.array(lo) - 1e-9) or np.any(s_hi > np.array(hi) + 1e-9):
-            raise ConfigError(
-                f"{src}: obstacles[{i}] ({solid.name or type(solid).__name__}) reaches outside the "
-                f"box {lo}..{hi}: its bounds are {format_point(s_lo)}..{format_point(s_hi)}"
-            )
-        out.append(solid)
-    return tuple(out)
-
-
-def _parse_baffle(
-    data: Mapping[str, Any], lo: Vec3, hi: Vec3, src: str
-) -> tuple[Baffle, Hatch | None]:
-    raw = _section(data, "baffle", {"axis", "position", "thickness"}, src)
-    _require(raw, ["axis", "position", "thickness"], f"{src}: baffle")
-    if raw["axis"] not in ("x", "y"):
-        raise ConfigError(f"{src}: baffle.axis: expected 'x' or 'y', got {brief(raw['axis'])}")
-    baffle = Baffle(
-        raw["axis"],
-        to_float(raw["position"], f"{src}: baffle.position", limit=MAX_COORD),
-        _positive(raw["thickness"], f"{src}: baffle.thickness"),
-    )
-    k = baffle.index
-    if (
-        not lo[k]
-        < baffle.position - baffle.thickness / 2
-        < baffle.position + baffle.thickness / 2
-        < hi[k]
-    ):
-        raise ConfigError(f"{src}: baffle.position: the baffle slab must lie inside the box")
-    if data.get("hatch") is None:
-        return baffle, None
-    raw_h = _section(data, "hatch", {"center", "width", "height"}, src)
-    _require(raw_h, ["center", "width", "height"], f"{src}: hatch")
-    hatch = Hatch(
-        to_vector(raw_h["center"], f"{src}: hatch.center", limit=MAX_COORD),  # type: ignore[arg-type]
-        _positive(raw_h["width"], f"{src}: hatch.width"),
-        _positive(raw_h["height"], f"{src}: hatch.height"),
-    )
-    u = 1 - k
-    if abs(hatch.center[k] - baffle.position) > 1e-9:
-        raise ConfigError(
-            f"{src}: hatch.center: the hatch is not in its baffle ({'xy'[k]} = "
-            f"{hatch.center[k]:g}, the baffle is at {baffle.position:g})"
-        )
-    if not (
-        lo[u] <= hatch.center[u] - hatch.width / 2
-        and hatch.center[u] + hatch.width / 2 <= hi[u]
-        and lo[2] <= hatch.center[2] - hatch.height / 2
-        and hatch.center[2] + hatch.height / 2 <= hi[2]
-    ):
-        raise ConfigError(f"{src}: hatch: the opening reaches outside the baffle")
-    return baffle, hatch
 
 
 def _check_points(tank: Tank, src: str) -> None:

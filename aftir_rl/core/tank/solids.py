@@ -25,7 +25,7 @@ import fcl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Vec3", "Box", "Cylinder", "Sphere", "Solid", "Mesh", "rotation_z_to"]
+__all__ = ["Vec3", "Shape", "Box", "Cylinder", "Sphere", "Solid", "Mesh", "rotation_z_to"]
 
 Vec3 = tuple[float, float, float]
 #: A triangle mesh: vertices ``(V, 3)`` [cm] and faces ``(F, 3)`` (vertex indices).
@@ -53,8 +53,8 @@ def rotation_z_to(direction: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.stack([x, y, d], axis=-1)
 
 
-class _Shape(ABC):
-    """What the three kinds of solid share; each defines the geometry it is made of."""
+class Shape(ABC):
+    """What every kind of solid shares; each defines the geometry it is made of."""
 
     #: The kind, as in the tank files and the scene export.
     kind: ClassVar[str]
@@ -95,13 +95,37 @@ class _Shape(ABC):
         """A python-fcl ``CollisionObject`` of this solid (a solid primitive, not a mesh)."""
         return fcl.CollisionObject(*self.fcl_geometry())
 
+    def fcl_objects(self) -> list[Any]:
+        """The python-fcl objects that make up this solid (one primitive here)."""
+        return [self.fcl_object()]
+
+    @abstractmethod
+    def overlaps(self, lo: _Array, hi: _Array) -> NDArray[np.bool_]:
+        """Positive-volume overlap with boxes ``[lo, hi]`` of shape ``(..., 3)``."""
+
+    @abstractmethod
+    def contains(self, points: _Array) -> NDArray[np.bool_]:
+        """Whether points ``(..., 3)`` lie strictly inside."""
+
+    @abstractmethod
+    def to_json(self) -> dict[str, Any]:
+        """Scene-export form."""
+
+    @abstractmethod
+    def mesh(self) -> Mesh:
+        """Vertices and triangles of the surface (pictures, mesh export)."""
+
+    @abstractmethod
+    def wireframe(self) -> list[_Array]:
+        """Polylines ``(V, 3)`` that outline the solid (matplotlib)."""
+
     @abstractmethod
     def aabb(self) -> tuple[_Array, _Array]:
         """Axis-aligned bounds ``(lo, hi)``."""
 
 
 @dataclass(frozen=True)
-class Box(_Shape):
+class Box(Shape):
     """Solid axis-aligned box between the corners ``min`` and ``max`` [cm].
 
     Every kind of solid has a ``name``: what messages and collision reports call it ("" for
@@ -169,7 +193,7 @@ class Box(_Shape):
 
 
 @dataclass(frozen=True)
-class Cylinder(_Shape):
+class Cylinder(Shape):
     """Solid cylinder between the centres of its end faces ``p0`` and ``p1`` [cm]."""
 
     p0: Vec3
@@ -284,7 +308,7 @@ class Cylinder(_Shape):
 
 
 @dataclass(frozen=True)
-class Sphere(_Shape):
+class Sphere(Shape):
     """Solid sphere [cm]."""
 
     center: Vec3
@@ -347,4 +371,6 @@ class Sphere(_Shape):
         return [*grid, *grid.transpose(1, 0, 2)]
 
 
-Solid = Box | Cylinder | Sphere
+#: Any solid of a tank: a box, cylinder, sphere, or a plate with holes
+#: (:class:`~aftir_rl.core.tank.plate.Plate`).
+Solid = Shape

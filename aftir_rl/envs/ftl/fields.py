@@ -158,8 +158,15 @@ def clearance_grid(tank: Tank) -> ClearanceGrid:
 def kernel_tank(tank: Tank, grid: ClearanceGrid) -> KernelTank:
     """The :class:`KernelTank` of a tank and its clearance grid."""
     groups: dict[str, list[tuple[float, ...]]] = {"box": [], "cylinder": [], "sphere": []}
+    plates: list[tuple[float, ...]] = []
+    holes: list[tuple[float, ...]] = []
     for solid in tank.solids:
         params = tuple(float(v) for v in solid.distance_params)
+        if solid.kind == "plate":
+            n_holes = (len(params) - 7) // 5
+            plates.append((*params[:7], len(holes), len(holes) + n_holes))
+            holes.extend(params[i : i + 5] for i in range(7, len(params), 5))
+            continue
         if solid.kind == "cylinder":
             params += (float(solid.stack_key),)
         groups[solid.kind].append(params)
@@ -182,6 +189,8 @@ def kernel_tank(tank: Tank, grid: ClearanceGrid) -> KernelTank:
         stack(groups["box"], 6),
         stack(groups["cylinder"], 6),
         stack(groups["sphere"], 4),
+        stack(plates, 9),
+        stack(holes, 5),
         walls,
         np.array([lo for lo, _, _, _ in grid.grids], dtype=np.float64).reshape(-1, 3),
         np.array([g for _, g, _, _ in grid.grids], dtype=np.float64),

@@ -22,21 +22,10 @@ __all__ = ["CORNER_DEPTH", "FailureRates", "bay_region", "corner_candidates", "d
 
 
 def bay_region(tank: Tank, bay: int | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Corners [cm] of the tank's box, or of bay 1 / 2 (either side of the baffle)."""
-    lo, hi = np.array(tank.box_min, float), np.array(tank.box_max, float)
+    """Corners [cm] of the tank's box, or of bay ``bay`` (:meth:`Tank.bay`: between baffles)."""
     if bay is None:
-        return lo, hi
-    baffle = tank.baffle
-    if baffle is None or bay not in (1, 2):
-        raise ConfigError(
-            f"bay must be None, 1 or 2 (and the tank must have a baffle), got {bay!r}"
-        )
-    i, half = baffle.index, baffle.thickness / 2
-    if bay == 1:
-        hi[i] = baffle.position - half
-    else:
-        lo[i] = baffle.position + half
-    return lo, hi
+        return np.array(tank.box_min, float), np.array(tank.box_max, float)
+    return tank.bay(bay)
 
 
 def draw_targets(

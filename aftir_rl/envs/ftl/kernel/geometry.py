@@ -9,13 +9,13 @@ cached function, so kernels that call each other live together.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
 from aftir_rl.core.robot import SMALL
+from aftir_rl.envs.ftl.kernel.arrays import KernelArms, KernelTank
 
 __all__ = [
     "rotate",
@@ -24,6 +24,8 @@ __all__ = [
     "steering_frames",
     "advance",
     "KernelTank",
+    "hole_2d",
+    "plate_sdf",
     "sdf",
     "grid_value",
     "refresh",
@@ -172,61 +174,42 @@ def advance(
         k[b] = new_k
 
 
-class KernelArms(NamedTuple):
-    """A batch of arms as the kernels read them: the state, then what :func:`refresh` derives.
-
-    The route ``kappa (B, N, 2)``, the steered section ``k (B,)`` and the tip's arc length ``s
-    (B,)``; the posture ``theta``, ``phi (B, N)``, the backbone ``points (B, N·K + 1, 3)``, the
-    tip's ``heading (B, 3)``, the ``body_clearance (B,)`` and the ``ray_clearance (B, R)``.
-    """
-
-    kappa: NDArray[np.float64]
-    k: NDArray[np.int64]
-    s: NDArray[np.float64]
-    theta: NDArray[np.float64]
-    phi: NDArray[np.float64]
-    points: NDArray[np.float64]
-    heading: NDArray[np.float64]
-    body_clearance: NDArray[np.float64]
-    ray_clearance: NDArray[np.float64]
-
-
-class KernelTank(NamedTuple):
-    """A tank's signed distance and clearance grids as the arrays the kernels read.
-
-    ``boxes (S, 6)``: centre and half-size; ``cylinders (S, 6)``: the axis's two coordinates
-    across, radius, middle and half-length along, and the axis (0, 1, 2); ``spheres (S, 4)``;
-    ``walls (11,)``: whether the tank has walls, its box's corners, the panel's centre (x, y)
-    and radius, and the height below which solids are skipped (as
-    :class:`~aftir_rl.core.tank.distance.TankDistance`). The grids: per grid its corner ``lo (G,
-    3)``,
-    spacing ``(G,)``, shape ``(G, 3)`` and offset ``(G,)`` into the concatenated values; ``slack``
-    bounds a value's distance from the exact one.
-    """
-
-    boxes: NDArray[np.float64]
-    cylinders: NDArray[np.float64]
-    spheres: NDArray[np.float64]
-    walls: NDArray[np.float64]
-    grid_lo: NDArray[np.float64]
-    grid_spacing: NDArray[np.float64]
-    grid_shape: NDArray[np.int64]
-    grid_offset: NDArray[np.int64]
-    grid_values: NDArray[np.float64]
-    slack: float
+@njit(cache=True)
+def hole_2d(shape: float, da: float, db: float, ha: float, hb: float) -> float:
+    """2D signed distance to a rect (0), circle (1) or oval (2) hole, compiled."""
+    if shape == 0.0:
+        qa, qb = abs(da) - ha, abs(db) - hb
+        return math.hypot(max(qa, 0.0), max(qb, 0.0)) + min(max(qa, qb), 0.0)
+    if shape == 1.0:
+        return math.hypot(da, db) - ha
+    r = min(ha, hb)
+    if ha >= hb:
+        return math.hypot(max(abs(da) - (ha - r), 0.0), db) - r
+    return math.hypot(da, max(abs(db) - (hb - r), 0.0)) - r
 
 
 @njit(cache=True)
-def sdf(
-    x: float,
-    y: float,
-    z: float,
-    boxes: NDArray[np.float64],
-    cylinders: NDArray[np.float64],
-    spheres: NDArray[np.float64],
-    walls: NDArray[np.float64],
+def plate_sdf(
+    x: float, y: float, z: float, plate: NDArray[np.float64], holes: NDArray[np.float64]
 ) -> float:
+    """Signed distance to one plate ``(9,)`` with its rows of ``holes`` (:class:`Plate`'s)."""
+    k = int(plate[0])
+    n = x if k == 0 else (y if k == 1 else z)
+    a = y if k == 0 else x
+    b = y if k == 2 else z
+    ha, hb = (plate[5] - plate[3]) / 2, (plate[6] - plate[4]) / 2
+    flat = hole_2d(0.0, a - plate[3] - ha, b - plate[4] - hb, ha, hb)
+    for h in range(int(plate[7]), int(plate[8])):
+        hole = holes[h]
+        flat = max(flat, -hole_2d(hole[0], a - hole[1], b - hole[2], hole[3], hole[4]))
+    w = abs(n - plate[1]) - plate[2]
+    return math.hypot(max(flat, 0.0), max(w, 0.0)) + min(max(flat, w), 0.0)
+
+
+@njit(cache=True)
+def sdf(x: float, y: float, z: float, tank: KernelTank) -> float:
     """Signed distance [cm] of one point to the tank (:class:`TankDistance`'s, compiled)."""
+    boxes, cylinders, spheres, walls = tank.boxes, tank.cylinders, tank.spheres, tank.walls
     best = math.inf
     if walls[0] == 0.0 or z > walls[10]:
         for i in range(boxes.shape[0]):
@@ -251,6 +234,8 @@ def sdf(
         for i in range(spheres.shape[0]):
             dx, dy, dz = x - spheres[i, 0], y - spheres[i, 1], z - spheres[i, 2]
             best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3])
+        for i in range(tank.plates.shape[0]):
+            best = min(best, plate_sdf(x, y, z, tank.plates[i], tank.holes))
     if walls[0] != 0.0:
         side = min(min(x - walls[1], walls[4] - x), min(y - walls[2], walls[5] - y))
         radial = math.hypot(x - walls[7], y - walls[8])
@@ -312,7 +297,6 @@ def refresh(
     body_clearance, ray_clearance = arms.body_clearance, arms.ray_clearance
     ray_axes, ray_distances = rays
     n = kappa.shape[1]
-    boxes, cylinders, spheres, walls = tank.boxes, tank.cylinders, tank.spheres, tank.walls
     lo, spacing, shape = tank.grid_lo, tank.grid_spacing, tank.grid_shape
     offset, values, slack = tank.grid_offset, tank.grid_values, tank.slack
     l = section_length
@@ -361,9 +345,7 @@ def refresh(
             if v == math.inf:
                 continue
             if math.isnan(v) or v - slack <= upper:
-                d = sdf(points[b, p, 0], points[b, p, 1], points[b, p, 2], boxes, cylinders,
-                        spheres, walls)  # fmt: skip
-                best = min(best, d)
+                best = min(best, sdf(points[b, p, 0], points[b, p, 1], points[b, p, 2], tank))
         body_clearance[b] = best - radius
         # the rays: the heading, then the fixed axes
         n_d = ray_distances.shape[0]
@@ -377,7 +359,7 @@ def refresh(
                 px, py, pz = tx + ax * dd, ty + ay * dd, tz + az * dd
                 v = grid_value(px, py, pz, lo, spacing, shape, offset, values)
                 if math.isnan(v):
-                    v = sdf(px, py, pz, boxes, cylinders, spheres, walls)
+                    v = sdf(px, py, pz, tank)
                 ray_clearance[b, a * n_d + di] = v
 
 
@@ -402,7 +384,7 @@ def usable_point(
     v = grid_value(x, y, z, tank.grid_lo, tank.grid_spacing, tank.grid_shape,
                     tank.grid_offset, tank.grid_values)  # fmt: skip
     if math.isnan(v) or abs(v - clearance) <= tank.slack:
-        v = sdf(x, y, z, tank.boxes, tank.cylinders, tank.spheres, tank.walls)
+        v = sdf(x, y, z, tank)
     return v >= clearance
 
 

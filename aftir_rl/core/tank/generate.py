@@ -1,0 +1,144 @@
+"""Generated wing tanks: a row of bays between ribs with holes, stringers and pipes, by seed.
+
+:func:`wing_tank` draws a wing box from :class:`WingRanges` with a seeded generator and returns
+it as the mapping a tank YAML holds (:func:`~aftir_rl.core.tank.loading.tank_from_mapping` reads
+it; ``aftir tank generate`` writes it). The span runs along x, the chord along y; the access
+panel is in the floor of bay 1. Every rib has one access hole (oval or rectangular) on a chain
+near the middle of the chord, and lightening holes (circles) beside it; stringers run along the
+span on the floor and the ceiling, a pipe under the ceiling. The same seed gives the same tank.
+Ranges and how reachability is kept: docs/tanks.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from aftir_rl.core.errors import ConfigError
+
+__all__ = ["WingRanges", "wing_tank", "MAX_BAYS"]
+
+#: Most bays of a generated wing tank (12 sections of 50 cm reach about five).
+MAX_BAYS = 8
+
+
+@dataclass(frozen=True)
+class WingRanges:
+    """The ranges a wing tank is drawn from [cm]; each ``(low, high)`` is drawn uniformly.
+
+    Sizes are multiples of :attr:`cell_size` where the raster needs it (box, bay lengths).
+    """
+
+    bay_length: tuple[float, float] = (80.0, 110.0)
+    chord: tuple[float, float] = (140.0, 200.0)
+    depth: tuple[float, float] = (80.0, 100.0)
+    rib_thickness: tuple[float, float] = (2.0, 4.0)
+    access_width: tuple[float, float] = (36.0, 50.0)
+    access_height: tuple[float, float] = (32.0, 44.0)
+    access_offset: float = 12.0
+    lightening_diameter: tuple[float, float] = (14.0, 26.0)
+    lightening_holes: tuple[int, int] = (0, 3)
+    stringers: tuple[int, int] = (1, 3)
+    pipe_radius: tuple[float, float] = (3.0, 5.0)
+    cell_size: float = 10.0
+    panel_radius: float = 12.0
+
+
+def _round_to(value: float, step: float) -> float:
+    return float(max(step, round(value / step) * step))
+
+
+def _ribs(rng: np.random.Generator, r: WingRanges, xs: list[float], chord: float, depth: float):
+    """The ribs at ``xs``: an access hole near the chord's middle, lightening holes beside."""
+    ribs = []
+    half_chord = chord / 2
+    for i, x in enumerate(xs):
+        w, h = rng.uniform(*r.access_width), rng.uniform(*r.access_height)
+        cy = rng.uniform(-r.access_offset, r.access_offset)
+        cz = rng.uniform(depth / 2 - 6.0, depth / 2 + 6.0)
+        shape = "oval" if rng.random() < 0.5 else "rect"
+        holes: list[dict[str, Any]] = [
+            {"shape": shape, "center": [x, round(cy, 2), round(cz, 2)],
+             "width": round(w, 2), "height": round(h, 2)}
+        ]  # fmt: skip
+        taken = [(cy - w / 2 - 4, cy + w / 2 + 4)]
+        for _ in range(int(rng.integers(r.lightening_holes[0], r.lightening_holes[1] + 1))):
+            d = rng.uniform(*r.lightening_diameter)
+            y = rng.uniform(-half_chord + d / 2 + 6, half_chord - d / 2 - 6)
+            if any(lo - d / 2 < y < hi + d / 2 for lo, hi in taken):
+                continue
+            taken.append((y - d / 2 - 4, y + d / 2 + 4))
+            holes.append({"shape": "circle", "center": [x, round(y, 2), round(cz, 2)],
+                          "diameter": round(d, 2)})  # fmt: skip
+        ribs.append({"name": f"rib_{i + 1}", "axis": "x", "position": x,
+                     "thickness": round(rng.uniform(*r.rib_thickness), 2), "holes": holes})  # fmt: skip
+    return ribs
+
+
+def _obstacles(rng: np.random.Generator, r: WingRanges, lo, hi, ribs) -> list[dict[str, Any]]:
+    """Stringers on floor and ceiling away from the panel and the access holes; one pipe."""
+    chord, depth = hi[1] - lo[1], hi[2]
+    out: list[dict[str, Any]] = []
+    access = [(h["center"][1] - h["width"] / 2, h["center"][1] + h["width"] / 2)
+              for rib in ribs for h in rib["holes"][:1]]  # fmt: skip
+    low, high = min(a for a, _ in access) - 6, max(b for _, b in access) + 6
+    for where, z0, z1 in (("floor", 0.0, 5.0), ("ceiling", depth - 5.0, depth)):
+        for j in range(int(rng.integers(r.stringers[0], r.stringers[1] + 1))):
+            y = rng.uniform(lo[1] + 8, hi[1] - 8)
+            if abs(y) < r.panel_radius + 10 or (where == "ceiling" and low < y < high):
+                continue
+            out.append({"name": f"stringer_{where}_{j + 1}", "type": "box",
+                        "min": [lo[0], round(y - 1.5, 2), z0], "max": [hi[0], round(y + 1.5, 2), z1]})  # fmt: skip
+    radius = rng.uniform(*r.pipe_radius)
+    side = 1.0 if rng.random() < 0.5 else -1.0
+    y = side * rng.uniform(max(abs(low), abs(high)) + radius + 4, chord / 2 - radius - 6)
+    z = depth - radius - 8
+    out.append({"name": "fuel_pipe", "type": "cylinder", "p0": [lo[0], round(y, 2), round(z, 2)],
+                "p1": [hi[0], round(y, 2), round(z, 2)], "radius": round(radius, 2)})  # fmt: skip
+    return out
+
+
+def wing_tank(bays: int, seed: int, ranges: WingRanges | None = None) -> dict[str, Any]:
+    """A wing tank of ``bays`` bays drawn with ``seed``, as a tank YAML mapping.
+
+    Raises:
+        ConfigError: ``bays`` outside 1..:data:`MAX_BAYS`.
+
+    """
+    if not 1 <= int(bays) <= MAX_BAYS:
+        raise ConfigError(f"bays: a wing tank has 1 to {MAX_BAYS} bays, got {bays}")
+    r = ranges or WingRanges()
+    rng = np.random.default_rng([int(seed), int(bays)])
+    step = r.cell_size
+    lengths = [_round_to(rng.uniform(*r.bay_length), step) for _ in range(bays)]
+    chord = _round_to(rng.uniform(*r.chord), 2 * step)
+    depth = _round_to(rng.uniform(*r.depth), step)
+    x0 = -_round_to(lengths[0] / 2, step)
+    lo = [x0, -chord / 2, 0.0]
+    hi = [x0 + sum(lengths), chord / 2, depth]
+    # ribs in the middle of a cell: one column of cells each on the raster, not two
+    xs = [x0 + float(np.sum(lengths[: i + 1])) + step / 2 for i in range(bays - 1)]
+    ribs = _ribs(rng, r, xs, chord, depth)
+    obstacles = _obstacles(rng, r, lo, hi, ribs)
+    targets = [[round((a + b) / 2, 2), 0.0, round(depth / 2, 2)]
+               for a, b in zip([lo[0], *xs], [*xs, hi[0]])]  # fmt: skip
+    targets[0] = [round(lo[0] + 15.0, 2), 0.0, round(depth / 2, 2)]
+    return {
+        "name": f"wing_{bays}bay_s{seed}",
+        "description": f"Generated wing tank: {bays} bays, seed {seed} (aftir tank generate)",
+        "box": {"min": lo, "max": hi},
+        "cell_size": step,
+        "panel": {"center": [0.0, 0.0, 0.0], "radius": r.panel_radius},
+        "start_point": [0.0, 0.0, 10.0],
+        "baffles": ribs,
+        "obstacles": obstacles,
+        "arm": {"section_length": 50, "max_sections": 12, "radius": 2.5, "theta_max": 1.5708},
+        "targets": targets,
+    }
+
+
+def ranges_json(ranges: WingRanges | None = None) -> dict[str, Any]:
+    """The ranges as plain data (docs, a run's record)."""
+    return asdict(ranges or WingRanges())
