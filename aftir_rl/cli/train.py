@@ -114,6 +114,10 @@ def _add_q_table_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
         default=str(CONFIG_DIR / "q_table.yaml"),
         help="YAML of QLearningConfig fields (default: configs/q_table.yaml)",
     )
+    q.add_argument(
+        "--tank",
+        help="tank name, YAML path or generator spec such as wing:3:7 (overrides the config's)",
+    )
     add_target_option(
         q, "target point in cm; repeat for several (default: the tank's reference targets)"
     )
@@ -330,6 +334,11 @@ def _q_table_config(args: argparse.Namespace) -> Any:
 
     """
     config = load_q_table_config(args.config)
+    if args.tank is not None:
+        from aftir_rl.core.tank import load_tank
+
+        load_tank(args.tank)  # a bad tank is one line before anything runs
+        config = dataclasses.replace(config, tank=args.tank)
     if args.episodes is not None:
         if args.episodes < 1:
             raise ConfigError(f"--episodes must be at least 1, got {args.episodes}")

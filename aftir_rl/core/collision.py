@@ -84,6 +84,8 @@ class CollisionScene:
                 self._names[id(obj)] = solid.name or type(solid).__name__.lower()
                 objects.append(obj)
         self._objects = objects  # keep the Python objects alive for the manager
+        # python-fcl's meshes are hollow: an arm wholly inside one is found by its inside test
+        self._hollow = [s for s in tank.solids if s.kind == "mesh"]
         self._scene = fcl.DynamicAABBTreeCollisionManager()
         self._scene.registerObjects(objects)
         self._scene.setup()
@@ -146,14 +148,25 @@ class CollisionScene:
         data = fcl.CollisionData()
         with held():  # a Ctrl-C inside fcl's callback would be printed and lost
             self._scene.collide(self._place(posture), data, fcl.defaultCollisionCallback)
-        return bool(data.result.is_collision)
+        return bool(data.result.is_collision) or bool(self._inside_hollow(posture))
+
+    def _inside_hollow(self, posture: Posture) -> str:
+        """The name of a mesh solid that holds a backbone point, "" if none."""
+        if not self._hollow:
+            return ""
+        pts = posture.points(self.arm.section_length, self.links_per_section)
+        for solid in self._hollow:
+            if solid.contains(pts).any():
+                return solid.name or "mesh"
+        return ""
 
     def clearance(self, posture: Posture) -> float:
         """Smallest distance between the arm's body and any solid or wall [cm] (≤ 0 on contact)."""
         data = fcl.DistanceData()
         with held():
             self._scene.distance(self._place(posture), data, fcl.defaultDistanceCallback)
-        return _finite_or_inf(data.result.min_distance)
+        inside = self._inside_hollow(posture)
+        return min(_finite_or_inf(data.result.min_distance), 0.0 if inside else math.inf)
 
     def check(self, posture: Posture) -> CollisionReport:
         """Collision, clearance and panel rule of one posture, and what it hits."""
@@ -165,9 +178,11 @@ class CollisionScene:
             hit = self._hit_name(manager) if data.result.is_collision else ""
             self._scene.distance(manager, dist, fcl.defaultDistanceCallback)
         clearance = _finite_or_inf(dist.result.min_distance)
-        if data.result.is_collision:
+        inside = self._inside_hollow(posture)
+        touches = bool(data.result.is_collision) or bool(inside)
+        if touches:
             clearance = min(clearance, 0.0)
-        return CollisionReport(bool(data.result.is_collision) or not panel, clearance, panel, hit)
+        return CollisionReport(touches or not panel, clearance, panel, hit or inside)
 
     def _hit_name(self, manager: fcl.DynamicAABBTreeCollisionManager) -> str:
         for obj in self._objects:

@@ -30,6 +30,13 @@ def _python(code: str) -> subprocess.CompletedProcess[str]:
             "rrt_connect(CollisionScene(t, t.arm), p, p)",
             "ompl",
         ),
+        (
+            "trimesh",
+            "from aftir_rl.core.tank import load_tank\n"
+            "from aftir_rl.core.tank.meshes import export_tank_mesh\n"
+            "export_tank_mesh(load_tank('b737_center'), 'never.stl')",
+            "mesh",
+        ),
     ],
 )
 def test_missing_extra_is_a_catchable_one_line_error(blocked, call, extra):

@@ -9,6 +9,8 @@ random obstacles of every kind.
 from __future__ import annotations
 
 import dataclasses
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +19,7 @@ from aftir_rl.core.robot import _bend_rotations, body_points
 from aftir_rl.core.tank import load_tank
 from aftir_rl.core.tank.generate import wing_tank
 from aftir_rl.core.tank.loading import tank_from_mapping
+from aftir_rl.core.tank.meshes import export_tank_mesh
 from aftir_rl.core.tank.solids import Box, Cylinder, Sphere
 from aftir_rl.envs.ftl import kernel
 from aftir_rl.envs.ftl.env import ArmFTLVectorEnv
@@ -45,12 +48,17 @@ def random_tank(seed):
     return dataclasses.replace(base, obstacles=tuple(solids))
 
 
-TANKS = ["b737_center", "single_cabin", "open_space_obstacles1", "random", "wing"]
+TANKS = ["b737_center", "single_cabin", "open_space_obstacles1", "random", "wing", "mesh"]
 
 
 def tank_named(name):
     if name == "wing":  # ribs with rectangular, oval and round holes
         return tank_from_mapping(wing_tank(3, 5), "wing")
+    if name == "mesh":  # a generated wing's solids read back from a mesh file
+        pytest.importorskip("trimesh")
+        folder = Path(tempfile.mkdtemp())
+        export_tank_mesh(load_tank("wing:2:3"), folder / "w.stl", folder / "w.yaml")
+        return load_tank(folder / "w.yaml")
     return random_tank(11) if name == "random" else load_tank(name)
 
 
@@ -80,9 +88,7 @@ def test_sdf_is_the_tanks_signed_distance(name):
     pts[:2000, 2] = rng.uniform(-400, 5, 2000)  # in and around the guide tube
     pts[:1000, :2] = np.array(tank.panel.center)[:2] + rng.normal(0, tank.panel.radius, (1000, 2))
     packed = kernel_grid(tank)
-    got = np.array(
-        [kernel.sdf(*p, packed) for p in pts]
-    )
+    got = np.array([kernel.sdf(*p, packed) for p in pts])
     np.testing.assert_allclose(got, tank.distance(pts), rtol=0, atol=1e-9)
 
 

@@ -72,8 +72,11 @@ def _ribs(rng: np.random.Generator, r: WingRanges, xs: list[float], chord: float
             taken.append((y - d / 2 - 4, y + d / 2 + 4))
             holes.append({"shape": "circle", "center": [x, round(y, 2), round(cz, 2)],
                           "diameter": round(d, 2)})  # fmt: skip
-        ribs.append({"name": f"rib_{i + 1}", "axis": "x", "position": x,
-                     "thickness": round(rng.uniform(*r.rib_thickness), 2), "holes": holes})  # fmt: skip
+        thickness = round(rng.uniform(*r.rib_thickness), 2)
+        ribs.append(
+            {"name": f"rib_{i + 1}", "axis": "x", "position": x, "thickness": thickness,
+             "holes": holes}
+        )  # fmt: skip
     return ribs
 
 
@@ -89,8 +92,11 @@ def _obstacles(rng: np.random.Generator, r: WingRanges, lo, hi, ribs) -> list[di
             y = rng.uniform(lo[1] + 8, hi[1] - 8)
             if abs(y) < r.panel_radius + 10 or (where == "ceiling" and low < y < high):
                 continue
-            out.append({"name": f"stringer_{where}_{j + 1}", "type": "box",
-                        "min": [lo[0], round(y - 1.5, 2), z0], "max": [hi[0], round(y + 1.5, 2), z1]})  # fmt: skip
+            y0, y1 = round(y - 1.5, 2), round(y + 1.5, 2)
+            out.append(
+                {"name": f"stringer_{where}_{j + 1}", "type": "box", "min": [lo[0], y0, z0],
+                 "max": [hi[0], y1, z1]}
+            )  # fmt: skip
     radius = rng.uniform(*r.pipe_radius)
     side = 1.0 if rng.random() < 0.5 else -1.0
     y = side * rng.uniform(max(abs(low), abs(high)) + radius + 4, chord / 2 - radius - 6)

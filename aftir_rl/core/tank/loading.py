@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Mapping
+import re
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, cast
 
@@ -29,6 +30,7 @@ from aftir_rl.core.config import (
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import atomic_open
 from aftir_rl.core.robot import ArmSpec
+from aftir_rl.core.tank.generate import wing_tank
 from aftir_rl.core.tank.geometry import Panel, Tank
 from aftir_rl.core.tank.parts import (
     MAX_CELLS,
@@ -52,6 +54,7 @@ __all__ = [
     "resolve_run_tank",
     "keep_run_tank",
     "tank_from_mapping",
+    "generated_spec",
 ]
 
 TANK_DIR = CONFIG_DIR / "tanks"
@@ -233,16 +236,18 @@ _CACHE_SIZE = 4
 
 #: The file a run directory keeps its tank in when it was trained in a tank that is not shipped.
 RUN_TANK_FILE = "tank.yaml"
+#: A generated tank by name: ``wing:BAYS:SEED`` (:func:`generated_spec`).
+_SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})")
 
 
 def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
-    """What a run directory records as its tank: a shipped tank's name, else ``tank.yaml``.
+    """What a run directory records as its tank: a shipped name or a spec, else ``tank.yaml``.
 
     A tank given as a path is copied into the run directory (:data:`RUN_TANK_FILE`), so the run
     stays readable wherever it is moved and :func:`resolve_run_tank` never leaves it.
     """
     text, source = str(tank), Path(tank)
-    if text in available_tanks() and not source.exists():
+    if (text in available_tanks() or generated_spec(text)) and not source.exists():
         return text
     if not (source.suffix in (".yaml", ".yml") or source.exists()):
         source = TANK_DIR / f"{text}.yaml"
@@ -255,7 +260,8 @@ def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
 def resolve_run_tank(name: object, run_dir: str | Path) -> str:
     """The tank a run directory names, as :func:`load_tank` takes it, checked before any read.
 
-    A run may name a shipped tank (``b737_center``) or a YAML file inside its own directory
+    A run may name a shipped tank (``b737_center``), a generator spec (``wing:3:7``) or a YAML
+    file inside its own directory
     (:data:`RUN_TANK_FILE`); an absolute path, ``..``, or a symlink that leads out of the
     directory is refused unread, so a run handed over by someone else opens no other file.
 
@@ -264,7 +270,7 @@ def resolve_run_tank(name: object, run_dir: str | Path) -> str:
 
     """
     shipped = available_tanks()
-    if isinstance(name, str) and name in shipped:
+    if isinstance(name, str) and (name in shipped or generated_spec(name) is not None):
         return name
     folder = Path(run_dir)
     try:
@@ -282,10 +288,17 @@ def resolve_run_tank(name: object, run_dir: str | Path) -> str:
     return str(path)
 
 
-def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
-    """Load a tank by name (``configs/tanks/NAME.yaml``) or by path to a YAML file.
+def generated_spec(text: str) -> tuple[int, int] | None:
+    """``(bays, seed)`` of a generator spec ``wing:BAYS:SEED``, or None for anything else."""
+    match = _SPEC.fullmatch(text)
+    return (int(match[1]), int(match[2])) if match else None
 
-    The last few tanks loaded are cached by their file's content, so envs share one raster.
+
+def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
+    """Load a tank by name (``configs/tanks/NAME.yaml``), path, or spec ``wing:BAYS:SEED``.
+
+    A spec is :func:`~aftir_rl.core.tank.generate.wing_tank`'s tank, read no file. The last few
+    tanks loaded are cached by their file's content, so envs share one raster.
 
     Raises:
         ConfigError: the tank does not exist or its file is malformed.
@@ -294,6 +307,9 @@ def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
     if isinstance(tank, Tank):
         return tank
     text = str(tank)
+    spec = generated_spec(text)
+    if spec is not None:
+        return _cached(text, lambda: tank_from_mapping(wing_tank(*spec), text))
     path = Path(text)
     if not (path.suffix in (".yaml", ".yml") or path.exists()):
         path = TANK_DIR / f"{text}.yaml"
@@ -302,8 +318,14 @@ def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
                 f"unknown tank {text!r}: give a YAML path or one of {', '.join(available_tanks())}"
             )
     raw = read_limited(path, MAX_YAML_BYTES, ConfigError, "file", "tank or config")
-    key = hashlib.sha256(raw).hexdigest()
-    tank = _CACHE.pop(key, None) or tank_from_mapping(read_yaml(path, raw), str(path))
+    return _cached(
+        hashlib.sha256(raw).hexdigest(), lambda: tank_from_mapping(read_yaml(path, raw), str(path))
+    )
+
+
+def _cached(key: str, build: Callable[[], Tank]) -> Tank:
+    """The tank cached under ``key``, built and cached (the newest last) when missing."""
+    tank = _CACHE.pop(key, None) or build()
     _CACHE[key] = tank
     while len(_CACHE) > _CACHE_SIZE:
         del _CACHE[next(iter(_CACHE))]

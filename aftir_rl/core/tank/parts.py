@@ -9,6 +9,7 @@ docs/tanks.md.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -83,8 +84,13 @@ def positive(value: Any, where: str, allow_zero: bool = False) -> float:
     return x
 
 
-def parse_solid(item: Any, where: str) -> Solid:
-    """One obstacle: a box, cylinder or sphere."""
+def parse_solid(
+    item: Any, where: str, base: Path | None = None, extent: tuple[Vec3, Vec3] | None = None
+) -> Solid:
+    """One obstacle: a box, cylinder, sphere, or a mesh file (relative to ``base``).
+
+    A mesh's distance grid covers ``extent`` (the tank's box) too.
+    """
     if not isinstance(item, Mapping):
         raise ConfigError(f"{where}: expected a mapping, got {brief(item)}")
     kind = item.get("type")
@@ -93,10 +99,11 @@ def parse_solid(item: Any, where: str) -> Solid:
         "box": {"type", "name", "min", "max"},
         "cylinder": {"type", "name", "p0", "p1", "radius"},
         "sphere": {"type", "name", "center", "radius"},
+        "mesh": {"type", "name", "file"},
     }
     if kind not in allowed:
         raise ConfigError(
-            f"{where}: type: expected one of box, cylinder, sphere, got {brief(kind)}"
+            f"{where}: type: expected one of box, cylinder, sphere, mesh, got {brief(kind)}"
         )
     unknown = sorted(set(item) - allowed[kind], key=str)
     if unknown:
@@ -106,6 +113,8 @@ def parse_solid(item: Any, where: str) -> Solid:
         )
     require(item, allowed[kind] - {"name"}, where)
     name = str(item.get("name", ""))
+    if kind == "mesh":
+        return _parse_mesh(item["file"], name, where, base, extent)
     if kind == "box":
         lo, hi = (
             to_vector(item["min"], f"{where}: min", limit=MAX_COORD),
@@ -138,7 +147,7 @@ def parse_obstacles(data: Mapping[str, Any], lo: Vec3, hi: Vec3, src: str) -> tu
         raise ConfigError(f"{src}: obstacles: {len(items)} obstacles, at most {MAX_OBSTACLES}")
     out = []
     for i, item in enumerate(items):
-        solid = parse_solid(item, f"{src}: obstacles[{i}]")
+        solid = parse_solid(item, f"{src}: obstacles[{i}]", Path(src).parent, (lo, hi))
         s_lo, s_hi = solid.aabb()
         if np.any(s_lo < np.array(lo) - 1e-9) or np.any(s_hi > np.array(hi) + 1e-9):
             raise ConfigError(
@@ -272,3 +281,16 @@ def _parse_hole(item: Any, plate: Plate, where: str) -> Hole:
             f"{format_point(plate.lo)}..{format_point(plate.hi)})"
         )
     return hole
+
+
+def _parse_mesh(
+    file: Any, name: str, where: str, base: Path | None, extent: tuple[Vec3, Vec3] | None
+) -> Solid:
+    """A mesh obstacle: the file relative to the tank file's folder, read and checked."""
+    from aftir_rl.core.tank.meshes import MeshSolid, read_mesh
+
+    if not isinstance(file, str) or not 0 < len(file) <= 255 or "\0" in file:
+        raise ConfigError(f"{where}: file: expected a mesh file name, got {brief(file)}")
+    path = (base or Path(".")) / file
+    verts, faces = read_mesh(path, f"{where}: file")
+    return MeshSolid(verts, faces, name, file, extent)

@@ -243,6 +243,10 @@ class Plate(Shape):
             faces += [[i, j, v + j], [i, v + j, v + i]]
         return verts, np.array(faces)
 
+    def bodies(self) -> list[tuple[_Array, _Array]]:
+        """Every piece's prism as a closed mesh ``(vertices, faces)``."""
+        return [self._prism(flat) for flat in self.pieces]
+
     def fcl_objects(self) -> list[Any]:
         """python-fcl convex prisms, one per piece of :attr:`pieces` (solid, not hollow)."""
         out = []
@@ -258,7 +262,7 @@ class Plate(Shape):
 
     def mesh(self) -> Mesh:
         """Vertices and triangles of every piece's prism (a picture's solid plate)."""
-        parts = [self._prism(flat) for flat in self.pieces]
+        parts = self.bodies()
         offsets = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])
         verts = np.vstack([v for v, _ in parts])
         return verts, np.vstack([f + o for (_, f), o in zip(parts, offsets)]).astype(np.int64)

@@ -23,13 +23,13 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.core.tank import Tank
 from aftir_rl.envs.ftl import kernel
 from aftir_rl.envs.ftl.kernel import KernelTank
+from aftir_rl.envs.ftl.packing import kernel_tank
 
 __all__ = [
     "ClearanceGrid",
     "FieldGuide",
     "clearance_grid",
     "kernel_grid",
-    "kernel_tank",
     "field_guide",
     "raster_distance_table",
 ]
@@ -59,6 +59,8 @@ class ClearanceGrid:
             jump), or the bounds are wrong.
         spacing: grid spacing ``g`` [cm] (grown for a box until its grid has at most
             :data:`MAX_GRID_NODES` nodes).
+        lipschitz: a bound on how fast ``distance`` changes (1 for a true signed distance; √3
+            for a grid read trilinearly, as a mesh solid's is).
 
     """
 
@@ -67,6 +69,7 @@ class ClearanceGrid:
         distance: Callable[[NDArray[np.float64]], NDArray[np.float64]],
         boxes: Sequence[tuple[ArrayLike, ArrayLike]],
         spacing: float = GRID_SPACING,
+        lipschitz: float = 1.0,
     ) -> None:
         self.distance = distance
         self.grids: list[tuple[NDArray[np.float64], float, NDArray[np.int64], NDArray[np.float64]]]
@@ -83,7 +86,7 @@ class ClearanceGrid:
             chunks = np.array_split(nodes, 1 + len(nodes) // 65536)
             values = np.concatenate([distance(c) for c in chunks]).astype(np.float64)
             self.grids.append((lo, g, shape, values))
-            self.slack = max(self.slack, g * math.sqrt(3.0) / 2.0)
+            self.slack = max(self.slack, lipschitz * g * math.sqrt(3.0) / 2.0)
 
     def bound(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """Nearest-node values of points ``(..., 3)``; NaN outside every grid.
@@ -151,54 +154,11 @@ def clearance_grid(tank: Tank) -> ClearanceGrid:
         half = max((r - 2.0 * GRID_SPACING) / math.sqrt(2.0), 0.0)
         depth = tank.arm.max_sections * tank.arm.section_length + 10.0
         column = (c - [half, half, depth], c + [half, half, 0.0])
-        grid = _GRIDS[tank] = ClearanceGrid(tank.distance, [(lo, hi), column])
+        steep = any(s.kind == "mesh" for s in tank.solids)
+        grid = _GRIDS[tank] = ClearanceGrid(
+            tank.distance, [(lo, hi), column], lipschitz=math.sqrt(3.0) if steep else 1.0
+        )
     return grid
-
-
-def kernel_tank(tank: Tank, grid: ClearanceGrid) -> KernelTank:
-    """The :class:`KernelTank` of a tank and its clearance grid."""
-    groups: dict[str, list[tuple[float, ...]]] = {"box": [], "cylinder": [], "sphere": []}
-    plates: list[tuple[float, ...]] = []
-    holes: list[tuple[float, ...]] = []
-    for solid in tank.solids:
-        params = tuple(float(v) for v in solid.distance_params)
-        if solid.kind == "plate":
-            n_holes = (len(params) - 7) // 5
-            plates.append((*params[:7], len(holes), len(holes) + n_holes))
-            holes.extend(params[i : i + 5] for i in range(7, len(params), 5))
-            continue
-        if solid.kind == "cylinder":
-            params += (float(solid.stack_key),)
-        groups[solid.kind].append(params)
-
-    def stack(rows: list[tuple[float, ...]], width: int) -> NDArray[np.float64]:
-        return np.array(rows, dtype=np.float64).reshape(-1, width)
-
-    lowest = min((float(s.aabb()[0][2]) for s in tank.solids), default=math.inf)
-    c, r = tank.panel.center, float(tank.panel.radius)
-    walls = np.array(
-        [float(tank.walls), *tank.box_min, *tank.box_max, c[0], c[1], r,
-         min(float(tank.box_min[2]), lowest) - r],
-        dtype=np.float64,
-    )  # fmt: skip
-    offsets, total = [], 0
-    for _, _, _, values in grid.grids:
-        offsets.append(total)
-        total += len(values)
-    return KernelTank(
-        stack(groups["box"], 6),
-        stack(groups["cylinder"], 6),
-        stack(groups["sphere"], 4),
-        stack(plates, 9),
-        stack(holes, 5),
-        walls,
-        np.array([lo for lo, _, _, _ in grid.grids], dtype=np.float64).reshape(-1, 3),
-        np.array([g for _, g, _, _ in grid.grids], dtype=np.float64),
-        np.array([shape for _, _, shape, _ in grid.grids], dtype=np.int64).reshape(-1, 3),
-        np.array(offsets, dtype=np.int64),
-        np.concatenate([values for _, _, _, values in grid.grids]).astype(np.float64),
-        float(grid.slack),
-    )
 
 
 _KERNEL_TANKS: weakref.WeakKeyDictionary[Tank, KernelTank] = weakref.WeakKeyDictionary()
@@ -207,7 +167,7 @@ _KERNEL_TANKS: weakref.WeakKeyDictionary[Tank, KernelTank] = weakref.WeakKeyDict
 def kernel_grid(tank: Tank) -> KernelTank:
     """The tank's signed distance and :func:`clearance_grid` as the compiled kernels read them.
 
-    Built once per tank (:func:`kernel_tank`).
+    Built once per tank (:func:`~aftir_rl.envs.ftl.packing.kernel_tank`).
     """
     packed = _KERNEL_TANKS.get(tank)
     if packed is None:

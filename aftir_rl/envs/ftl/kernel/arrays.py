@@ -36,6 +36,8 @@ class KernelTank(NamedTuple):
     across, radius, middle and half-length along, and the axis (0, 1, 2); ``spheres (S, 4)``;
     ``plates (P, 9)``: axis, position, half thickness, the rectangle's corners in the plane and
     the range of the plate's rows of ``holes (H, 5)`` (shape code, centre, half-sizes);
+    ``meshes (M, 14)``: a mesh solid's grid corner, spacing, shape, offset into ``mesh_values``
+    and its box's corners;
     ``walls (11,)``: whether the tank has walls, its box's corners, the panel's centre (x, y)
     and radius, and the height below which solids are skipped (as
     :class:`~aftir_rl.core.tank.distance.TankDistance`). The grids: per grid its corner ``lo
@@ -48,6 +50,8 @@ class KernelTank(NamedTuple):
     spheres: NDArray[np.float64]
     plates: NDArray[np.float64]
     holes: NDArray[np.float64]
+    meshes: NDArray[np.float64]
+    mesh_values: NDArray[np.float32]
     walls: NDArray[np.float64]
     grid_lo: NDArray[np.float64]
     grid_spacing: NDArray[np.float64]

@@ -26,6 +26,7 @@ __all__ = [
     "KernelTank",
     "hole_2d",
     "plate_sdf",
+    "mesh_sdf",
     "sdf",
     "grid_value",
     "refresh",
@@ -207,6 +208,35 @@ def plate_sdf(
 
 
 @njit(cache=True)
+def mesh_sdf(
+    x: float, y: float, z: float, m: NDArray[np.float64], values: NDArray[np.float32]
+) -> float:
+    """A mesh solid's grid ``m (14,)`` read trilinearly; outside, the distance to its box."""
+    p = (x, y, z)
+    base, frac, inside = np.empty(3, np.int64), np.empty(3), True
+    for d in range(3):
+        r = (p[d] - m[d]) / m[3]
+        n = int(m[4 + d])
+        inside = inside and 0.0 <= r <= n - 1
+        base[d] = min(max(int(math.floor(r)), 0), n - 2)
+        frac[d] = min(max(r - base[d], 0.0), 1.0)
+    if not inside:
+        ox = max(m[8] - x, x - m[11], 0.0)
+        oy = max(m[9] - y, y - m[12], 0.0)
+        oz = max(m[10] - z, z - m[13], 0.0)
+        return math.sqrt(ox * ox + oy * oy + oz * oz)
+    ny, nz, out = int(m[5]), int(m[6]), 0.0
+    for dx in range(2):
+        for dy in range(2):
+            for dz in range(2):
+                w = (frac[0] if dx else 1.0 - frac[0]) * (frac[1] if dy else 1.0 - frac[1])
+                w *= frac[2] if dz else 1.0 - frac[2]
+                flat = ((base[0] + dx) * ny + base[1] + dy) * nz + base[2] + dz
+                out += w * values[int(m[7]) + flat]
+    return out
+
+
+@njit(cache=True)
 def sdf(x: float, y: float, z: float, tank: KernelTank) -> float:
     """Signed distance [cm] of one point to the tank (:class:`TankDistance`'s, compiled)."""
     boxes, cylinders, spheres, walls = tank.boxes, tank.cylinders, tank.spheres, tank.walls
@@ -236,6 +266,8 @@ def sdf(x: float, y: float, z: float, tank: KernelTank) -> float:
             best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3])
         for i in range(tank.plates.shape[0]):
             best = min(best, plate_sdf(x, y, z, tank.plates[i], tank.holes))
+        for i in range(tank.meshes.shape[0]):
+            best = min(best, mesh_sdf(x, y, z, tank.meshes[i], tank.mesh_values))
     if walls[0] != 0.0:
         side = min(min(x - walls[1], walls[4] - x), min(y - walls[2], walls[5] - y))
         radial = math.hypot(x - walls[7], y - walls[8])

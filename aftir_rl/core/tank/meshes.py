@@ -1,0 +1,311 @@
+"""Tanks from triangle meshes: read, check and measure a mesh solid; write a tank as a mesh.
+
+:func:`read_mesh` reads STL, OBJ or PLY with trimesh (``aftir_rl[mesh]``) within bounds (file
+size, triangles, coordinates) and refuses, in one line, a mesh with NaN or huge vertices,
+degenerate triangles, holes (an edge not matched by one in the opposite direction), or inverted
+normals. :class:`MeshSolid` is a tank solid made of it: its signed distance is tabulated on a
+grid (exact at the nodes within :data:`BAND` of a triangle; beyond, the distance to the mesh point
+nearest the nearest such node, an upper bound, near-exact; inside where
+the oriented crossings below a node are positive, so overlapping closed bodies are their union)
+and read trilinearly; the raster marks cells a triangle cuts or whose centre is inside;
+python-fcl gets a BVH model, hollow, so the collision check adds the inside test of the grid.
+:func:`export_tank_mesh` writes any tank's solids as one mesh. More: docs/tanks.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any, ClassVar
+
+import fcl
+import numpy as np
+from numpy.typing import NDArray
+
+from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.extras import require
+from aftir_rl.core.tank import mesh_kernels
+from aftir_rl.core.tank.solids import Mesh, Shape
+
+__all__ = ["MeshSolid", "read_mesh", "export_tank_mesh", "MAX_MESH_BYTES", "MAX_TRIANGLES"]
+
+_Array = NDArray[np.float64]
+#: Largest mesh file read [bytes], and most triangles in it.
+MAX_MESH_BYTES = 128 * 2**20
+MAX_TRIANGLES = 1_000_000
+#: Largest magnitude of a vertex coordinate [cm], as for every tank coordinate.
+MAX_MESH_COORD = 1e4
+#: Spacing of the signed-distance grid [cm] (grown until it has at most MAX_GRID_NODES nodes),
+#: and the band around the surface where its values are exact [cm].
+GRID_SPACING = 1.0
+MAX_GRID_NODES = 40_000_000
+BAND = 4.0
+MESH_SUFFIXES = (".stl", ".obj", ".ply")
+
+
+def _trimesh() -> Any:
+    return require("trimesh", "mesh")
+
+
+def read_mesh(path: str | Path, where: str) -> tuple[_Array, NDArray[np.int64]]:
+    """Vertices ``(V, 3)`` [cm] and faces ``(F, 3)`` of a closed, outward mesh file.
+
+    Raises:
+        ConfigError: naming ``where`` and what is wrong (never the file's content).
+
+    """
+    path = Path(path)
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise ConfigError(f"{where}: expected a {', '.join(MESH_SUFFIXES)} file, got {path.name!r}")
+    try:
+        if not path.is_file():
+            raise ConfigError(f"{where}: {path} is not a regular file")
+        size = path.stat().st_size
+    except OSError as exc:
+        raise ConfigError(f"{where}: cannot read {path}: {exc.strerror}") from None
+    if size > MAX_MESH_BYTES:
+        raise ConfigError(f"{where}: {path.name} is {size:,} bytes, more than {MAX_MESH_BYTES:,}")
+    trimesh = _trimesh()
+    try:
+        mesh = trimesh.load_mesh(str(path), process=False)
+    except Exception as exc:  # noqa: BLE001 - any parser failure is one line
+        raise ConfigError(
+            f"{where}: {path.name} is not a readable mesh ({type(exc).__name__})"
+        ) from None
+    if not hasattr(mesh, "faces") or len(mesh.faces) == 0:
+        raise ConfigError(f"{where}: {path.name} holds no triangles")
+    return check_mesh(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), where)
+
+
+def check_mesh(
+    verts: _Array, faces: NDArray[np.int64], where: str
+) -> tuple[_Array, NDArray[np.int64]]:
+    """The mesh with equal vertices merged, checked: finite, bounded, closed, outward."""
+    if len(faces) > MAX_TRIANGLES:
+        raise ConfigError(f"{where}: {len(faces):,} triangles, more than {MAX_TRIANGLES:,}")
+    if not np.all(np.isfinite(verts)):
+        raise ConfigError(f"{where}: a vertex is not a finite number (NaN or inf)")
+    if np.abs(verts).max(initial=0.0) > MAX_MESH_COORD:
+        raise ConfigError(f"{where}: a vertex lies beyond {MAX_MESH_COORD:g} cm of the origin")
+    if faces.min(initial=0) < 0 or faces.max(initial=0) >= len(verts):
+        raise ConfigError(f"{where}: a face names a vertex that does not exist")
+    # merge equal vertices (an STL repeats them per triangle)
+    unique, inverse = np.unique(np.round(verts, 6), axis=0, return_inverse=True)
+    faces = inverse.reshape(-1)[faces]
+    tri = unique[faces]
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    if np.any(area2 <= 1e-12):
+        bad = int(np.flatnonzero(area2 <= 1e-12)[0])
+        raise ConfigError(f"{where}: triangle {bad} is degenerate (zero area)")
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    forward = np.unique(edges, axis=0, return_counts=True)
+    backward = np.unique(edges[:, ::-1], axis=0, return_counts=True)
+    if len(forward[0]) != len(backward[0]) or not (
+        np.array_equal(forward[0], backward[0]) and np.array_equal(forward[1], backward[1])
+    ):
+        raise ConfigError(
+            f"{where}: the mesh is not watertight (an edge has no matching edge in the opposite "
+            "direction: a hole, or faces turned inconsistently)"
+        )
+    volume = float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6)
+    if volume <= 0:
+        raise ConfigError(f"{where}: the mesh's normals point inward (its volume is {volume:.4g})")
+    return unique, faces.astype(np.int64)
+
+
+@dataclass(frozen=True, eq=False)
+class MeshSolid(Shape):
+    """A solid bounded by a closed triangle mesh (one or more bodies) [cm]."""
+
+    vertices: _Array = field(repr=False)
+    faces: NDArray[np.int64] = field(repr=False)
+    name: str = ""
+    source: str = ""
+    #: Corners [cm] of a region the distance grid must cover too (the tank's box), or None.
+    extent: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    kind: ClassVar[str] = "mesh"
+
+    @property
+    def stack_key(self) -> int:
+        """Every mesh is its own group: its grid is not a parameter."""
+        return id(self)
+
+    def aabb(self) -> tuple[_Array, _Array]:
+        """Axis-aligned bounds ``(lo, hi)``."""
+        return self.vertices.min(axis=0), self.vertices.max(axis=0)
+
+    @cached_property
+    def grid(self) -> tuple[_Array, float, NDArray[np.float32]]:
+        """The signed-distance grid: corner [cm], spacing [cm] and values ``(nx, ny, nz)``."""
+        lo, hi = self.aabb()
+        pad = BAND + 2 * GRID_SPACING
+        lo, hi = lo - pad, hi + pad
+        if self.extent is not None:
+            lo = np.minimum(lo, np.array(self.extent[0]) - pad)
+            hi = np.maximum(hi, np.array(self.extent[1]) + pad)
+        g = GRID_SPACING
+        while math.prod(int(math.ceil((hi - lo)[d] / g)) + 1 for d in range(3)) > MAX_GRID_NODES:
+            g *= 1.25
+        shape = np.array([int(math.ceil((hi - lo)[d] / g)) + 1 for d in range(3)], np.int64)
+        near, nearest = mesh_kernels.band_distances(self.vertices, self.faces, lo, g, shape, BAND)
+        inside = mesh_kernels.column_winding(self.vertices, self.faces, lo, g, shape) > 0
+        ndimage = require("scipy.ndimage", "mesh")
+        # beyond the band: the distance to the mesh point nearest the nearest node within it
+        far = ~np.isfinite(near)
+        if far.any() and not far.all():
+            (i, j, k) = ndimage.distance_transform_edt(
+                far, return_distances=False, return_indices=True
+            )
+            del far
+            nodes = np.stack(np.meshgrid(*(np.arange(n) for n in shape), indexing="ij"), -1)
+            spots = nearest[i, j, k]
+            del i, j, k
+            gap = np.linalg.norm(lo + g * nodes - spots, axis=-1)
+            near = np.where(np.isfinite(near), near, gap).astype(np.float32)
+        values = np.where(inside, -near, near).astype(np.float32)
+        values.setflags(write=False)
+        return lo, g, values
+
+    @property
+    def distance_params(self) -> tuple[float, ...]:
+        """None: the grid is the solid's own (:attr:`grid`)."""
+        return ()
+
+    def distance_field(self, x: _Array, y: _Array, z: _Array, *params: Any) -> _Array:
+        """Signed distance [cm]: the grid read trilinearly; beyond it, the distance to the box."""
+        lo, g, values = self.grid
+        pts = np.stack(np.broadcast_arrays(x, y, z), axis=-1).astype(np.float64)
+        return trilinear(pts, lo, g, values, self.aabb())
+
+    def overlaps(self, lo: _Array, hi: _Array) -> NDArray[np.bool_]:
+        """Positive-volume overlap with cells ``[lo, hi]`` (a triangle cuts it, or it is inside)."""
+        inside = self.signed_distance((np.asarray(lo) + np.asarray(hi)) / 2) < 0
+        return inside | self._cut(lo, hi)
+
+    def _cut(self, lo: _Array, hi: _Array) -> NDArray[np.bool_]:
+        flat_lo = np.asarray(lo, float).reshape(-1, 3)
+        size = (
+            float((np.asarray(hi) - np.asarray(lo)).reshape(-1, 3)[0, 0]) if flat_lo.size else 1.0
+        )
+        origin = flat_lo.min(axis=0) if flat_lo.size else np.zeros(3)
+        shape = np.round((flat_lo.max(axis=0) - origin) / size).astype(np.int64) + 1
+        cut = mesh_kernels.cells_cut(self.vertices, self.faces, origin, size, shape)
+        index = np.round((flat_lo - origin) / size).astype(np.int64)
+        return cut[index[:, 0], index[:, 1], index[:, 2]].reshape(np.shape(lo)[:-1])
+
+    def contains(self, points: _Array) -> NDArray[np.bool_]:
+        """Whether points ``(..., 3)`` lie inside (the grid's sign)."""
+        return self.signed_distance(points) < 0
+
+    def to_json(self) -> dict[str, Any]:
+        """Scene-export form (the file it was read from, and its size)."""
+        return {"type": "mesh", "file": self.source, "triangles": len(self.faces)}
+
+    def fcl_objects(self) -> list[Any]:
+        """A python-fcl BVH model of the triangles (hollow: see :meth:`contains`)."""
+        model = fcl.BVHModel()
+        model.beginModel(len(self.vertices), len(self.faces))
+        model.addSubModel(self.vertices, self.faces)
+        model.endModel()
+        return [fcl.CollisionObject(model, fcl.Transform())]
+
+    def fcl_geometry(self) -> tuple[Any, Any]:
+        """The BVH model and the identity pose."""
+        return self.fcl_objects()[0].getCollisionGeometry(), fcl.Transform()
+
+    def mesh(self) -> Mesh:
+        """The mesh itself."""
+        return self.vertices, self.faces
+
+    def wireframe(self) -> list[_Array]:
+        """Its bounding box's edges (a picture of a large mesh draws the mesh, not lines)."""
+        from aftir_rl.core.tank.solids import Box
+
+        lo, hi = self.aabb()
+        return Box(tuple(lo), tuple(hi)).wireframe()  # type: ignore[arg-type]
+
+
+def trilinear(points: _Array, lo: _Array, g: float, values: NDArray[np.float32],
+              box: tuple[_Array, _Array]) -> _Array:  # fmt: skip
+    """Grid values at points ``(..., 3)`` read trilinearly; outside, the distance to ``box``.
+
+    The distance to ``box`` is a lower bound of the distance to anything in it.
+    """
+    shape = np.array(values.shape)
+    rel = (points - lo) / g
+    inside = np.all((rel >= 0) & (rel <= shape - 1), axis=-1)
+    base = np.clip(np.floor(rel).astype(np.int64), 0, shape - 2)
+    f = np.clip(rel - base, 0.0, 1.0)
+    out = np.zeros(points.shape[:-1])
+    for dx in (0, 1):
+        for dy in (0, 1):
+            for dz in (0, 1):
+                w = (f[..., 0] if dx else 1 - f[..., 0]) * (f[..., 1] if dy else 1 - f[..., 1])
+                w = w * (f[..., 2] if dz else 1 - f[..., 2])
+                out += w * values[base[..., 0] + dx, base[..., 1] + dy, base[..., 2] + dz]
+    outside = np.linalg.norm(np.maximum(np.maximum(box[0] - points, points - box[1]), 0), axis=-1)
+    return np.where(inside, out, outside)
+
+
+def tank_bodies(tank: Any) -> tuple[_Array, NDArray[np.int64]]:
+    """Every solid of a tank as closed outward bodies in one mesh ``(V, F)``."""
+    verts, faces, offset = [], [], 0
+    for solid in tank.solids:
+        v, f = solid.mesh()
+        bodies = solid.bodies() if solid.kind == "plate" else [(v, f)]
+        for bv, bf in bodies:
+            tri = bv[bf]
+            volume = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum()
+            verts.append(bv)
+            faces.append((bf if volume > 0 else bf[:, ::-1]) + offset)
+            offset += len(bv)
+    return np.vstack(verts), np.vstack(faces).astype(np.int64)
+
+
+def export_tank_mesh(tank: Any, output: str | Path, yaml_out: str | Path | None = None) -> int:
+    """Write a tank's solids as one mesh file (and a tank YAML that reads it); its triangles."""
+    trimesh = _trimesh()
+    output = Path(output)
+    if output.suffix.lower() not in MESH_SUFFIXES:
+        raise ConfigError(f"-o: expected a {', '.join(MESH_SUFFIXES)} file, got {output.name!r}")
+    verts, faces = tank_bodies(tank)
+    data = trimesh.Trimesh(verts, faces, process=False).export(file_type=output.suffix[1:].lower())
+    from aftir_rl.core.files import atomic_open
+
+    with atomic_open(output, "wb" if isinstance(data, bytes) else "w") as fh:
+        fh.write(data)
+    if yaml_out is not None:
+        _write_mesh_yaml(tank, output, Path(yaml_out))
+    return len(faces)
+
+
+def _write_mesh_yaml(tank: Any, mesh_file: Path, yaml_out: Path) -> None:
+    """A tank file with ``tank``'s box, panel, arm and targets, and the mesh as its solids."""
+    import os
+
+    import yaml
+
+    from aftir_rl.core.files import atomic_open
+
+    rel = os.path.relpath(mesh_file.resolve(), yaml_out.resolve().parent)
+    data = {
+        "name": f"{tank.name}_mesh",
+        "description": f"{tank.name} with its solids read from {mesh_file.name}",
+        "box": {"min": list(tank.box_min), "max": list(tank.box_max)},
+        "cell_size": tank.cell_size,
+        "panel": {"center": list(tank.panel.center), "radius": tank.panel.radius},
+        "start_point": list(tank.start_point),
+        "walls": tank.walls,
+        "obstacles": [{"type": "mesh", "name": "solids", "file": rel}],
+        "arm": {
+            "section_length": tank.arm.section_length,
+            "max_sections": tank.arm.max_sections,
+            "radius": tank.arm.radius,
+            "theta_max": tank.arm.theta_max,
+        },  # fmt: skip
+        "targets": [list(t) for t in tank.targets],
+    }
+    with atomic_open(yaml_out, "w") as fh:
+        yaml.safe_dump(data, fh, sort_keys=False, default_flow_style=None, width=100)

@@ -1,0 +1,74 @@
+"""A tank's solids and clearance grids packed into the arrays the compiled kernels read."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aftir_rl.core.tank import Tank
+from aftir_rl.envs.ftl.kernel import KernelTank
+
+__all__ = ["kernel_tank"]
+
+
+def kernel_tank(tank: Tank, grid: Any) -> KernelTank:
+    """The :class:`KernelTank` of a tank and its clearance grid.
+
+    ``grid`` is the tank's :class:`~aftir_rl.envs.ftl.fields.ClearanceGrid`.
+    """
+    groups: dict[str, list[tuple[float, ...]]] = {"box": [], "cylinder": [], "sphere": []}
+    plates: list[tuple[float, ...]] = []
+    holes: list[tuple[float, ...]] = []
+    meshes: list[tuple[float, ...]] = []
+    mesh_values: list[NDArray[np.float32]] = []
+    for solid in tank.solids:
+        if solid.kind == "mesh":
+            lo, g, values = solid.grid
+            start = sum(len(v) for v in mesh_values)
+            box = np.concatenate(solid.aabb())
+            meshes.append((*lo, g, *values.shape, start, *box))
+            mesh_values.append(values.ravel())
+            continue
+        params = tuple(float(v) for v in solid.distance_params)
+        if solid.kind == "plate":
+            n_holes = (len(params) - 7) // 5
+            plates.append((*params[:7], len(holes), len(holes) + n_holes))
+            holes.extend(params[i : i + 5] for i in range(7, len(params), 5))
+            continue
+        if solid.kind == "cylinder":
+            params += (float(solid.stack_key),)
+        groups[solid.kind].append(params)
+
+    def stack(rows: list[tuple[float, ...]], width: int) -> NDArray[np.float64]:
+        return np.array(rows, dtype=np.float64).reshape(-1, width)
+
+    lowest = min((float(s.aabb()[0][2]) for s in tank.solids), default=math.inf)
+    c, r = tank.panel.center, float(tank.panel.radius)
+    walls = np.array(
+        [float(tank.walls), *tank.box_min, *tank.box_max, c[0], c[1], r,
+         min(float(tank.box_min[2]), lowest) - r],
+        dtype=np.float64,
+    )  # fmt: skip
+    offsets, total = [], 0
+    for _, _, _, values in grid.grids:
+        offsets.append(total)
+        total += len(values)
+    return KernelTank(
+        stack(groups["box"], 6),
+        stack(groups["cylinder"], 6),
+        stack(groups["sphere"], 4),
+        stack(plates, 9),
+        stack(holes, 5),
+        stack(meshes, 14),
+        np.concatenate(mesh_values) if mesh_values else np.zeros(0, np.float32),
+        walls,
+        np.array([lo for lo, _, _, _ in grid.grids], dtype=np.float64).reshape(-1, 3),
+        np.array([g for _, g, _, _ in grid.grids], dtype=np.float64),
+        np.array([shape for _, _, shape, _ in grid.grids], dtype=np.int64).reshape(-1, 3),
+        np.array(offsets, dtype=np.int64),
+        np.concatenate([values for _, _, _, values in grid.grids]).astype(np.float64),
+        float(grid.slack),
+    )

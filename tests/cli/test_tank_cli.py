@@ -1,0 +1,49 @@
+"""``aftir tank show | generate | export`` and ``--tank`` with a generated tank."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+
+from aftir_rl.cli.tank import main
+from aftir_rl.core.tank import load_tank
+
+
+def test_generate_writes_a_tank_that_reads_back(tmp_path, capsys):
+    out = tmp_path / "wing.yaml"
+    assert main(["generate", "--kind", "wing", "--bays", "3", "--seed", "7", "-o", str(out)]) == 0
+    tank = load_tank(out)
+    assert len(tank.baffles) == 2 and tank.scene_dict() == load_tank("wing:3:7").scene_dict()
+    assert yaml.safe_load(out.read_text())["name"] == "wing_3bay_s7"
+
+
+def test_show_takes_a_generator_spec_and_the_old_form(capsys):
+    assert main(["show", "--tank", "wing:2:1"]) == 0
+    assert "H hole in a baffle" in capsys.readouterr().out
+    assert main(["--tank", "b737_center", "--json"]) == 0
+    assert '"solids"' in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["generate", "--bays", "0", "-o", "x.yaml"], "--bays must be from 1 to 8"),
+        (["show", "--tank", "wing:0:1"], "unknown tank 'wing:0:1'"),
+        (["export", "b737_center", "-o", "tank.txt"], "expected a .stl, .obj, .ply file"),
+    ],
+)
+def test_refusals_are_one_line(tmp_path, monkeypatch, capsys, argv, message):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_export_writes_a_mesh_and_a_tank_that_reads_it(tmp_path, capsys):
+    pytest.importorskip("trimesh")
+    assert main(["export", "wing:2:4", "-o", str(tmp_path / "w.obj"), "--yaml",
+                 str(tmp_path / "w.yaml")]) == 0  # fmt: skip
+    meshed, tank = load_tank(tmp_path / "w.yaml"), load_tank("wing:2:4")
+    assert (meshed.raster.obstructed == tank.raster.obstructed).all()
+    assert "triangles" in capsys.readouterr().out
