@@ -15,6 +15,8 @@ from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 
+import numpy as np
+
 from aftir_rl.cli.args import (
     OneLineParser,
     add_int_option,
@@ -86,6 +88,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="an SB3 run directory (python -m aftir_rl.train ppo|sac|td3)",
     )
     parser.add_argument("--json", metavar="PATH", help="also write every outcome as JSON")
+    parser.add_argument(
+        "--suite",
+        metavar="DIR",
+        help="instead: the scene suite (8 tanks, fixed targets, the follow-the-leader planner); "
+        "writes suite.json, suite.csv and suite.db (OMPL's benchmark database) in DIR",
+    )
+    add_int_option(
+        parser, "--suite-targets", (1, 100), "targets per scene of --suite, 1 to 100 (100)", 100
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     add_margin_option(
         parser, f"clearance the q_table+ftl motions keep (default {DEFAULT_MARGIN:g} cm)"
@@ -136,6 +147,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
+    if args.suite:
+        return _run_suite(args)
     start = time.perf_counter()
     try:
         rows = _run_benchmark(args)
@@ -156,6 +169,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         write_json(
             args.json, {"machine": facts, "seconds": seconds, "options": options, "rows": rows_out}
         )
+    return 0
+
+
+def _run_suite(args: argparse.Namespace) -> int:
+    """``--suite DIR``: every scene's targets planned; a table of each scene's outcomes."""
+    from aftir_rl.experiments.suite import run_suite
+
+    progress = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
+    try:
+        rows = run_suite(args.suite, args.suite_targets, progress=progress)
+    except AftirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print("scene | targets | complete | median s | max s | failures (reason)")
+    for scene in dict.fromkeys(r.scene for r in rows):
+        mine = [r for r in rows if r.scene == scene]
+        times = [r.seconds for r in mine]
+        fails = "; ".join(f"{list(r.target)}: {r.reason}" for r in mine if not r.complete)
+        print(f"{scene} | {len(mine)} | {sum(r.complete for r in mine)} | "
+              f"{np.median(times):.2f} | {max(times):.2f} | {fails or '-'}")  # fmt: skip
+    print(f"wrote {args.suite}/suite.json, suite.csv, suite.db")
     return 0
 
 

@@ -38,6 +38,7 @@ class WingRanges:
     access_width: tuple[float, float] = (36.0, 50.0)
     access_height: tuple[float, float] = (32.0, 44.0)
     access_offset: float = 12.0
+    access_shapes: tuple[str, ...] = ("oval", "rect")
     lightening_diameter: tuple[float, float] = (14.0, 26.0)
     lightening_holes: tuple[int, int] = (0, 3)
     stringers: tuple[int, int] = (1, 3)
@@ -58,7 +59,7 @@ def _ribs(rng: np.random.Generator, r: WingRanges, xs: list[float], chord: float
         w, h = rng.uniform(*r.access_width), rng.uniform(*r.access_height)
         cy = rng.uniform(-r.access_offset, r.access_offset)
         cz = rng.uniform(depth / 2 - 6.0, depth / 2 + 6.0)
-        shape = "oval" if rng.random() < 0.5 else "rect"
+        shape = r.access_shapes[int(rng.random() * len(r.access_shapes))]
         holes: list[dict[str, Any]] = [
             {"shape": shape, "center": [x, round(cy, 2), round(cz, 2)],
              "width": round(w, 2), "height": round(h, 2)}
