@@ -4,9 +4,9 @@
 it as the mapping a tank YAML holds (:func:`~aftir_rl.core.tank.loading.tank_from_mapping` reads
 it; ``aftir tank generate`` writes it). The span runs along x, the chord along y; the access
 panel is in the floor of bay 1. Every rib has one access hole (oval or rectangular) on a chain
-near the middle of the chord, and lightening holes (circles) beside it; stringers run along the
-span on the floor and the ceiling, a pipe under the ceiling. The same seed gives the same tank.
-Ranges and how reachability is kept: docs/tanks.md.
+near the middle of the chord, and lightening holes (circles) beside it; the box tapers in depth
+and chord toward the tip; stringers run along the span on the floor, a pipe under the ceiling.
+The same seed gives the same tank. Ranges and how reachability is kept: docs/tanks.md.
 """
 
 from __future__ import annotations
@@ -43,6 +43,9 @@ class WingRanges:
     lightening_holes: tuple[int, int] = (0, 3)
     stringers: tuple[int, int] = (1, 3)
     pipe_radius: tuple[float, float] = (3.0, 5.0)
+    #: the tip's depth and chord as fractions of the root's (the box tapers linearly along x)
+    taper_depth: tuple[float, float] = (0.8, 1.0)
+    taper_chord: tuple[float, float] = (0.85, 1.0)
     cell_size: float = 10.0
     panel_radius: float = 12.0
 
@@ -51,12 +54,15 @@ def _round_to(value: float, step: float) -> float:
     return float(max(step, round(value / step) * step))
 
 
-def _ribs(rng: np.random.Generator, r: WingRanges, xs: list[float], chord: float, depth: float):
-    """The ribs at ``xs``: an access hole near the chord's middle, lightening holes beside."""
+def _ribs(rng: np.random.Generator, r: WingRanges, xs: list[float], section: Any):
+    """The ribs at ``xs``: an access hole near the chord's middle, lightening holes beside.
+
+    ``section(x)`` is the half chord and the depth at ``x`` (the box tapers).
+    """
     ribs = []
-    half_chord = chord / 2
     for i, x in enumerate(xs):
-        w, h = rng.uniform(*r.access_width), rng.uniform(*r.access_height)
+        half_chord, depth = section(x)
+        w, h = rng.uniform(*r.access_width), min(rng.uniform(*r.access_height), depth - 24.0)
         cy = rng.uniform(-r.access_offset, r.access_offset)
         cz = rng.uniform(depth / 2 - 6.0, depth / 2 + 6.0)
         shape = r.access_shapes[int(rng.random() * len(r.access_shapes))]
@@ -81,17 +87,20 @@ def _ribs(rng: np.random.Generator, r: WingRanges, xs: list[float], chord: float
     return ribs
 
 
-def _obstacles(rng: np.random.Generator, r: WingRanges, lo, hi, ribs) -> list[dict[str, Any]]:
-    """Stringers on floor and ceiling away from the panel and the access holes; one pipe."""
-    chord, depth = hi[1] - lo[1], hi[2]
+def _obstacles(rng: np.random.Generator, r: WingRanges, lo, hi, ribs, tip) -> list[dict[str, Any]]:
+    """Stringers on the floor away from the panel; a pipe under the tip's ceiling.
+
+    ``tip`` is the half chord and depth at the tip: both run straight along the span inside it.
+    """
+    half_chord, depth = tip
     out: list[dict[str, Any]] = []
     access = [(h["center"][1] - h["width"] / 2, h["center"][1] + h["width"] / 2)
               for rib in ribs for h in rib["holes"][:1]]  # fmt: skip
     low, high = min(a for a, _ in access) - 6, max(b for _, b in access) + 6
-    for where, z0, z1 in (("floor", 0.0, 5.0), ("ceiling", depth - 5.0, depth)):
+    for where, z0, z1 in (("floor", 0.0, 5.0),):
         for j in range(int(rng.integers(r.stringers[0], r.stringers[1] + 1))):
-            y = rng.uniform(lo[1] + 8, hi[1] - 8)
-            if abs(y) < r.panel_radius + 10 or (where == "ceiling" and low < y < high):
+            y = rng.uniform(-half_chord + 8, half_chord - 8)
+            if abs(y) < r.panel_radius + 10:
                 continue
             y0, y1 = round(y - 1.5, 2), round(y + 1.5, 2)
             out.append(
@@ -100,7 +109,7 @@ def _obstacles(rng: np.random.Generator, r: WingRanges, lo, hi, ribs) -> list[di
             )  # fmt: skip
     radius = rng.uniform(*r.pipe_radius)
     side = 1.0 if rng.random() < 0.5 else -1.0
-    y = side * rng.uniform(max(abs(low), abs(high)) + radius + 4, chord / 2 - radius - 6)
+    y = side * rng.uniform(max(abs(low), abs(high)) + radius + 4, half_chord - radius - 6)
     z = depth - radius - 8
     out.append({"name": "fuel_pipe", "type": "cylinder", "p0": [lo[0], round(y, 2), round(z, 2)],
                 "p1": [hi[0], round(y, 2), round(z, 2)], "radius": round(radius, 2)})  # fmt: skip
@@ -127,11 +136,17 @@ def wing_tank(bays: int, seed: int, ranges: WingRanges | None = None) -> dict[st
     hi = [x0 + sum(lengths), chord / 2, depth]
     # ribs in the middle of a cell: one column of cells each on the raster, not two
     xs = [x0 + float(np.sum(lengths[: i + 1])) + step / 2 for i in range(bays - 1)]
-    ribs = _ribs(rng, r, xs, chord, depth)
-    obstacles = _obstacles(rng, r, lo, hi, ribs)
-    targets = [[round((a + b) / 2, 2), 0.0, round(depth / 2, 2)]
-               for a, b in zip([lo[0], *xs], [*xs, hi[0]])]  # fmt: skip
-    targets[0] = [round(lo[0] + 15.0, 2), 0.0, round(depth / 2, 2)]
+    tip_chord = round(chord / 2 * rng.uniform(*r.taper_chord), 2)
+    tip_depth = round(depth * rng.uniform(*r.taper_depth), 2)
+
+    def section(x: float) -> tuple[float, float]:
+        t = (x - lo[0]) / (hi[0] - lo[0])
+        return chord / 2 + t * (tip_chord - chord / 2), depth + t * (tip_depth - depth)
+
+    ribs = _ribs(rng, r, xs, section)
+    obstacles = _obstacles(rng, r, lo, hi, ribs, (tip_chord, tip_depth))
+    middles = [lo[0] + 15.0] + [(a + b) / 2 for a, b in zip(xs, [*xs[1:], hi[0]])]
+    targets = [[round(x, 2), 0.0, round(section(x)[1] / 2, 2)] for x in middles]
     return {
         "name": f"wing_{bays}bay_s{seed}",
         "description": f"Generated wing tank: {bays} bays, seed {seed} (aftir tank generate)",
@@ -140,6 +155,7 @@ def wing_tank(bays: int, seed: int, ranges: WingRanges | None = None) -> dict[st
         "panel": {"center": [0.0, 0.0, 0.0], "radius": r.panel_radius},
         "start_point": [0.0, 0.0, 10.0],
         "baffles": ribs,
+        "taper": {"along": "x", "end": {"min": [-tip_chord, 0.0], "max": [tip_chord, tip_depth]}},
         "obstacles": obstacles,
         "arm": {"section_length": 50, "max_sections": 12, "radius": 2.5, "theta_max": 1.5708},
         "targets": targets,

@@ -138,6 +138,7 @@ class Tank:
         baffle: the wall between two bays, if any.
         hatch: the opening in the baffle, if any.
         baffles: more baffles (ribs), each a plate with any holes.
+        taper: wedges along the walls where the section shrinks along the box.
         obstacles: solid obstacles (not the baffle).
         arm: the arm used in this tank.
         targets: reference targets [cm].
@@ -156,6 +157,7 @@ class Tank:
     baffle: Baffle | None = None
     hatch: Hatch | None = None
     baffles: tuple[Plate, ...] = ()
+    taper: tuple[Solid, ...] = ()
     obstacles: tuple[Solid, ...] = ()
     arm: ArmSpec = ArmSpec()
     targets: tuple[Vec3, ...] = ()
@@ -214,8 +216,8 @@ class Tank:
 
     @property
     def solids(self) -> tuple[Solid, ...]:
-        """Every solid inside the box: baffle pieces, baffles with holes, then obstacles."""
-        return self.baffle_solids + self.baffles + self.obstacles
+        """Every solid inside the box: baffle pieces, baffles with holes, taper, obstacles."""
+        return self.baffle_solids + self.baffles + self.taper + self.obstacles
 
     @cached_property
     def dividers(self) -> tuple[tuple[int, float, float], ...]:

@@ -40,6 +40,7 @@ from aftir_rl.core.tank.parts import (
     parse_baffle,
     parse_baffles,
     parse_obstacles,
+    parse_taper,
     positive,
     require,
     section,
@@ -69,6 +70,7 @@ _TOP_KEYS = {
     "baffle",
     "hatch",
     "baffles",
+    "taper",
     "obstacles",
     "arm",
     "targets",
@@ -115,6 +117,7 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
     elif data.get("hatch") is not None:
         raise ConfigError(f"{src}: hatch: a hatch needs a baffle")
     kwargs["baffles"] = parse_baffles(data, lo, hi, src)
+    kwargs["taper"] = parse_taper(data, lo, hi, src)
     if "arm" in data:
         kwargs["arm"] = _parse_arm(data, src)
     kwargs["targets"] = _parse_targets(data, src)

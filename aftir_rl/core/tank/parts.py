@@ -36,6 +36,7 @@ __all__ = [
     "parse_obstacles",
     "parse_baffle",
     "parse_baffles",
+    "parse_taper",
 ]
 
 #: Largest magnitude of any coordinate or size in a tank file [cm] (100 m): beyond, python-fcl
@@ -294,3 +295,30 @@ def _parse_mesh(
     path = (base or Path(".")) / file
     verts, faces = read_mesh(path, f"{where}: file")
     return MeshSolid(verts, faces, name, file, extent)
+
+
+def parse_taper(data: Mapping[str, Any], lo: Vec3, hi: Vec3, src: str) -> tuple[Solid, ...]:
+    """The ``taper``: the section at the box's far end along ``along``, as wedges."""
+    from aftir_rl.core.tank.wedge import taper_wedges
+
+    if data.get("taper") is None:
+        return ()
+    raw = section(data, "taper", {"along", "end"}, src)
+    require(raw, ["along", "end"], f"{src}: taper")
+    if raw["along"] not in ("x", "y"):
+        raise ConfigError(f"{src}: taper.along: expected 'x' or 'y', got {brief(raw['along'])}")
+    k = "xy".index(raw["along"])
+    end = section(raw, "end", {"min", "max"}, f"{src}: taper")
+    require(end, ["min", "max"], f"{src}: taper.end")
+    others = [i for i in range(3) if i != k]
+    e_lo, e_hi = (
+        np.array(to_vector(end[key], f"{src}: taper.end.{key}", size=2, limit=MAX_COORD))
+        for key in ("min", "max")
+    )
+    box_lo, box_hi = np.array(lo)[others], np.array(hi)[others]
+    if np.any(e_lo < box_lo - 1e-9) or np.any(e_hi > box_hi + 1e-9) or np.any(e_hi <= e_lo):
+        raise ConfigError(
+            f"{src}: taper.end: the far end's section {format_point(e_lo)}..{format_point(e_hi)} "
+            f"must be non-empty and inside the box's {format_point(box_lo)}..{format_point(box_hi)}"
+        )
+    return tuple(taper_wedges(np.array(lo), np.array(hi), k, e_lo, e_hi))

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.tank.solids import Mesh, Shape
 
-__all__ = ["Hole", "Plate", "HOLE_SHAPES", "plane_axes", "hole_distance_2d"]
+__all__ = ["Hole", "Plate", "HOLE_SHAPES", "plane_axes", "hole_distance_2d", "lift", "extrude"]
 
 _Array = NDArray[np.float64]
 #: The hole shapes, by their code in :attr:`Plate.distance_params` and the compiled kernels.
@@ -50,6 +50,30 @@ def hole_distance_2d(shape: Any, da: _Array, db: _Array, ha: Any, hb: Any) -> _A
     along_b = np.hypot(da, np.maximum(np.abs(db) - (hb - r), 0.0))
     oval = np.where(ha >= hb, along_a, along_b) - r
     return np.where(shape == 0, rect, np.where(shape == 1, circle, oval))
+
+
+def lift(flat: _Array, axis: int, n: float) -> _Array:
+    """Plane points ``(V, 2)`` (:func:`plane_axes`) at ``n`` along ``axis``, as ``(V, 3)``."""
+    out = np.empty((len(flat), 3))
+    a, b = plane_axes(axis)
+    out[:, a], out[:, b], out[:, axis] = flat[:, 0], flat[:, 1], n
+    return out
+
+
+def extrude(flat: _Array, axis: int, n0: float, n1: float) -> tuple[_Array, _Array]:
+    """The prism over a convex polygon ``(V, 2)`` from ``n0`` to ``n1`` along ``axis``.
+
+    Its vertices and triangles, closed (orientation as the polygon's; :func:`tank_bodies
+    <aftir_rl.core.tank.meshes.tank_bodies>` turns bodies outward).
+    """
+    v = len(flat)
+    verts = np.vstack([lift(flat, axis, n0), lift(flat, axis, n1)])
+    faces = [[0, i + 1, i] for i in range(1, v - 1)]
+    faces += [[v, v + i, v + i + 1] for i in range(1, v - 1)]
+    for i in range(v):
+        j = (i + 1) % v
+        faces += [[i, j, v + j], [i, v + j, v + i]]
+    return verts, np.array(faces)
 
 
 @dataclass(frozen=True)
@@ -223,25 +247,10 @@ class Plate(Shape):
             out.extend(h.corner_fans()[0])
         return out
 
-    def _lift(self, flat: _Array, n: float) -> _Array:
-        """Plane points ``(V, 2)`` at coordinate ``n`` along the axis, as ``(V, 3)``."""
-        out = np.empty((len(flat), 3))
-        a, b = plane_axes(self.axis)
-        out[:, a], out[:, b], out[:, self.axis] = flat[:, 0], flat[:, 1], n
-        return out
-
     def _prism(self, flat: _Array) -> tuple[_Array, _Array]:
-        """The convex prism over a polygon ``(V, 2)``: vertices and faces (triangles)."""
-        t, v = self.thickness / 2, len(flat)
-        verts = np.vstack(
-            [self._lift(flat, self.position - t), self._lift(flat, self.position + t)]
-        )
-        faces = [[0, i + 1, i] for i in range(1, v - 1)]
-        faces += [[v, v + i, v + i + 1] for i in range(1, v - 1)]
-        for i in range(v):
-            j = (i + 1) % v
-            faces += [[i, j, v + j], [i, v + j, v + i]]
-        return verts, np.array(faces)
+        """The convex prism over a polygon ``(V, 2)`` through the plate."""
+        t = self.thickness / 2
+        return extrude(flat, self.axis, self.position - t, self.position + t)
 
     def bodies(self) -> list[tuple[_Array, _Array]]:
         """Every piece's prism as a closed mesh ``(vertices, faces)``."""
@@ -274,5 +283,5 @@ class Plate(Shape):
         for outline in [rect, *(h.polygon() for h in self.holes)]:
             closed = np.vstack([outline, outline[:1]])
             for side in (-1, 1):
-                out.append(self._lift(closed, self.position + side * self.thickness / 2))
+                out.append(lift(closed, self.axis, self.position + side * self.thickness / 2))
         return out

@@ -14,33 +14,39 @@ from aftir_rl.envs.ftl.kernel import KernelTank
 __all__ = ["kernel_tank"]
 
 
-def kernel_tank(tank: Tank, grid: Any) -> KernelTank:
-    """The :class:`KernelTank` of a tank and its clearance grid.
-
-    ``grid`` is the tank's :class:`~aftir_rl.envs.ftl.fields.ClearanceGrid`.
-    """
-    groups: dict[str, list[tuple[float, ...]]] = {"box": [], "cylinder": [], "sphere": []}
-    plates: list[tuple[float, ...]] = []
-    holes: list[tuple[float, ...]] = []
-    meshes: list[tuple[float, ...]] = []
+def _solid_rows(tank: Tank) -> tuple[dict[str, list[tuple[float, ...]]], NDArray[np.float32]]:
+    """Each kind's rows of parameters (plates' holes as rows of their own), and mesh grids."""
+    rows: dict[str, list[tuple[float, ...]]] = {
+        k: [] for k in ("box", "cylinder", "sphere", "plate", "hole", "wedge", "mesh")
+    }
     mesh_values: list[NDArray[np.float32]] = []
     for solid in tank.solids:
         if solid.kind == "mesh":
             lo, g, values = solid.grid
             start = sum(len(v) for v in mesh_values)
-            box = np.concatenate(solid.aabb())
-            meshes.append((*lo, g, *values.shape, start, *box))
+            rows["mesh"].append((*lo, g, *values.shape, start, *np.concatenate(solid.aabb())))
             mesh_values.append(values.ravel())
             continue
         params = tuple(float(v) for v in solid.distance_params)
         if solid.kind == "plate":
+            holes = rows["hole"]
             n_holes = (len(params) - 7) // 5
-            plates.append((*params[:7], len(holes), len(holes) + n_holes))
+            rows["plate"].append((*params[:7], len(holes), len(holes) + n_holes))
             holes.extend(params[i : i + 5] for i in range(7, len(params), 5))
             continue
         if solid.kind == "cylinder":
             params += (float(solid.stack_key),)
-        groups[solid.kind].append(params)
+        rows[solid.kind].append(params)
+    values = np.concatenate(mesh_values) if mesh_values else np.zeros(0, np.float32)
+    return rows, values
+
+
+def kernel_tank(tank: Tank, grid: Any) -> KernelTank:
+    """The :class:`KernelTank` of a tank and its clearance grid.
+
+    ``grid`` is the tank's :class:`~aftir_rl.envs.ftl.fields.ClearanceGrid`.
+    """
+    rows, mesh_values = _solid_rows(tank)
 
     def stack(rows: list[tuple[float, ...]], width: int) -> NDArray[np.float64]:
         return np.array(rows, dtype=np.float64).reshape(-1, width)
@@ -57,13 +63,14 @@ def kernel_tank(tank: Tank, grid: Any) -> KernelTank:
         offsets.append(total)
         total += len(values)
     return KernelTank(
-        stack(groups["box"], 6),
-        stack(groups["cylinder"], 6),
-        stack(groups["sphere"], 4),
-        stack(plates, 9),
-        stack(holes, 5),
-        stack(meshes, 14),
-        np.concatenate(mesh_values) if mesh_values else np.zeros(0, np.float32),
+        stack(rows["box"], 6),
+        stack(rows["cylinder"], 6),
+        stack(rows["sphere"], 4),
+        stack(rows["plate"], 9),
+        stack(rows["hole"], 5),
+        stack(rows["wedge"], 9),
+        stack(rows["mesh"], 14),
+        mesh_values,
         walls,
         np.array([lo for lo, _, _, _ in grid.grids], dtype=np.float64).reshape(-1, 3),
         np.array([g for _, g, _, _ in grid.grids], dtype=np.float64),

@@ -11,7 +11,6 @@ Compiled on first use and cached beside the files (``cache=True``). See docs/env
 from aftir_rl.envs.ftl.kernel.geometry import (
     KernelArms,
     KernelTank,
-    advance,
     fk_points,
     refresh,
     sdf,
@@ -28,6 +27,7 @@ from aftir_rl.envs.ftl.kernel.observation import (
     guide_columns,
     observation,
 )
+from aftir_rl.envs.ftl.kernel.step import advance
 
 __all__ = [
     "CONTACT_PENALTY",

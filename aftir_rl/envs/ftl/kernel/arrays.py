@@ -36,6 +36,7 @@ class KernelTank(NamedTuple):
     across, radius, middle and half-length along, and the axis (0, 1, 2); ``spheres (S, 4)``;
     ``plates (P, 9)``: axis, position, half thickness, the rectangle's corners in the plane and
     the range of the plate's rows of ``holes (H, 5)`` (shape code, centre, half-sizes);
+    ``wedges (W, 9)``: axis, middle, half length and the triangle's corners;
     ``meshes (M, 14)``: a mesh solid's grid corner, spacing, shape, offset into ``mesh_values``
     and its box's corners;
     ``walls (11,)``: whether the tank has walls, its box's corners, the panel's centre (x, y)
@@ -50,6 +51,7 @@ class KernelTank(NamedTuple):
     spheres: NDArray[np.float64]
     plates: NDArray[np.float64]
     holes: NDArray[np.float64]
+    wedges: NDArray[np.float64]
     meshes: NDArray[np.float64]
     mesh_values: NDArray[np.float32]
     walls: NDArray[np.float64]

@@ -22,10 +22,10 @@ __all__ = [
     "fk_row",
     "fk_points",
     "steering_frames",
-    "advance",
     "KernelTank",
     "hole_2d",
     "plate_sdf",
+    "wedge_sdf",
     "mesh_sdf",
     "sdf",
     "grid_value",
@@ -129,53 +129,6 @@ def steering_frames(
 
 
 @njit(cache=True)
-def advance(
-    action: NDArray[np.float64],
-    kappa: NDArray[np.float64],
-    k: NDArray[np.int64],
-    s: NDArray[np.float64],
-    steer_target: bool,
-    kappa_step: float,
-    push_step: float,
-    theta_max: float,
-    section_length: float,
-) -> None:
-    """Steer and push every arm by its action ``(B, 3)`` in ``[-1, 1]``, in place.
-
-    The steered ``κ`` (the route's last) changes by ``action[:2]·kappa_step`` or, with
-    ``steer_target``, approaches ``action[:2]·θ_max`` by at most ``kappa_step`` per component,
-    its norm kept within ``θ_max``; the tip's arc length ``s`` changes by
-    ``action[2]·push_step`` within ``[0, N·l]``. A tip that enters a new section starts it with
-    the steered ``κ`` (``push_step ≤ l``: at most one per step).
-    """
-    n = kappa.shape[1]
-    s_max = n * section_length
-    for b in range(kappa.shape[0]):
-        kb = k[b]
-        l0, l1 = kappa[b, kb, 0], kappa[b, kb, 1]
-        if steer_target:
-            w0, w1 = action[b, 0] * theta_max, action[b, 1] * theta_max
-            norm = math.hypot(w0, w1)
-            if norm > theta_max:
-                scale = theta_max / max(norm, 1e-12)
-                w0, w1 = w0 * scale, w1 * scale
-            q0 = l0 + min(max(w0 - l0, -kappa_step), kappa_step)
-            q1 = l1 + min(max(w1 - l1, -kappa_step), kappa_step)
-        else:
-            q0, q1 = l0 + action[b, 0] * kappa_step, l1 + action[b, 1] * kappa_step
-            norm = math.hypot(q0, q1)
-            if norm > theta_max:
-                scale = theta_max / max(norm, 1e-12)
-                q0, q1 = q0 * scale, q1 * scale
-        kappa[b, kb, 0], kappa[b, kb, 1] = q0, q1
-        s[b] = min(max(s[b] + action[b, 2] * push_step, 0.0), s_max)
-        new_k = min(int(math.floor(s[b] / section_length)), n - 1)
-        if new_k > kb:
-            kappa[b, new_k, 0], kappa[b, new_k, 1] = q0, q1
-        k[b] = new_k
-
-
-@njit(cache=True)
 def hole_2d(shape: float, da: float, db: float, ha: float, hb: float) -> float:
     """2D signed distance to a rect (0), circle (1) or oval (2) hole, compiled."""
     if shape == 0.0:
@@ -205,6 +158,32 @@ def plate_sdf(
         flat = max(flat, -hole_2d(hole[0], a - hole[1], b - hole[2], hole[3], hole[4]))
     w = abs(n - plate[1]) - plate[2]
     return math.hypot(max(flat, 0.0), max(w, 0.0)) + min(max(flat, w), 0.0)
+
+
+@njit(cache=True)
+def wedge_sdf(x: float, y: float, z: float, w: NDArray[np.float64]) -> float:
+    """Signed distance to one wedge ``(9,)`` (:class:`~aftir_rl.core.tank.wedge.Wedge`'s)."""
+    k = int(w[0])
+    n = x if k == 0 else (y if k == 1 else z)
+    a = y if k == 0 else x
+    b = y if k == 2 else z
+    orient = (w[5] - w[3]) * (w[8] - w[4]) - (w[7] - w[3]) * (w[6] - w[4])
+    best, inside = math.inf, True
+    for i in range(3):
+        j = (i + 1) % 3
+        pa, pb, ea, eb = (
+            w[3 + 2 * i],
+            w[4 + 2 * i],
+            w[3 + 2 * j] - w[3 + 2 * i],
+            w[4 + 2 * j] - w[4 + 2 * i],
+        )
+        wa, wb = a - pa, b - pb
+        t = min(max((wa * ea + wb * eb) / max(ea * ea + eb * eb, 1e-300), 0.0), 1.0)
+        best = min(best, math.hypot(wa - t * ea, wb - t * eb))
+        inside = inside and (ea * wb - eb * wa) * orient >= 0
+    flat = -best if inside else best
+    h = abs(n - w[1]) - w[2]
+    return math.hypot(max(flat, 0.0), max(h, 0.0)) + min(max(flat, h), 0.0)
 
 
 @njit(cache=True)
@@ -266,6 +245,8 @@ def sdf(x: float, y: float, z: float, tank: KernelTank) -> float:
             best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3])
         for i in range(tank.plates.shape[0]):
             best = min(best, plate_sdf(x, y, z, tank.plates[i], tank.holes))
+        for i in range(tank.wedges.shape[0]):
+            best = min(best, wedge_sdf(x, y, z, tank.wedges[i]))
         for i in range(tank.meshes.shape[0]):
             best = min(best, mesh_sdf(x, y, z, tank.meshes[i], tank.mesh_values))
     if walls[0] != 0.0:
