@@ -2,13 +2,12 @@
 
 :func:`tank_traces` draws the box outline, the access panel and the solids from their own
 :meth:`~aftir_rl.core.tank.solids.Box.mesh` and :meth:`~aftir_rl.core.tank.solids.Box.wireframe`,
-grouped
-in the legend (baffle pieces, boxes, pipes, spheres). :func:`build_figure` adds, per run, the
-cell path, the target, the tip route and the arm, the arm animated over at most ``max_frames``
-frames (evenly spaced, the first and the last posture always among them, and the waypoints'
-postures where they fit); with several motions, frame ``k`` shows each arm at the same fraction
-of its own motion. The axes span the tank's box and 30 % of its height below the floor; the arm
-still inside the guide further down is clipped.
+grouped in the legend (baffles, boxes, pipes, spheres, taper, meshes). :func:`build_figure` adds,
+per run, the cell path, the target, the tip route and the arm, the arm animated over at most
+``max_frames`` frames (evenly spaced, the first and the last posture always among them, and the
+waypoints' postures where they fit); with several motions, frame ``k`` shows each arm at the same
+fraction of its own motion. The axes span the tank's box and 30 % of its height below the floor;
+the arm still inside the guide further down is clipped.
 """
 
 from __future__ import annotations
@@ -38,6 +37,8 @@ _SOLID_GROUPS = {
     "box": ("boxes (stringers)", "#8c564b", 0.6),
     "cylinder": ("pipes", "#7f7f7f", 0.6),
     "sphere": ("spheres", "#e45756", 0.5),
+    "wedge": ("taper", "#9fb4c7", 0.3),
+    "mesh": ("meshes", "#6b8e23", 0.5),
 }
 
 

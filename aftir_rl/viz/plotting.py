@@ -35,6 +35,8 @@ _SOLID_STYLE: dict[str, dict[str, Any]] = {
     "cylinder": {"color": "tab:gray", "lw": 0.8},
     "sphere": {"color": "tab:red", "lw": 0.5},
     "plate": {"color": "tab:olive", "lw": 0.8},
+    "wedge": {"color": "tab:blue", "lw": 0.5},
+    "mesh": {"color": "tab:green", "lw": 0.8},
 }
 
 

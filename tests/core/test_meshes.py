@@ -133,3 +133,21 @@ def test_overlapping_bodies_read_as_their_union(tmp_path):
     pts = np.array([[7.0, 7.0, 7.0], [2.0, 2.0, 2.0], [12.0, 12.0, 12.0], [12.0, 2.0, 2.0]])
     assert solid.contains(pts).tolist() == [True, True, True, False]
     assert solid.signed_distance(pts[3]) == pytest.approx(2.0, abs=1e-6)
+
+
+def test_a_run_keeps_its_mesh_tank_and_refuses_paths_out(tmp_path):
+    from aftir_rl.core.tank.loading import keep_run_tank, resolve_run_tank
+
+    source, run = tmp_path / "src", tmp_path / "run"
+    source.mkdir()
+    run.mkdir()
+    export_tank_mesh(load_tank("wing:2:2"), source / "w.stl", source / "w.yaml")
+    assert keep_run_tank(source / "w.yaml", run) == "tank.yaml"
+    (source / "w.stl").unlink()  # the run does not need the original any more
+    kept = load_tank(resolve_run_tank("tank.yaml", run))
+    assert kept.obstacles[0].kind == "mesh" and (run / "tank_mesh_0.stl").is_file()
+    text = (run / "tank.yaml").read_text()
+    for escape in ("../src/w.stl", str(tmp_path / "src" / "w.stl")):
+        (run / "tank.yaml").write_text(text.replace("tank_mesh_0.stl", escape))
+        with pytest.raises(ConfigError, match="leads out of the tank file's folder"):
+            load_tank(resolve_run_tank("tank.yaml", run))

@@ -10,11 +10,13 @@ from __future__ import annotations
 import hashlib
 import math
 import re
+import shutil
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
+import yaml
 
 from aftir_rl.core.actuation import ActuatorLimits
 from aftir_rl.core.config import (
@@ -246,8 +248,9 @@ _SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})")
 def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
     """What a run directory records as its tank: a shipped name or a spec, else ``tank.yaml``.
 
-    A tank given as a path is copied into the run directory (:data:`RUN_TANK_FILE`), so the run
-    stays readable wherever it is moved and :func:`resolve_run_tank` never leaves it.
+    A tank given as a path is copied into the run directory (:data:`RUN_TANK_FILE`), with the
+    mesh files it names beside it, so the run stays readable wherever it is moved and
+    :func:`resolve_run_tank` never leaves it.
     """
     text, source = str(tank), Path(tank)
     if (text in available_tanks() or generated_spec(text)) and not source.exists():
@@ -255,6 +258,17 @@ def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
     if not (source.suffix in (".yaml", ".yml") or source.exists()):
         source = TANK_DIR / f"{text}.yaml"
     raw = read_limited(source, MAX_YAML_BYTES, ConfigError, "tank file", "tank")
+    data = read_yaml(source, raw)
+    meshes = [
+        o for o in data.get("obstacles") or [] if isinstance(o, dict) and o.get("type") == "mesh"
+    ]
+    if meshes:
+        load_tank(source)  # every mesh checked before anything is copied
+        for i, item in enumerate(meshes):
+            name = f"tank_mesh_{i}{Path(str(item['file'])).suffix.lower()}"
+            shutil.copyfile(source.parent / str(item["file"]), Path(run_dir) / name)
+            item["file"] = name
+        raw = yaml.safe_dump(data, sort_keys=False).encode()
     with atomic_open(Path(run_dir) / RUN_TANK_FILE, "wb") as fh:
         fh.write(raw)
     return RUN_TANK_FILE

@@ -290,6 +290,8 @@ def _write_mesh_yaml(tank: Any, mesh_file: Path, yaml_out: Path) -> None:
     from aftir_rl.core.files import atomic_open
 
     rel = os.path.relpath(mesh_file.resolve(), yaml_out.resolve().parent)
+    if rel.startswith(".."):
+        raise ConfigError(f"--yaml {yaml_out}: write it in the mesh file's folder or above it")
     data = {
         "name": f"{tank.name}_mesh",
         "description": f"{tank.name} with its solids read from {mesh_file.name}",

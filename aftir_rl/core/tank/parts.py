@@ -292,7 +292,17 @@ def _parse_mesh(
 
     if not isinstance(file, str) or not 0 < len(file) <= 255 or "\0" in file:
         raise ConfigError(f"{where}: file: expected a mesh file name, got {brief(file)}")
-    path = (base or Path(".")) / file
+    folder = (base or Path(".")).resolve()
+    path = folder / file
+    try:
+        inside = path.resolve().is_relative_to(folder)
+    except (OSError, RuntimeError):  # a symlink loop
+        inside = False
+    if not inside:
+        raise ConfigError(
+            f"{where}: file: {brief(file)} leads out of the tank file's folder; keep meshes beside "
+            "it or below"
+        )
     verts, faces = read_mesh(path, f"{where}: file")
     return MeshSolid(verts, faces, name, file, extent)
 
