@@ -47,3 +47,23 @@ def test_export_writes_a_mesh_and_a_tank_that_reads_it(tmp_path, capsys):
     meshed, tank = load_tank(tmp_path / "w.yaml"), load_tank("wing:2:4")
     assert (meshed.raster.obstructed == tank.raster.obstructed).all()
     assert "triangles" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("obstacle", "content", "message"),
+    [
+        ({"type": "mesh", "file": "walls.stl"}, b"solid x\nendsolid x\n", "walls.stl"),
+        ({"type": "mesh", "file": "../escape.stl"}, None, "leads out of the tank file's folder"),
+        ({"type": "mesh", "file": "walls.txt"}, b"", "expected a .stl, .obj, .ply file"),
+        ({"type": "mesh"}, None, "missing key 'file'"),
+    ],
+)
+def test_hostile_mesh_tanks_are_one_line(tmp_path, capsys, obstacle, content, message):
+    pytest.importorskip("trimesh")
+    if content is not None:
+        (tmp_path / obstacle["file"]).write_bytes(content)
+    data = {"box": {"min": [-50, -50, 0], "max": [50, 50, 100]}, "obstacles": [obstacle]}
+    (tmp_path / "t.yaml").write_text(yaml.safe_dump(data))
+    assert main(["show", "--tank", str(tmp_path / "t.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and "Traceback" not in err
