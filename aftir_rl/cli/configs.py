@@ -55,4 +55,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name in names:
         print(f"{name:<{width}}  {_summary(f'{args.folder}/{name}' if args.folder else name)}")
     print(f"({len(names)} in {CONFIG_DIR / args.folder})")
+    if args.folder in ("", "tanks"):
+        print("--tank also takes a YAML path, or wing:BAYS:SEED for a generated wing tank")
     return 0

@@ -16,7 +16,13 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["band_distances", "column_winding", "cells_cut", "closest_on_triangle"]
+__all__ = [
+    "band_distances",
+    "column_winding",
+    "cells_cut",
+    "closest_on_triangle",
+    "sweep_nearest",
+]
 
 
 @njit(cache=True)
@@ -196,3 +202,45 @@ def cells_cut(
                                 cut = not _separated(v, axis, half)
                     out[i, j, k] = out[i, j, k] or cut
     return out
+
+
+@njit(cache=True)
+def sweep_nearest(
+    dist: NDArray[np.float32], nearest: NDArray[np.float32], lo: NDArray[np.float64], g: float
+) -> None:
+    """Improve each node's nearest mesh point from its neighbours', in place (two sweeps).
+
+    ``nearest`` holds a mesh point per node (exact near the mesh, a neighbour's guess beyond);
+    a forward and a backward sweep over the grid hand each node the nearest of its 26
+    neighbours' points when it is nearer, and ``dist`` becomes the distance to it.
+    """
+    nx, ny, nz = dist.shape
+    for sweep in range(2):
+        step = 1 if sweep == 0 else -1
+        for ii in range(nx):
+            i = ii if step == 1 else nx - 1 - ii
+            x = lo[0] + g * i
+            for jj in range(ny):
+                j = jj if step == 1 else ny - 1 - jj
+                y = lo[1] + g * j
+                for kk in range(nz):
+                    k = kk if step == 1 else nz - 1 - kk
+                    z = lo[2] + g * k
+                    best = dist[i, j, k]
+                    for di in range(-1, 2):
+                        for dj in range(-1, 2):
+                            for dk in range(-1, 2):
+                                a, b, c = i + di, j + dj, k + dk
+                                if a < 0 or b < 0 or c < 0 or a >= nx or b >= ny or c >= nz:
+                                    continue
+                                qx, qy, qz = (
+                                    nearest[a, b, c, 0],
+                                    nearest[a, b, c, 1],
+                                    nearest[a, b, c, 2],
+                                )
+                                d = math.sqrt((x - qx) ** 2 + (y - qy) ** 2 + (z - qz) ** 2)
+                                if d < best:
+                                    best = d
+                                    nearest[i, j, k, 0], nearest[i, j, k, 1] = qx, qy
+                                    nearest[i, j, k, 2] = qz
+                    dist[i, j, k] = best

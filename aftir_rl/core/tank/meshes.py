@@ -4,8 +4,8 @@
 size, triangles, coordinates) and refuses, in one line, a mesh with NaN or huge vertices,
 degenerate triangles, holes (an edge not matched by one in the opposite direction), or inverted
 normals. :class:`MeshSolid` is a tank solid made of it: its signed distance is tabulated on a
-grid (exact at the nodes within :data:`BAND` of a triangle; beyond, the distance to the mesh point
-nearest the nearest such node, an upper bound, near-exact; inside where
+grid (exact at the nodes within :data:`BAND` of a triangle; beyond, the distance to the nearest of
+the mesh points its neighbours found, an upper bound, near-exact; inside where
 the oriented crossings below a node are positive, so overlapping closed bodies are their union)
 and read trilinearly; the raster marks cells a triangle cuts or whose centre is inside;
 python-fcl gets a BVH model, hollow, so the collision check adds the inside test of the grid.
@@ -41,7 +41,9 @@ MAX_MESH_COORD = 1e4
 #: and the band around the surface where its values are exact [cm].
 GRID_SPACING = 1.0
 MAX_GRID_NODES = 40_000_000
-BAND = 4.0
+BAND = 2.0
+#: How far [cm] the grid reaches beyond the mesh and the tank's box.
+GRID_PAD = 6.0
 MESH_SUFFIXES = (".stl", ".obj", ".ply")
 
 
@@ -140,7 +142,7 @@ class MeshSolid(Shape):
     def grid(self) -> tuple[_Array, float, NDArray[np.float32]]:
         """The signed-distance grid: corner [cm], spacing [cm] and values ``(nx, ny, nz)``."""
         lo, hi = self.aabb()
-        pad = BAND + 2 * GRID_SPACING
+        pad = GRID_PAD
         lo, hi = lo - pad, hi + pad
         if self.extent is not None:
             lo = np.minimum(lo, np.array(self.extent[0]) - pad)
@@ -152,18 +154,16 @@ class MeshSolid(Shape):
         near, nearest = mesh_kernels.band_distances(self.vertices, self.faces, lo, g, shape, BAND)
         inside = mesh_kernels.column_winding(self.vertices, self.faces, lo, g, shape) > 0
         ndimage = require("scipy.ndimage", "mesh")
-        # beyond the band: the distance to the mesh point nearest the nearest node within it
+        # beyond the band: the nearest node within it hands over its mesh point, then two
+        # sweeps hand each node the nearest of its neighbours' points
         far = ~np.isfinite(near)
         if far.any() and not far.all():
-            (i, j, k) = ndimage.distance_transform_edt(
+            i, j, k = ndimage.distance_transform_edt(
                 far, return_distances=False, return_indices=True
             )
-            del far
-            nodes = np.stack(np.meshgrid(*(np.arange(n) for n in shape), indexing="ij"), -1)
-            spots = nearest[i, j, k]
-            del i, j, k
-            gap = np.linalg.norm(lo + g * nodes - spots, axis=-1)
-            near = np.where(np.isfinite(near), near, gap).astype(np.float32)
+            nearest = np.ascontiguousarray(nearest[i, j, k])
+            del i, j, k, far
+            mesh_kernels.sweep_nearest(near, nearest, lo, g)
         values = np.where(inside, -near, near).astype(np.float32)
         values.setflags(write=False)
         return lo, g, values
