@@ -58,6 +58,7 @@ __all__ = [
     "keep_run_tank",
     "tank_from_mapping",
     "generated_spec",
+    "names_generated",
 ]
 
 TANK_DIR = CONFIG_DIR / "tanks"
@@ -243,6 +244,7 @@ _CACHE_SIZE = 4
 RUN_TANK_FILE = "tank.yaml"
 #: A generated tank by name: ``wing:BAYS:SEED`` (:func:`generated_spec`).
 _SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})")
+_POOL_SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})-([0-9]{1,10})")
 
 
 def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
@@ -253,7 +255,7 @@ def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
     :func:`resolve_run_tank` never leaves it.
     """
     text, source = str(tank), Path(tank)
-    if (text in available_tanks() or generated_spec(text)) and not source.exists():
+    if (text in available_tanks() or names_generated(text)) and not source.exists():
         return text
     if not (source.suffix in (".yaml", ".yml") or source.exists()):
         source = TANK_DIR / f"{text}.yaml"
@@ -287,7 +289,7 @@ def resolve_run_tank(name: object, run_dir: str | Path) -> str:
 
     """
     shipped = available_tanks()
-    if isinstance(name, str) and (name in shipped or generated_spec(name) is not None):
+    if isinstance(name, str) and (name in shipped or names_generated(name)):
         return name
     folder = Path(run_dir)
     try:
@@ -311,6 +313,11 @@ def generated_spec(text: str) -> tuple[int, int] | None:
     return (int(match[1]), int(match[2])) if match else None
 
 
+def names_generated(text: str) -> bool:
+    """Whether ``text`` names generated tanks: ``wing:BAYS:SEED`` or a pool ``wing:BAYS:A-B``."""
+    return generated_spec(text) is not None or _POOL_SPEC.fullmatch(text) is not None
+
+
 def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
     """Load a tank by name (``configs/tanks/NAME.yaml``), path, or spec ``wing:BAYS:SEED``.
 
@@ -324,6 +331,11 @@ def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
     if isinstance(tank, Tank):
         return tank
     text = str(tank)
+    if _POOL_SPEC.fullmatch(text):
+        raise ConfigError(
+            f"tank {text!r} is a pool of generated tanks: AFTIR-ArmFTL-v0 draws one per episode "
+            "(tank=...); everything else takes one tank, wing:BAYS:SEED"
+        )
     spec = generated_spec(text)
     if spec is not None:
         return _cached(text, lambda: tank_from_mapping(wing_tank(*spec), text))

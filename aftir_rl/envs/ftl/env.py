@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.robot import Posture, body_points
+from aftir_rl.envs.ftl.pool import TankPool, pool_specs
 from aftir_rl.envs.ftl.spec import FTLSpec
 from aftir_rl.envs.ftl.task import FTLTask, check_options
 
@@ -142,7 +143,12 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         self.render_mode = render_mode
-        self._configure(FTLSpec.from_kwargs(**kwargs), 1)
+        spec = FTLSpec.from_kwargs(**kwargs)
+        specs = pool_specs(spec.task.tank)
+        #: The tanks drawn per episode (``tank="wing:BAYS:FIRST-LAST"``), or None.
+        self.pool = None if specs is None else TankPool(specs)
+        self._spec, self._tank_index = spec, 0
+        self._configure(spec if self.pool is None else self.pool.spec_for(spec, 0), 1)
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
         self.action_space, self.observation_space = self._spaces()  # type: ignore[assignment]
@@ -151,6 +157,11 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
         self._potential: NDArray[np.float64] | None = np.full(1, np.nan)
         self._achieved = np.zeros((1, 3), dtype=np.float32)
         self._open = False  # an episode has steps and has not ended (for failure_bias)
+
+    def _goal_bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The tank's box grown by 1 m; with a pool, every tank's."""
+        pool = self.__dict__.get("pool")
+        return pool.goal_bounds if pool is not None else super()._goal_bounds()
 
     @property
     def target(self) -> NDArray[np.float64]:
@@ -192,6 +203,11 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
         if self._open:  # the last episode ended without success (truncated or left)
             self._record_outcomes(self.batch.target, [False])
         self._open = False
+        if self.pool is not None:  # this episode's tank
+            index = self.pool.draw(self.np_random)
+            if index != self._tank_index:
+                self._configure(self.pool.spec_for(self._spec, index), 1)
+                self._tank_index, self._renderer = index, None
         if options.get("target") is not None:
             target = self._check_target(options["target"])
         elif self.fixed_target is not None:
@@ -201,7 +217,11 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
         self.batch.reset_rows(np.array([0]), target[None])
         self._potential = np.full(1, np.nan)
         self._tips = [self.tip]
-        info = {"distance_cm": float(np.linalg.norm(self.tip - target)), "target": target.copy()}
+        info = {
+            "distance_cm": float(np.linalg.norm(self.tip - target)),
+            "target": target.copy(),
+            "tank": self.tank.source or self.tank.name,
+        }
         rows = self._obs_dict()
         self._achieved = rows["achieved_goal"].copy()  # the next step's previous tip, clipped
         return {k: v[0] for k, v in rows.items()}, info
@@ -284,7 +304,13 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
         self.num_envs = int(num_envs)
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = None
-        self._configure(FTLSpec.from_kwargs(**kwargs), self.num_envs)
+        spec = FTLSpec.from_kwargs(**kwargs)
+        if pool_specs(spec.task.tank) is not None:
+            raise ConfigError(
+                "a tank pool (wing:BAYS:FIRST-LAST) runs in the single env, one tank per env: "
+                "gym.make_vec('AFTIR-ArmFTL-v0', n, vectorization_mode='async', tank=...)"
+            )
+        self._configure(spec, self.num_envs)
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:

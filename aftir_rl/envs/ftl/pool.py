@@ -1,0 +1,72 @@
+"""A pool of generated tanks for ``AFTIR-ArmFTL-v0``: a new tank per episode, from a seed range.
+
+``tank="wing:BAYS:FIRST-LAST"`` names the generated wing tanks of ``BAYS`` bays and seeds
+``FIRST`` to ``LAST`` (:func:`~aftir_rl.core.tank.generate.wing_tank`; at most
+:data:`MAX_POOL` of them). :class:`TankPool` builds them once (their grids are kept while the
+env lives), draws one per episode with the env's generator, and gives the goal space that holds
+every tank of the pool, so observations do not depend on which tank an episode has. The batched
+vector env keeps one tank for all its rows; a pool runs in the single env, one tank per env of
+``gym.make_vec(..., vectorization_mode="sync" | "async")``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.tank import Tank, load_tank
+from aftir_rl.envs.ftl.spec import FTLSpec
+
+__all__ = ["MAX_POOL", "TankPool", "pool_specs"]
+
+#: Most tanks in one pool.
+MAX_POOL = 64
+_POOL = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})-([0-9]{1,10})")
+
+
+def pool_specs(tank: object) -> list[str] | None:
+    """The generator specs of a pool ``wing:BAYS:FIRST-LAST``, or None for a single tank.
+
+    Raises:
+        ConfigError: an empty range, or more than :data:`MAX_POOL` tanks.
+
+    """
+    match = _POOL.fullmatch(tank) if isinstance(tank, str) else None
+    if match is None:
+        return None
+    bays, first, last = int(match[1]), int(match[2]), int(match[3])
+    if not first <= last < first + MAX_POOL:
+        raise ConfigError(
+            f"tank {tank!r}: a pool names 1 to {MAX_POOL} seeds, FIRST-LAST with FIRST <= LAST"
+        )
+    return [f"wing:{bays}:{seed}" for seed in range(first, last + 1)]
+
+
+class TankPool:
+    """The tanks of a pool, built once; the one of each episode is drawn from them."""
+
+    def __init__(self, specs: list[str]) -> None:
+        #: The pool's tanks, in seed order (kept alive: their grids are cached per tank).
+        self.tanks: list[Tank] = [load_tank(s) for s in specs]
+        self.names = specs
+        lo = np.min([t.box_min for t in self.tanks], axis=0)
+        hi = np.max([t.box_max for t in self.tanks], axis=0)
+        #: The goal space's corners [cm]: every tank's box, grown by 1 m.
+        self.goal_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] = (lo - 100.0, hi + 100.0)
+
+    def __len__(self) -> int:
+        return len(self.tanks)
+
+    def spec_for(self, spec: FTLSpec, index: int) -> FTLSpec:
+        """``spec`` with the pool's tank ``index``."""
+        return dataclasses.replace(
+            spec, task=dataclasses.replace(spec.task, tank=self.tanks[index])
+        )
+
+    def draw(self, rng: np.random.Generator) -> int:
+        """The index of an episode's tank."""
+        return int(rng.integers(len(self.tanks)))
