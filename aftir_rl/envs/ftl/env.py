@@ -78,10 +78,13 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
 
     ## Arguments
 
-    - ``tank``: tank name or YAML path; ``n_sections``: default the tank arm's maximum.
+    - ``tank``: tank name, YAML path, generator spec ``wing:BAYS:SEED``, or (this env, not the
+      batched one) a pool ``wing:BAYS:FIRST-LAST`` drawn per episode
+      (:mod:`aftir_rl.envs.ftl.pool`); ``n_sections``: default the tank arm's maximum.
     - ``target``: fixed target [cm] for every episode; default drawn per episode with
       ``np_random``, uniformly among points ``target_clearance`` (10 cm) from every surface and
-      20 cm from the start, in ``bay`` (1, 2, or None for the whole tank).
+      20 cm from the start, in ``bay`` (1 to the number of bays between the tank's baffles, or
+      None for the whole tank).
     - ``success_tolerance`` (2 cm), ``margin`` (1 cm), ``kappa_step`` (0.1 rad), ``push_step``
       (5 cm), ``start_height`` (10 cm), ``samples_per_section`` (10).
     - ``shaping`` (False): the reward's potential term, ``True`` or ``"raster"`` (the raster
