@@ -21,7 +21,17 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.tank.solids import Mesh, Shape
 
-__all__ = ["Hole", "Plate", "HOLE_SHAPES", "plane_axes", "hole_distance_2d", "lift", "extrude"]
+__all__ = [
+    "Hole",
+    "Plate",
+    "HOLE_SHAPES",
+    "plane_axes",
+    "plane_coordinates",
+    "hole_distance_2d",
+    "extruded_distance",
+    "lift",
+    "extrude",
+]
 
 _Array = NDArray[np.float64]
 #: The hole shapes, by their code in :attr:`Plate.distance_params` and the compiled kernels.
@@ -50,6 +60,25 @@ def hole_distance_2d(shape: Any, da: _Array, db: _Array, ha: Any, hb: Any) -> _A
     along_b = np.hypot(da, np.maximum(np.abs(db) - (hb - r), 0.0))
     oval = np.where(ha >= hb, along_a, along_b) - r
     return np.where(shape == 0, rect, np.where(shape == 1, circle, oval))
+
+
+def plane_coordinates(k: Any, x: _Array, y: _Array, z: _Array) -> tuple[_Array, _Array, _Array]:
+    """``(n, a, b)``: the coordinate along axis ``k`` and the two across it (:func:`plane_axes`).
+
+    ``k`` may be an array (one axis per solid, broadcast against the coordinates).
+    """
+    n = np.where(k == 0, x, np.where(k == 1, y, z))
+    return n, np.where(k == 0, y, x), np.where(k == 2, y, z)
+
+
+def extruded_distance(flat: _Array, w: _Array) -> _Array:
+    """Signed distance to a 2D region extruded: ``flat`` in its plane, ``w`` along its axis.
+
+    ``w`` is the distance past the slab's faces (|n − middle| − half length); exact when
+    ``flat`` is the region's exact 2D signed distance.
+    """
+    outside = np.hypot(np.maximum(flat, 0.0), np.maximum(w, 0.0))
+    return outside + np.minimum(np.maximum(flat, w), 0.0)
 
 
 def lift(flat: _Array, axis: int, n: float) -> _Array:
@@ -182,17 +211,13 @@ class Plate(Shape):
     def distance_field(self, x: _Array, y: _Array, z: _Array, *params: Any) -> _Array:
         """Signed distance [cm] to plates with ``params`` (:attr:`distance_params`)."""
         k, c, t, a0, b0, a1, b1 = params[:7]
-        n = np.where(k == 0, x, np.where(k == 1, y, z))
-        a = np.where(k == 0, y, x)
-        b = np.where(k == 2, y, z)
+        n, a, b = plane_coordinates(k, x, y, z)
         ca, cb, ha, hb = (a0 + a1) / 2, (b0 + b1) / 2, (a1 - a0) / 2, (b1 - b0) / 2
         flat = hole_distance_2d(0, a - ca, b - cb, ha, hb)
         for i in range(7, len(params), 5):
             shape, hca, hcb, hha, hhb = params[i : i + 5]
             flat = np.maximum(flat, -hole_distance_2d(shape, a - hca, b - hcb, hha, hhb))
-        w = np.abs(n - c) - t
-        outside = np.hypot(np.maximum(flat, 0.0), np.maximum(w, 0.0))
-        return outside + np.minimum(np.maximum(flat, w), 0.0)
+        return extruded_distance(flat, np.abs(n - c) - t)
 
     def overlaps(self, lo: _Array, hi: _Array) -> NDArray[np.bool_]:
         """Positive-volume overlap with boxes ``[lo, hi]`` of shape ``(..., 3)``."""

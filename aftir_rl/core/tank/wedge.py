@@ -18,7 +18,13 @@ import fcl
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.core.tank.plate import extrude, lift, plane_axes
+from aftir_rl.core.tank.plate import (
+    extrude,
+    extruded_distance,
+    lift,
+    plane_axes,
+    plane_coordinates,
+)
 from aftir_rl.core.tank.solids import Mesh, Shape
 
 __all__ = ["Wedge", "triangle_distance_2d", "taper_wedges"]
@@ -30,7 +36,6 @@ def triangle_distance_2d(a: _Array, b: _Array, tri: tuple[Any, ...]) -> _Array:
     """Exact 2D signed distance of points ``(a, b)`` to triangles ``(a0, b0, a1, b1, a2, b2)``."""
     corners = [(tri[0], tri[1]), (tri[2], tri[3]), (tri[4], tri[5])]
     best = np.full(np.broadcast(a, b, *tri).shape, np.inf)
-    sign = np.ones_like(best)
     orient = (tri[2] - tri[0]) * (tri[5] - tri[1]) - (tri[4] - tri[0]) * (tri[3] - tri[1])
     inside = np.ones(best.shape, dtype=bool)
     for i in range(3):
@@ -40,7 +45,7 @@ def triangle_distance_2d(a: _Array, b: _Array, tri: tuple[Any, ...]) -> _Array:
         t = np.clip((wa * ea + wb * eb) / np.maximum(ea * ea + eb * eb, 1e-300), 0.0, 1.0)
         best = np.minimum(best, np.hypot(wa - t * ea, wb - t * eb))
         inside &= (ea * wb - eb * wa) * orient >= 0
-    return np.where(inside, -sign * best, best)
+    return np.where(inside, -best, best)
 
 
 @dataclass(frozen=True)
@@ -75,14 +80,8 @@ class Wedge(Shape):
     def distance_field(self, x: _Array, y: _Array, z: _Array, *params: Any) -> _Array:
         """Signed distance [cm] to wedges with ``params`` (:attr:`distance_params`)."""
         k, mid, half = params[:3]
-        n = np.where(k == 0, x, np.where(k == 1, y, z))
-        a = np.where(k == 0, y, x)
-        b = np.where(k == 2, y, z)
-        flat = triangle_distance_2d(a, b, params[3:])
-        w = np.abs(n - mid) - half
-        return np.hypot(np.maximum(flat, 0.0), np.maximum(w, 0.0)) + np.minimum(
-            np.maximum(flat, w), 0.0
-        )
+        n, a, b = plane_coordinates(k, x, y, z)
+        return extruded_distance(triangle_distance_2d(a, b, params[3:]), np.abs(n - mid) - half)
 
     def overlaps(self, lo: _Array, hi: _Array) -> NDArray[np.bool_]:
         """Positive-volume overlap with boxes ``[lo, hi]`` of shape ``(..., 3)``."""
