@@ -159,6 +159,39 @@ def readme_table(results: Path) -> str:
     return "\n".join(lines)
 
 
+def suite_section(data: dict) -> str:
+    """The scene suite: per scene, completed motions, planning time and smallest clearance."""
+    rows, m = data["rows"], data["machine"]
+    lines = [
+        "",
+        "## Scene suite",
+        "",
+        f"`aftir bench --suite DIR --suite-targets 100` ({m['cpu']}, {m['cores']} cores, "
+        f"{data['seconds'] / 60:.0f} minutes in all): the follow-the-leader planner with the 1 cm "
+        "margin on each scene's fixed targets (seed = the scene's index; [tanks](tanks.md)). "
+        "One run; every failure with its reason is in `benchmarks/results/suite/suite.json`.",
+        "",
+        "| scene | targets | complete | median s | p90 s | max s | smallest clearance (cm) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for scene in dict.fromkeys(r["scene"] for r in rows):
+        mine = [r for r in rows if r["scene"] == scene]
+        times = sorted(r["seconds"] for r in mine)
+        clear = [r["min_clearance_cm"] for r in mine if r["complete"]]
+        p90 = times[min(len(times) - 1, int(0.9 * len(times)))]
+        lines.append(
+            f"| {scene} | {len(mine)} | {sum(r['complete'] for r in mine)} | "
+            f"{times[len(times) // 2]:.2f} | {p90:.2f} | {times[-1]:.2f} | "
+            f"{_num(min(clear) if clear else None, '.2f')} |"
+        )
+    total = sum(r["complete"] for r in rows)
+    lines += [
+        "",
+        f"In all {total} of {len(rows)} motions complete ({100 * total / len(rows):.1f}%).",
+    ]
+    return "\n".join(lines)
+
+
 def with_readme_table(readme: str, table: str) -> str:
     """The README with the text between its results markers replaced by ``table``."""
     head, rest = readme.split(START, 1)
@@ -175,6 +208,9 @@ def render(results: Path) -> str:
     seeds = [json.loads(p.read_text()) for p in sorted(results.glob("seeds_*.json"))]
     if seeds:
         parts.append(seeds_section(seeds))
+    suite = results / "suite" / "suite.json"
+    if suite.exists():
+        parts.append(suite_section(json.loads(suite.read_text())))
     return "\n".join(parts)
 
 

@@ -49,7 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
         parser, "--random", (1, MAX_TOUR_TARGETS), "N random targets at least 10 cm from every "
         "surface, instead of --targets"
     )  # fmt: skip
-    parser.add_argument("--bay", type=int, choices=(1, 2), default=2, help="--random's bay (2)")
+    add_int_option(parser, "--bay", (1, 64), "--random's bay, counted between baffles (2)", 2)
     add_seed_option(parser, "seed of --random (default 0)")
     parser.add_argument("--tank", default="b737_center", help="tank name or YAML (b737_center)")
     add_margin_option(parser, f"clearance the arm keeps (default {DEFAULT_MARGIN:g} cm)")
@@ -67,9 +67,13 @@ def _targets(args: argparse.Namespace, tank: Any) -> np.ndarray:
 
     if (args.targets is None) == (args.random is None):
         raise ConfigError("give --targets FILE or --random N (one of them)")
-    if args.random is not None:
+    if args.random is not None and tank.baffle is not None and args.bay in (1, 2):
         drawn = random_free_targets(Planner(tank), args.random, args.seed, clearance=10.0)
         return np.array(drawn[f"bay{args.bay}"])
+    if args.random is not None:  # any other tank: between its baffles
+        from aftir_rl.experiments.suite import suite_targets
+
+        return suite_targets(tank, args.random, args.seed, tank.bay(args.bay))
     points = read_yaml(args.targets).get("targets")
     if not isinstance(points, list) or not 0 < len(points) <= MAX_TOUR_TARGETS:
         raise ConfigError(f"{args.targets}: targets: expected a list of 1 to 100 [x, y, z]")

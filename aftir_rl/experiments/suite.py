@@ -24,6 +24,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
+from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import atomic_open, write_json
 from aftir_rl.core.tank import Tank, load_tank
 from aftir_rl.core.tank.generate import WingRanges, wing_tank
@@ -80,10 +81,28 @@ def scene_tanks(folder: Path, names: list[str] | None = None) -> dict[str, Tank]
     return out
 
 
-def suite_targets(tank: Tank, n: int, seed: int) -> NDArray[np.float64]:
-    """``n`` targets ``(n, 3)`` [cm]: uniform in the box, clear and reachable, by ``seed``."""
+def suite_targets(
+    tank: Tank,
+    n: int,
+    seed: int,
+    region: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+) -> NDArray[np.float64]:
+    """``n`` targets ``(n, 3)`` [cm]: uniform in ``region`` (default the box), clear, reachable.
+
+    Each is at least :data:`CLEARANCE` from every surface, in a raster cell reachable from the
+    start (not the start's), drawn with ``seed``.
+
+    Raises:
+        ConfigError: fewer than ``n`` such points in 256,000 draws.
+
+    """
     rng = np.random.default_rng(seed)
-    lo, hi = np.array(tank.box_min) + CLEARANCE, np.array(tank.box_max) - CLEARANCE
+    lo, hi = region if region is not None else (np.array(tank.box_min), np.array(tank.box_max))
+    lo, hi = np.asarray(lo) + CLEARANCE, np.asarray(hi) - CLEARANCE
+    if np.any(hi <= lo):
+        raise ConfigError(
+            f"{tank.name}: the region is too small for targets {CLEARANCE:g} cm clear"
+        )
     found: list[NDArray[np.float64]] = []
     for _ in range(1000):
         cand = rng.uniform(lo, hi, (256, 3))
@@ -92,8 +111,8 @@ def suite_targets(tank: Tank, n: int, seed: int) -> NDArray[np.float64]:
         keep = [p for p, c in zip(cand, cells) if tank.reachable[c] > 0]
         found.extend(keep[: n - len(found)])
         if len(found) >= n:
-            break
-    return np.round(np.array(found[:n]), 2)
+            return np.round(np.array(found[:n]), 2)
+    raise ConfigError(f"{tank.name}: found {len(found)} of {n} clear, reachable targets")
 
 
 def run_suite(

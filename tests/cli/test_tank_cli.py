@@ -67,3 +67,12 @@ def test_hostile_mesh_tanks_are_one_line(tmp_path, capsys, obstacle, content, me
     assert main(["show", "--tank", str(tmp_path / "t.yaml")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err and "Traceback" not in err
+
+
+def test_tour_draws_targets_in_any_bay_of_a_generated_tank(tmp_path, capsys):
+    pytest.importorskip("toppra")
+    from aftir_rl.cli.tour import main as tour
+
+    out = tmp_path / "tour"
+    assert tour(["--tank", "wing:2:1", "--random", "9", "--bay", "7", "-o", str(out)]) == 2
+    assert "this tank has 2 bays" in capsys.readouterr().err and not out.exists()

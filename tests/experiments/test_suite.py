@@ -8,6 +8,7 @@ import sqlite3
 import numpy as np
 import pytest
 
+from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.tank import load_tank
 from aftir_rl.experiments.suite import CLEARANCE, SCENES, run_suite, suite_targets
 
@@ -42,3 +43,21 @@ def test_suite_writes_json_csv_and_an_ompl_database(tmp_path):
         ).fetchall()
         assert got == [("wing_round_holes", 1, 1), ("b737_center_mesh", 1, 1)]
         assert con.execute("SELECT name FROM plannerConfigs").fetchall() == [("geometric_FTL",)]
+
+
+def test_targets_in_a_bay_and_too_small_regions():
+    tank = load_tank("wing:3:1")
+    lo, hi = tank.bay(3)
+    targets = suite_targets(tank, 5, seed=0, region=(lo, hi))
+    assert np.all((targets >= lo) & (targets <= hi))
+    with pytest.raises(ConfigError, match="too small"):
+        suite_targets(tank, 1, 0, region=(lo, lo + 15.0))
+
+
+def test_posture_target_draws_need_a_hatch():
+    """They draw on both sides of a hatch; a tank without one is refused, not looped on."""
+    from aftir_rl.planning.posture.context import random_free_targets
+    from aftir_rl.planning.posture.planner import Planner
+
+    with pytest.raises(ConfigError, match="has none"):
+        random_free_targets(Planner(load_tank("wing:2:1")), 2, 0)

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.collision import CollisionScene, point_clearance
-from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.errors import ConfigError, PlanningError
 from aftir_rl.core.robot import Posture
 from aftir_rl.core.tank import Tank, load_tank
 
@@ -279,12 +279,21 @@ def random_free_targets(
     (``bay2`` beyond the baffle, planned with TSM by ``auto``).
     """
     tank, rng = context.tank, np.random.default_rng(seed)
+    if tank.baffle is None:
+        raise ConfigError(
+            f"{tank.name}: random_free_targets draws on both sides of a tank's baffle and hatch; "
+            "this tank has none (draw in Tank.bay(n) instead)"
+        )
     out: dict[str, list[NDArray[np.float64]]] = {"bay1": [], "bay2": []}
-    while min(len(v) for v in out.values()) < n_each:
+    for _ in range(1000 * (n_each + 1)):
+        if min(len(v) for v in out.values()) >= n_each:
+            return out
         x = rng.uniform(tank.box_min, tank.box_max)
         if point_clearance(tank, x[None])[0] <= clearance:
             continue
         bay = "bay2" if context.beyond_baffle(x) else "bay1"
         if len(out[bay]) < n_each:
             out[bay].append(x)
-    return out
+    if min(len(v) for v in out.values()) >= n_each:
+        return out
+    raise ConfigError(f"{tank.name}: found too few points {clearance:g} cm clear in each bay")
