@@ -151,3 +151,20 @@ def test_a_run_keeps_its_mesh_tank_and_refuses_paths_out(tmp_path):
         (run / "tank.yaml").write_text(text.replace("tank_mesh_0.stl", escape))
         with pytest.raises(ConfigError, match="leads out of the tank file's folder"):
             load_tank(resolve_run_tank("tank.yaml", run))
+
+
+@pytest.mark.slow
+def test_a_huge_mesh_grows_its_grid_within_the_node_bound(tmp_path):
+    from aftir_rl.core.tank import meshes
+
+    write_stl(tmp_path / "slab.stl", box_triangles((-9000, -9000, 10), (9000, 9000, 60)))
+    data = {
+        "box": {"min": [-9500, -9500, 0], "max": [9500, 9500, 100]},
+        "walls": False,
+        "obstacles": [{"type": "mesh", "file": "slab.stl"}],
+    }
+    tank = tank_from_mapping(data, str(tmp_path / "t.yaml"))
+    lo, g, values = tank.obstacles[0].grid
+    assert values.size <= meshes.MAX_GRID_NODES and g > meshes.GRID_SPACING
+    probe = np.array([[0.0, 0.0, 80.0], [0.0, 0.0, 35.0], [9200.0, 0.0, 35.0]])
+    np.testing.assert_allclose(tank.distance(probe), [20.0, -25.0, 200.0], atol=g)

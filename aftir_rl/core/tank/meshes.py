@@ -40,7 +40,7 @@ MAX_MESH_COORD = 1e4
 #: Spacing of the signed-distance grid [cm] (grown until it has at most MAX_GRID_NODES nodes),
 #: and the band around the surface where its values are exact [cm].
 GRID_SPACING = 1.0
-MAX_GRID_NODES = 40_000_000
+MAX_GRID_NODES = 16_000_000
 BAND = 2.0
 #: How far [cm] the grid reaches beyond the mesh and the tank's box.
 GRID_PAD = 6.0
@@ -151,7 +151,8 @@ class MeshSolid(Shape):
         while math.prod(int(math.ceil((hi - lo)[d] / g)) + 1 for d in range(3)) > MAX_GRID_NODES:
             g *= 1.25
         shape = np.array([int(math.ceil((hi - lo)[d] / g)) + 1 for d in range(3)], np.int64)
-        near, nearest = mesh_kernels.band_distances(self.vertices, self.faces, lo, g, shape, BAND)
+        band = max(BAND, 1.5 * g)  # every triangle has nodes within its band
+        near, nearest = mesh_kernels.band_distances(self.vertices, self.faces, lo, g, shape, band)
         inside = mesh_kernels.column_winding(self.vertices, self.faces, lo, g, shape) > 0
         ndimage = require("scipy.ndimage", "mesh")
         # beyond the band: the nearest node within it hands over its mesh point, then two

@@ -74,7 +74,7 @@ def plane_coordinates(k: Any, x: _Array, y: _Array, z: _Array) -> tuple[_Array, 
 def extruded_distance(flat: _Array, w: _Array) -> _Array:
     """Signed distance to a 2D region extruded: ``flat`` in its plane, ``w`` along its axis.
 
-    ``w`` is the distance past the slab's faces (|n − middle| − half length); exact when
+    ``w`` is the distance past the slab's faces (``abs(n - middle) - half``); exact when
     ``flat`` is the region's exact 2D signed distance.
     """
     outside = np.hypot(np.maximum(flat, 0.0), np.maximum(w, 0.0))
