@@ -111,7 +111,8 @@ def suite_targets(
         keep = [p for p, c in zip(cand, cells) if tank.reachable[c] > 0]
         found.extend(keep[: n - len(found)])
         if len(found) >= n:
-            return np.round(np.array(found[:n]), 2)
+            out: NDArray[np.float64] = np.asarray(found[:n], dtype=np.float64).round(2)
+            return out
     raise ConfigError(f"{tank.name}: found {len(found)} of {n} clear, reachable targets")
 
 

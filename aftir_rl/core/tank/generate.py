@@ -11,6 +11,7 @@ The same seed gives the same tank. Ranges and how reachability is kept: docs/tan
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -54,7 +55,12 @@ def _round_to(value: float, step: float) -> float:
     return float(max(step, round(value / step) * step))
 
 
-def _ribs(rng: np.random.Generator, r: WingRanges, xs: list[float], section: Any):
+def _ribs(
+    rng: np.random.Generator,
+    r: WingRanges,
+    xs: list[float],
+    section: Callable[[float], tuple[float, float]],
+) -> list[dict[str, Any]]:
     """The ribs at ``xs``: an access hole near the chord's middle, lightening holes beside.
 
     ``section(x)`` is the half chord and the depth at ``x`` (the box tapers).
@@ -87,7 +93,14 @@ def _ribs(rng: np.random.Generator, r: WingRanges, xs: list[float], section: Any
     return ribs
 
 
-def _obstacles(rng: np.random.Generator, r: WingRanges, lo, hi, ribs, tip) -> list[dict[str, Any]]:
+def _obstacles(
+    rng: np.random.Generator,
+    r: WingRanges,
+    lo: list[float],
+    hi: list[float],
+    ribs: list[dict[str, Any]],
+    tip: tuple[float, float],
+) -> list[dict[str, Any]]:
     """Stringers on the floor away from the panel; a pipe under the tip's ceiling.
 
     ``tip`` is the half chord and depth at the tip: both run straight along the span inside it.

@@ -59,6 +59,10 @@ __all__ = [
     "tank_from_mapping",
     "generated_spec",
     "names_generated",
+    "MAX_COORD",
+    "MAX_CELLS",
+    "MAX_SECTIONS",
+    "MAX_TARGETS",
 ]
 
 TANK_DIR = CONFIG_DIR / "tanks"

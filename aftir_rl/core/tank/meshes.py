@@ -225,7 +225,7 @@ class MeshSolid(Shape):
         from aftir_rl.core.tank.solids import Box
 
         lo, hi = self.aabb()
-        return Box(tuple(lo), tuple(hi)).wireframe()  # type: ignore[arg-type]
+        return Box(tuple(lo), tuple(hi)).wireframe()
 
 
 def trilinear(points: _Array, lo: _Array, g: float, values: NDArray[np.float32],

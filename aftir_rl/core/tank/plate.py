@@ -89,7 +89,7 @@ def lift(flat: _Array, axis: int, n: float) -> _Array:
     return out
 
 
-def extrude(flat: _Array, axis: int, n0: float, n1: float) -> tuple[_Array, _Array]:
+def extrude(flat: _Array, axis: int, n0: float, n1: float) -> tuple[_Array, NDArray[np.int64]]:
     """The prism over a convex polygon ``(V, 2)`` from ``n0`` to ``n1`` along ``axis``.
 
     Its vertices and triangles, closed (orientation as the polygon's; :func:`tank_bodies
@@ -102,7 +102,7 @@ def extrude(flat: _Array, axis: int, n0: float, n1: float) -> tuple[_Array, _Arr
     for i in range(v):
         j = (i + 1) % v
         faces += [[i, j, v + j], [i, v + j, v + i]]
-    return verts, np.array(faces)
+    return verts, np.array(faces, dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -272,12 +272,12 @@ class Plate(Shape):
             out.extend(h.corner_fans()[0])
         return out
 
-    def _prism(self, flat: _Array) -> tuple[_Array, _Array]:
+    def _prism(self, flat: _Array) -> tuple[_Array, NDArray[np.int64]]:
         """The convex prism over a polygon ``(V, 2)`` through the plate."""
         t = self.thickness / 2
         return extrude(flat, self.axis, self.position - t, self.position + t)
 
-    def bodies(self) -> list[tuple[_Array, _Array]]:
+    def bodies(self) -> list[tuple[_Array, NDArray[np.int64]]]:
         """Every piece's prism as a closed mesh ``(vertices, faces)``."""
         return [self._prism(flat) for flat in self.pieces]
 

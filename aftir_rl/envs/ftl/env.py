@@ -210,7 +210,8 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
             index = self.pool.draw(self.np_random)
             if index != self._tank_index:
                 self._configure(self.pool.spec_for(self._spec, index), 1)
-                self._tank_index, self._renderer = index, None
+                self._tank_index = index
+                self.__dict__.pop("_renderer", None)  # drawn again in the new tank
         if options.get("target") is not None:
             target = self._check_target(options["target"])
         elif self.fixed_target is not None:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,7 +22,7 @@ def _solid_rows(tank: Tank) -> tuple[dict[str, list[tuple[float, ...]]], NDArray
     mesh_values: list[NDArray[np.float32]] = []
     for solid in tank.solids:
         if solid.kind == "mesh":
-            lo, g, values = solid.grid
+            lo, g, values = cast(Any, solid).grid
             start = sum(len(v) for v in mesh_values)
             rows["mesh"].append((*lo, g, *values.shape, start, *np.concatenate(solid.aabb())))
             mesh_values.append(values.ravel())

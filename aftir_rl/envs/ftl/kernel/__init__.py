@@ -8,9 +8,8 @@ and the arms' clearance, usable targets), :mod:`.guide` (the guide field's queri
 Compiled on first use and cached beside the files (``cache=True``). See docs/envs/armftl.md.
 """
 
+from aftir_rl.envs.ftl.kernel.arrays import KernelArms, KernelTank
 from aftir_rl.envs.ftl.kernel.geometry import (
-    KernelArms,
-    KernelTank,
     fk_points,
     refresh,
     sdf,
