@@ -15,6 +15,7 @@ python-fcl gets a BVH model, hollow, so the collision check adds the inside test
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -22,12 +23,14 @@ from typing import Any, ClassVar
 
 import fcl
 import numpy as np
+import yaml
 from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.extras import require
+from aftir_rl.core.files import atomic_open
 from aftir_rl.core.tank import mesh_kernels
-from aftir_rl.core.tank.solids import Mesh, Shape
+from aftir_rl.core.tank.solids import Box, Mesh, Shape
 
 __all__ = ["MeshSolid", "read_mesh", "export_tank_mesh", "MAX_MESH_BYTES", "MAX_TRIANGLES"]
 
@@ -212,18 +215,12 @@ class MeshSolid(Shape):
         model.endModel()
         return [fcl.CollisionObject(model, fcl.Transform())]
 
-    def fcl_geometry(self) -> tuple[Any, Any]:
-        """The BVH model and the identity pose."""
-        return self.fcl_objects()[0].getCollisionGeometry(), fcl.Transform()
-
     def mesh(self) -> Mesh:
         """The mesh itself."""
         return self.vertices, self.faces
 
     def wireframe(self) -> list[_Array]:
         """Its bounding box's edges (a picture of a large mesh draws the mesh, not lines)."""
-        from aftir_rl.core.tank.solids import Box
-
         lo, hi = self.aabb()
         return Box(tuple(lo), tuple(hi)).wireframe()
 
@@ -254,8 +251,7 @@ def tank_bodies(tank: Any) -> tuple[_Array, NDArray[np.int64]]:
     """Every solid of a tank as closed outward bodies in one mesh ``(V, F)``."""
     verts, faces, offset = [], [], 0
     for solid in tank.solids:
-        v, f = solid.mesh()
-        bodies = solid.bodies() if solid.kind == "plate" else [(v, f)]
+        bodies = solid.bodies() if solid.kind == "plate" else [solid.mesh()]
         for bv, bf in bodies:
             tri = bv[bf]
             volume = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum()
@@ -273,8 +269,6 @@ def export_tank_mesh(tank: Any, output: str | Path, yaml_out: str | Path | None 
         raise ConfigError(f"-o: expected a {', '.join(MESH_SUFFIXES)} file, got {output.name!r}")
     verts, faces = tank_bodies(tank)
     data = trimesh.Trimesh(verts, faces, process=False).export(file_type=output.suffix[1:].lower())
-    from aftir_rl.core.files import atomic_open
-
     with atomic_open(output, "wb" if isinstance(data, bytes) else "w") as fh:
         fh.write(data)
     if yaml_out is not None:
@@ -284,12 +278,6 @@ def export_tank_mesh(tank: Any, output: str | Path, yaml_out: str | Path | None 
 
 def _write_mesh_yaml(tank: Any, mesh_file: Path, yaml_out: Path) -> None:
     """A tank file with ``tank``'s box, panel, arm and targets, and the mesh as its solids."""
-    import os
-
-    import yaml
-
-    from aftir_rl.core.files import atomic_open
-
     rel = os.path.relpath(mesh_file.resolve(), yaml_out.resolve().parent)
     if rel.startswith(".."):
         raise ConfigError(f"--yaml {yaml_out}: write it in the mesh file's folder or above it")

@@ -290,10 +290,6 @@ class Plate(Shape):
             out.append(fcl.CollisionObject(fcl.Convex(verts, len(faces), flat_faces)))
         return out
 
-    def fcl_geometry(self) -> tuple[Any, Any]:
-        """Not one primitive: a plate is several (:meth:`fcl_objects`)."""
-        raise NotImplementedError("a plate is several python-fcl objects: use fcl_objects()")
-
     def mesh(self) -> Mesh:
         """Vertices and triangles of every piece's prism (a picture's solid plate)."""
         parts = self.bodies()

@@ -25,7 +25,17 @@ import fcl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Vec3", "Shape", "Box", "Cylinder", "Sphere", "Solid", "Mesh", "rotation_z_to"]
+__all__ = [
+    "Vec3",
+    "Shape",
+    "Primitive",
+    "Box",
+    "Cylinder",
+    "Sphere",
+    "Solid",
+    "Mesh",
+    "rotation_z_to",
+]
 
 Vec3 = tuple[float, float, float]
 #: A triangle mesh: vertices ``(V, 3)`` [cm] and faces ``(F, 3)`` (vertex indices).
@@ -88,16 +98,8 @@ class Shape(ABC):
         return self.signed_distance_xyz(p[..., 0], p[..., 1], p[..., 2])
 
     @abstractmethod
-    def fcl_geometry(self) -> tuple[Any, Any]:
-        """The python-fcl solid primitive and its ``fcl.Transform``."""
-
-    def fcl_object(self) -> Any:
-        """A python-fcl ``CollisionObject`` of this solid (a solid primitive, not a mesh)."""
-        return fcl.CollisionObject(*self.fcl_geometry())
-
     def fcl_objects(self) -> list[Any]:
-        """The python-fcl objects that make up this solid (one primitive here)."""
-        return [self.fcl_object()]
+        """The python-fcl ``CollisionObject`` s that make up this solid."""
 
     @abstractmethod
     def overlaps(self, lo: _Array, hi: _Array) -> NDArray[np.bool_]:
@@ -124,8 +126,24 @@ class Shape(ABC):
         """Axis-aligned bounds ``(lo, hi)``."""
 
 
+class Primitive(Shape):
+    """A solid that python-fcl holds as one solid primitive and its pose."""
+
+    @abstractmethod
+    def fcl_geometry(self) -> tuple[Any, Any]:
+        """The python-fcl solid primitive and its ``fcl.Transform``."""
+
+    def fcl_object(self) -> Any:
+        """A python-fcl ``CollisionObject`` of this solid (a solid primitive, not a mesh)."""
+        return fcl.CollisionObject(*self.fcl_geometry())
+
+    def fcl_objects(self) -> list[Any]:
+        """The solid's one python-fcl object, in a list."""
+        return [self.fcl_object()]
+
+
 @dataclass(frozen=True)
-class Box(Shape):
+class Box(Primitive):
     """Solid axis-aligned box between the corners ``min`` and ``max`` [cm].
 
     Every kind of solid has a ``name``: what messages and collision reports call it ("" for
@@ -193,7 +211,7 @@ class Box(Shape):
 
 
 @dataclass(frozen=True)
-class Cylinder(Shape):
+class Cylinder(Primitive):
     """Solid cylinder between the centres of its end faces ``p0`` and ``p1`` [cm]."""
 
     p0: Vec3
@@ -308,7 +326,7 @@ class Cylinder(Shape):
 
 
 @dataclass(frozen=True)
-class Sphere(Shape):
+class Sphere(Primitive):
     """Solid sphere [cm]."""
 
     center: Vec3

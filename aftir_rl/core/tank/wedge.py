@@ -25,7 +25,7 @@ from aftir_rl.core.tank.plate import (
     plane_axes,
     plane_coordinates,
 )
-from aftir_rl.core.tank.solids import Mesh, Shape
+from aftir_rl.core.tank.solids import Mesh, Primitive
 
 __all__ = ["Wedge", "triangle_distance_2d", "taper_wedges"]
 
@@ -49,7 +49,7 @@ def triangle_distance_2d(a: _Array, b: _Array, tri: tuple[Any, ...]) -> _Array:
 
 
 @dataclass(frozen=True)
-class Wedge(Shape):
+class Wedge(Primitive):
     """A triangle ``(a0, b0, a1, b1, a2, b2)`` across ``axis``, extruded from ``lo`` to ``hi``."""
 
     axis: int
