@@ -13,9 +13,9 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.collision import CollisionScene, panel_violation
 from aftir_rl.core.errors import InvalidActionError, TargetError
+from aftir_rl.core.kernel import fk_points
 from aftir_rl.core.robot import Posture
 from aftir_rl.core.tank import Tank, load_tank
-from aftir_rl.envs.ftl.kernel import fk_points
 from aftir_rl.envs.ftl.targets import bay_region, draw_targets
 
 __all__ = ["ArmEnv"]

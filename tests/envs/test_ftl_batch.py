@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from aftir_rl.core.collision import CollisionScene, point_clearance
+from aftir_rl.core.kernel.clearance import clearance_grid
 from aftir_rl.core.robot import Posture, body_points, forward_kinematics
 from aftir_rl.core.tank import load_tank
 from aftir_rl.envs.ftl.env import ArmFTLEnv, ArmFTLVectorEnv
-from aftir_rl.envs.ftl.fields import clearance_grid, field_guide, raster_distance_table
+from aftir_rl.envs.ftl.fields import field_guide, raster_distance_table
 from aftir_rl.envs.ftl.targets import draw_targets
 from aftir_rl.planning.ftl.model import kappa_to_angles
 from tests.helpers import random_ftl_batch

@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from aftir_rl.core import kernel as core_kernel
+from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.robot import _bend_rotations, body_points
 from aftir_rl.core.tank import load_tank
 from aftir_rl.core.tank.generate import wing_tank
@@ -23,7 +25,6 @@ from aftir_rl.core.tank.meshes import export_tank_mesh
 from aftir_rl.core.tank.solids import Box, Cylinder, Sphere
 from aftir_rl.envs.ftl import kernel
 from aftir_rl.envs.ftl.env import ArmFTLVectorEnv
-from aftir_rl.envs.ftl.fields import kernel_grid
 from aftir_rl.envs.ftl.state import _RAY_AXES, RAY_DISTANCES, ftl_kappa_batch
 from aftir_rl.planning.ftl.model import kappa_to_angles
 from tests.helpers import random_ftl_batch
@@ -88,7 +89,7 @@ def test_sdf_is_the_tanks_signed_distance(name):
     pts[:2000, 2] = rng.uniform(-400, 5, 2000)  # in and around the guide tube
     pts[:1000, :2] = np.array(tank.panel.center)[:2] + rng.normal(0, tank.panel.radius, (1000, 2))
     packed = kernel_grid(tank)
-    got = np.array([kernel.sdf(*p, packed) for p in pts])
+    got = np.array([core_kernel.sdf(*p, packed) for p in pts])
     np.testing.assert_allclose(got, tank.distance(pts), rtol=0, atol=1e-9)
 
 
@@ -282,5 +283,5 @@ def test_fk_points_is_body_points(samples):
     phi = rng.uniform(-np.pi, np.pi, (500, 12))
     dis = rng.uniform(-600, 0, 500)
     out = np.empty((500, 12 * samples + 1, 3))
-    kernel.fk_points(dis, theta, phi, 50.0, samples, out)
+    core_kernel.fk_points(dis, theta, phi, 50.0, samples, out)
     np.testing.assert_allclose(out, body_points(dis, theta, phi, 50.0, samples), atol=1e-9)

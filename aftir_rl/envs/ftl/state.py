@@ -4,8 +4,8 @@
 :class:`~aftir_rl.planning.ftl.model.Route`
 with ``lead = 0``) and tip arc lengths, and steps them in one numpy pass: shift-and-copy
 (:func:`ftl_kappa_batch`), batched forward kinematics, exact body clearances
-(:class:`~aftir_rl.envs.ftl.fields.ClearanceGrid`), sensing rays and, optionally, the goal-aware
-guide (:class:`~aftir_rl.envs.ftl.fields.FieldGuide`). No gymnasium here:
+(:class:`~aftir_rl.core.kernel.clearance.ClearanceGrid`), sensing rays and, optionally, the
+goal-aware guide (:class:`~aftir_rl.envs.ftl.fields.FieldGuide`). No gymnasium here:
 :mod:`aftir_rl.envs.ftl.env` wraps it as the single and the vector env.
 """
 
@@ -17,16 +17,12 @@ from collections import deque
 import numpy as np
 from numpy.typing import NDArray
 
+from aftir_rl.core import kernel as core_kernel
 from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.kernel.clearance import clearance_grid, kernel_grid
 from aftir_rl.core.tank import Tank
 from aftir_rl.envs.ftl import kernel
-from aftir_rl.envs.ftl.fields import (
-    LOOKAHEAD_HOPS,
-    clearance_grid,
-    field_guide,
-    kernel_grid,
-    raster_distance_table,
-)
+from aftir_rl.envs.ftl.fields import LOOKAHEAD_HOPS, field_guide, raster_distance_table
 
 __all__ = ["FTLBatch", "ftl_kappa_batch", "raster_detour_table", "RAY_DISTANCES", "NEAR_GOAL_RANGE"]
 
@@ -185,11 +181,11 @@ class FTLBatch:
     def refresh(self, rows: NDArray[np.int64] | None = None) -> None:
         """Recompute postures, body samples, tip and clearances of every env (or of ``rows``).
 
-        One compiled pass (:func:`aftir_rl.envs.ftl.kernel.refresh`): the FTL postures
+        One compiled pass (:func:`aftir_rl.core.kernel.refresh`): the FTL postures
         (:func:`ftl_kappa_batch`), the backbone samples (:func:`~aftir_rl.core.robot.body_points`),
         the exact body clearance (:meth:`ClearanceGrid.row_min
-        <aftir_rl.envs.ftl.fields.ClearanceGrid.row_min>`) and the rays' clearances
-        (:meth:`~aftir_rl.envs.ftl.fields.ClearanceGrid.approx`). Below the floor the body is
+        <aftir_rl.core.kernel.clearance.ClearanceGrid.row_min>`) and the rays' clearances
+        (:meth:`~aftir_rl.core.kernel.clearance.ClearanceGrid.approx`). Below the floor the body is
         straight on the guide's axis (the route starts at the floor), where the distance does
         not change with depth: the base stands for every sample deeper than the opening's rim
         can reach. For every env, every array is new (holders of the previous ones keep them);
@@ -203,7 +199,7 @@ class FTLBatch:
             self.heading = np.empty((b, 3))
             self.body_clearance = np.empty(b)  # surface [cm]
             self.ray_clearance = np.empty((b, (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)))
-        kernel.refresh(
+        core_kernel.refresh(
             np.asarray(rows, dtype=np.int64),
             self.kernel_arms(),
             self.l,
@@ -217,9 +213,11 @@ class FTLBatch:
         self.tip = self.points[:, -1]
         self.contact = self.body_clearance < self.margin
 
-    def kernel_arms(self) -> kernel.KernelArms:
+    def kernel_arms(self) -> core_kernel.KernelArms:
         """The batch's arrays as the compiled kernels read them (the arrays themselves)."""
-        return kernel.KernelArms(*(getattr(self, name) for name in kernel.KernelArms._fields))
+        return core_kernel.KernelArms(
+            *(getattr(self, name) for name in core_kernel.KernelArms._fields)
+        )
 
     def observation(self, rows: NDArray[np.int64] | None = None) -> NDArray[np.float32]:
         """The observation vectors of every env ``(B, obs_size)``, or of ``rows``.
@@ -286,11 +284,11 @@ class FTLBatch:
         """Rotations ``(B, 3, 3)`` of the frames the steered sections bend in (or of ``rows``).
 
         The route's frame at ``k·l``: the product of the rotations of its frozen sections
-        ``0..k−1`` (:func:`aftir_rl.envs.ftl.kernel.steering_frames`).
+        ``0..k−1`` (:func:`aftir_rl.core.kernel.steering_frames`).
         """
         kappa, k = (self.kappa, self.k) if rows is None else (self.kappa[rows], self.k[rows])
         out = np.empty((len(k), 3, 3))
-        kernel.steering_frames(kappa, k, out)
+        core_kernel.steering_frames(kappa, k, out)
         return out
 
     # -- dynamics

@@ -12,11 +12,11 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from aftir_rl.core import kernel
 from aftir_rl.core.errors import ConfigError, TargetError
+from aftir_rl.core.kernel import KernelTank
+from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.tank import Tank
-from aftir_rl.envs.ftl import kernel
-from aftir_rl.envs.ftl.fields import kernel_grid
-from aftir_rl.envs.ftl.kernel import KernelTank
 
 __all__ = ["CORNER_DEPTH", "FailureRates", "bay_region", "corner_candidates", "draw_targets"]
 
@@ -43,7 +43,7 @@ def draw_targets(
     Each generator draws batches of 64 uniform candidates until one is at least ``clearance``
     from every surface and 20 cm from ``start``; its first such candidate is its target (the
     clearance grid settles most candidates, the rest are computed exactly: the verdicts are the
-    exact ones, :func:`~aftir_rl.envs.ftl.kernel.usable`). Shape ``(len(rngs), 3)``.
+    exact ones, :func:`~aftir_rl.core.kernel.usable`). Shape ``(len(rngs), 3)``.
 
     With ``biased > 0`` each generator first draws whether its target is biased (probability
     ``biased``); a biased one keeps each free candidate with probability ``weight(candidate)``

@@ -8,7 +8,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from aftir_rl.envs.ftl.kernel.arrays import KernelArms
+from aftir_rl.core.kernel.arrays import KernelArms
 
 __all__ = ["observation", "goal_reward", "guide_columns"]
 

@@ -14,8 +14,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from aftir_rl.core.kernel.arrays import KernelArms, KernelTank
 from aftir_rl.core.robot import SMALL
-from aftir_rl.envs.ftl.kernel.arrays import KernelArms, KernelTank
 
 __all__ = [
     "rotate",

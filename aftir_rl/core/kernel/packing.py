@@ -8,8 +8,8 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
+from aftir_rl.core.kernel.arrays import KernelTank
 from aftir_rl.core.tank import Tank
-from aftir_rl.envs.ftl.kernel import KernelTank
 
 __all__ = ["kernel_tank"]
 
@@ -44,7 +44,7 @@ def _solid_rows(tank: Tank) -> tuple[dict[str, list[tuple[float, ...]]], NDArray
 def kernel_tank(tank: Tank, grid: Any) -> KernelTank:
     """The :class:`KernelTank` of a tank and its clearance grid.
 
-    ``grid`` is the tank's :class:`~aftir_rl.envs.ftl.fields.ClearanceGrid`.
+    ``grid`` is the tank's :class:`~aftir_rl.core.kernel.clearance.ClearanceGrid`.
     """
     rows, mesh_values = _solid_rows(tank)
 

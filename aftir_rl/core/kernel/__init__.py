@@ -1,0 +1,31 @@
+"""Compiled kernels (numba) of the arm's geometry, shared by the FTL planner and the FTL env.
+
+One loop per arm or point, no temporaries. By concern: :mod:`.geometry` (forward kinematics,
+shift-and-copy, the tank's signed distance and the arms' clearance, usable targets), :mod:`.guide`
+(the guide field's queries), :mod:`.arrays` (the arrays they read), :mod:`.packing` and
+:mod:`.clearance` (a tank packed into those arrays, with its clearance grid). Compiled on first
+use and cached beside the files (``cache=True``); each is tested equal to its numpy definition.
+"""
+
+from aftir_rl.core.kernel.arrays import KernelArms, KernelTank
+from aftir_rl.core.kernel.geometry import (
+    fk_points,
+    refresh,
+    sdf,
+    steering_frames,
+    usable,
+)
+from aftir_rl.core.kernel.guide import Grid, guide_query, lookahead
+
+__all__ = [
+    "Grid",
+    "KernelArms",
+    "KernelTank",
+    "fk_points",
+    "guide_query",
+    "lookahead",
+    "refresh",
+    "sdf",
+    "steering_frames",
+    "usable",
+]
