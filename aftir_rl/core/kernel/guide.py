@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import heapq
 import math
 
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["cell_of", "guide_query", "lookahead"]
+__all__ = ["cell_of", "guide_query", "lookahead", "relax_field", "field_query"]
 
 
 #: A guide grid as the kernels read it: its corner ``origin (3,)`` [cm], cell ``size`` [cm] and
@@ -112,3 +113,82 @@ def lookahead(
                 out[b, j, 0] = origin[0] + (a0 + 0.5) * size
                 out[b, j, 1] = origin[1] + (rem // s2 + 0.5) * size
                 out[b, j, 2] = origin[2] + (rem % s2 + 0.5) * size
+
+
+@njit(cache=True)
+def relax_field(
+    dist: NDArray[np.float64],
+    free: NDArray[np.bool_],
+    edges: NDArray[np.bool_],
+    weights: NDArray[np.float64],
+    neighbours: NDArray[np.int64],
+    shape: NDArray[np.int64],
+) -> None:
+    """Shortest distances to the seeds (finite ``dist``) over a grid's edges, in place (Dijkstra).
+
+    Flat grid points; ``edges[e, x]``: the edge from ``x`` to ``x + neighbours[e]`` exists,
+    ``weights[e, x]`` its length. ``dist`` ends as the fixed point of ``dist[x] = min_e
+    dist[x + d_e] + w_e(x)`` over free points (:class:`~aftir_rl.planning.ftl.guide.GuideField`).
+    """
+    s1, s2 = shape[1], shape[2]
+    heap = [(0.0, 0)]
+    heap.pop()
+    for x in range(dist.shape[0]):
+        if math.isfinite(dist[x]):
+            heapq.heappush(heap, (dist[x], x))
+    while heap:
+        dy, y = heapq.heappop(heap)
+        if dy > dist[y]:
+            continue
+        y0, rem = y // (s1 * s2), y % (s1 * s2)
+        y1, y2 = rem // s2, rem % s2
+        for e in range(neighbours.shape[0]):
+            x0, x1, x2 = y0 - neighbours[e, 0], y1 - neighbours[e, 1], y2 - neighbours[e, 2]
+            if not (0 <= x0 < shape[0] and 0 <= x1 < s1 and 0 <= x2 < s2):
+                continue
+            x = (x0 * s1 + x1) * s2 + x2
+            if not (edges[e, x] and free[x]):
+                continue
+            v = dy + weights[e, x]
+            if v < dist[x]:
+                dist[x] = v
+                heapq.heappush(heap, (v, x))
+
+
+@njit(cache=True)
+def field_query(
+    p: NDArray[np.float64],
+    dist: NDArray[np.float64],
+    edges: NDArray[np.bool_],
+    neighbours: NDArray[np.int64],
+    grid: Grid,
+    target: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:
+    """:meth:`GuideField.__call__ <aftir_rl.planning.ftl.guide.GuideField.__call__>`, in place.
+
+    Points ``p (B, 3)``; ``dist`` and ``edges`` flat over the grid.
+    """
+    origin, size, shape = grid
+    s1, s2 = shape[1], shape[2]
+    for b in range(p.shape[0]):
+        px, py, pz = p[b, 0], p[b, 1], p[b, 2]
+        c0, c1, c2 = cell_of(px, py, pz, grid)
+        flat = (c0 * s1 + c1) * s2 + c2
+        dx = px - (origin[0] + (c0 + 0.5) * size)
+        dy = py - (origin[1] + (c1 + 0.5) * size)
+        dz = pz - (origin[2] + (c2 + 0.5) * size)
+        best = dist[flat] + math.sqrt(dx * dx + dy * dy + dz * dz)
+        for e in range(neighbours.shape[0]):
+            n0, n1, n2 = c0 + neighbours[e, 0], c1 + neighbours[e, 1], c2 + neighbours[e, 2]
+            if not (0 <= n0 < shape[0] and 0 <= n1 < s1 and 0 <= n2 < s2) or not edges[e, flat]:
+                continue
+            sx = origin[0] + (n0 + 0.5) * size - px
+            sy = origin[1] + (n1 + 0.5) * size - py
+            sz = origin[2] + (n2 + 0.5) * size - pz
+            best = min(
+                best, dist[(n0 * s1 + n1) * s2 + n2] + math.sqrt(sx * sx + sy * sy + sz * sz)
+            )
+        tx, ty, tz = px - target[0], py - target[1], pz - target[2]
+        near = math.sqrt(tx * tx + ty * ty + tz * tz)
+        out[b] = min(best, near) if near < size else best

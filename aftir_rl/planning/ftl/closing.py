@@ -12,7 +12,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.collision import point_clearance
-from aftir_rl.core.robot import ArmSpec, body_points, tip_jacobian, tip_position
+from aftir_rl.core.kernel.sections import close
+from aftir_rl.core.robot import ArmSpec, body_points, tip_position
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.model import Route, clip_kappa, kappa_to_angles
 
@@ -43,74 +44,22 @@ def close_batch(
     (its derivative is ``(0, 0, 1)``): with sections of fixed length, a continuous lead is what
     lets a route end exactly at any distance. Steps are bounded (0.3 rad, 10 cm), ``κ`` stays
     within the joint limit and the lead within ``lead_range`` (None: the lead stays as given, for
-    routes already threaded through the tank by the beam). Returns ``(lead, κ)`` of each
-    candidate, or None where it did not converge to 1e-6 cm.
+    routes already threaded through the tank by the beam). Compiled, one loop per candidate
+    (:func:`aftir_rl.core.kernel.sections.close`). Returns ``(lead, κ)`` of each candidate, or
+    None where it did not converge to 1e-6 cm.
     """
     kap = np.array(kappa, dtype=np.float64)
-    lead = np.array(lead, dtype=np.float64)
-    lo, hi = lead_range if lead_range is not None else (lead, lead)
-    lead = np.clip(lead, lo, hi)
-    c, m = kap.shape[:2]
-    j0 = max(0, m - free)
-    nk = 2 * (m - j0)
-
-    def joints(p: NDArray[np.float64]) -> tuple[ArrayLike, ArrayLike, ArrayLike]:
-        # the last sections' κ, flattened in p (C, R, nk), after the fixed ones of each route
-        fixed = np.broadcast_to(kap[:, None, :j0], p.shape[:2] + (j0, 2))
-        theta, phi = kappa_to_angles(np.concatenate([fixed, p.reshape(p.shape[:2] + (-1, 2))], 2))
-        return lead[:, None], theta, phi
-
-    for _ in range(iterations):
-        # forward differences of the tip in the free κ (C, 3, nk)
-        tip, jac_t = tip_jacobian(kap[:, j0:].reshape(c, nk), l, central=False, joints=joints)
-        err = target - tip
-        norm = np.linalg.norm(err, axis=1)
-        done = norm < 1e-7
-        if done.all():
-            break
-        dk, dlead = _dls_step(jac_t, err, norm, done, l, lead_range is not None)
-        kap[:, j0:] = clip_kappa(kap[:, j0:] + dk.reshape(c, -1, 2), theta_max)
-        lead = np.clip(lead + dlead, lo, hi)
-    theta, phi = kappa_to_angles(kap)
-    ok = np.linalg.norm(target - tip_position(lead, theta, phi, l), axis=1) < 1e-6
-    return [(float(lead[i]), kap[i]) if ok[i] else None for i in range(c)]
-
-
-def _dls_step(
-    jac_t: NDArray[np.float64],
-    err: NDArray[np.float64],
-    norm: NDArray[np.float64],
-    done: NDArray[np.bool_],
-    l: float,
-    free_lead: bool,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """One bounded damped least-squares step of each route: ``(Δκ (C, nk), Δlead (C,))``.
-
-    Args:
-        jac_t: the tip's Jacobian in the free ``κ``, ``(C, 3, nk)``.
-        err: the tip errors ``target − tip``, ``(C, 3)``.
-        norm: their lengths [cm].
-        done: the routes already on the target (they do not move).
-        l: section length [cm].
-        free_lead: the lead moves too.
-
-    """
-    c, nk = jac_t.shape[0], jac_t.shape[2]
-    unit_z = np.array([0.0, 0.0, 1.0])
-    jac_k = np.swapaxes(jac_t, 1, 2)  # (C, nk, 3)
-    # the lead's column is in cm, the angles' in cm/rad: scale it like 1/l rad per cm
-    lead_weight = 1.0 if free_lead else 0.0
-    jac = np.concatenate([jac_k, np.broadcast_to(unit_z * l * lead_weight, (c, 1, 3))], axis=1)
-    damping = np.where(norm > 5, 1e-6, 1e-8) * l * l
-    a = np.swapaxes(jac, 1, 2) @ jac + damping[:, None, None] * np.eye(3)
-    step = np.einsum("cvi,ci->cv", jac, np.linalg.solve(a, err[..., None])[..., 0])
-    step[done] = 0.0
-    dk, dlead = step[:, :nk], step[:, nk] * l
-    size = np.linalg.norm(dk, axis=1)
-    scale = np.minimum(
-        np.minimum(1.0, 0.3 / np.maximum(size, 1e-12)), 10.0 / np.maximum(np.abs(dlead), 1e-12)
-    )
-    return dk * scale[:, None], dlead * scale
+    lead = np.array(lead, dtype=np.float64).reshape(-1)
+    if lead_range is None:
+        lo, hi = lead.copy(), lead.copy()
+    else:
+        lo = np.broadcast_to(np.asarray(lead_range[0], dtype=np.float64), lead.shape).copy()
+        hi = np.broadcast_to(np.asarray(lead_range[1], dtype=np.float64), lead.shape).copy()
+    ok = np.zeros(len(lead), dtype=bool)
+    if len(lead):
+        close(lead, kap, np.asarray(target, dtype=np.float64), float(l), float(theta_max),
+              int(free), int(iterations), lo, hi, lead_range is not None, ok)  # fmt: skip
+    return [(float(lead[i]), kap[i]) if ok[i] else None for i in range(len(lead))]
 
 
 def push_away(

@@ -1,6 +1,6 @@
 """The guide of the route search: a distance-to-go field over the free space of a tank.
 
-:class:`GuideField` runs Dijkstra-like relaxation over a grid of half the raster's cells
+:class:`GuideField` runs Dijkstra over a grid of half the raster's cells
 (26-neighbourhood, Euclidean steps, an edge only where its midpoint is free, so a thin wall cuts
 it), optionally restricted to a corridor around a learned cell path (:func:`corridor`). Used by
 :func:`aftir_rl.planning.ftl.route.plan_route` and by the batched kernels of the FTL env
@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.collision import point_clearance
+from aftir_rl.core.kernel.guide import field_query, relax_field
 from aftir_rl.core.tank import Tank
 
 __all__ = ["GuideField", "corridor"]
@@ -32,8 +33,9 @@ class GuideField:
     free when it keeps the arm's radius from every solid and wall; two neighbouring points
     (26-neighbourhood) are joined when the midpoint between them is free too, so a thin wall
     such as the 4 cm baffle cuts every edge across it except through the hatch. Distances are
-    Euclidean along the edges, relaxed with numpy until they settle. ``allowed`` (on the raster)
-    restricts the field to a corridor.
+    Euclidean along the edges, shortest by Dijkstra (compiled,
+    :func:`~aftir_rl.core.kernel.guide.relax_field`). ``allowed`` (on the raster) restricts the
+    field to a corridor.
 
     ``clearance_cost`` ``α`` (0: plain lengths) makes an edge near a surface dearer, so the
     shortest way keeps away from surfaces where it can (clearance as a cost, after Kuntz et al.):
@@ -75,16 +77,13 @@ class GuideField:
                 w * (1.0 + (cost + shifted(cost, -d)) / 2) for d, w in zip(NEIGHBOURS, lengths)
             ]
         self.weights = weights
-        for _ in range(int(self.shape.sum()) * 4):
-            new = dist.copy()
-            for e, (d, w) in enumerate(zip(NEIGHBOURS, weights)):
-                # dist[x] <- dist[x + d] + w where the edge x -> x + d exists
-                src = shifted(dist, -d)
-                new = np.minimum(new, np.where(edges[e] & free, src + w, np.inf))
-            new = np.where(free, new, np.inf)
-            if np.array_equal(new, dist):
-                break
-            dist = new
+        n = int(np.prod(self.shape))
+        table = np.empty((len(NEIGHBOURS), n))
+        for e, w in enumerate(weights):
+            table[e] = np.broadcast_to(w, tuple(self.shape)).reshape(-1)
+        self._flat_edges = edges.reshape(len(NEIGHBOURS), -1)
+        flat = dist.reshape(-1)  # a view: relaxed in place
+        relax_field(flat, free.reshape(-1), self._flat_edges, table, NEIGHBOURS, self.shape)
         self.dist = dist
         self.target = target
 
@@ -95,20 +94,13 @@ class GuideField:
         leaks through a thin wall), each at its distance plus the straight line to it.
         """
         p = np.asarray(points, dtype=np.float64)
-        cell = np.clip(np.floor((p - self.origin) / self.size).astype(np.int64), 0, self.shape - 1)
-        own = self.dist[cell[..., 0], cell[..., 1], cell[..., 2]]
-        centre = self.origin + (cell + 0.5) * self.size
-        best = own + np.linalg.norm(p - centre, axis=-1)
-        for e, d in enumerate(NEIGHBOURS):
-            c = cell + d
-            ok = np.all((c >= 0) & (c < self.shape), axis=-1)
-            cc = np.where(ok[..., None], c, 0)
-            joined = self.edges[e][cell[..., 0], cell[..., 1], cell[..., 2]] & ok
-            dd = self.dist[cc[..., 0], cc[..., 1], cc[..., 2]]
-            v = dd + np.linalg.norm(p - (self.origin + (cc + 0.5) * self.size), axis=-1)
-            best = np.minimum(best, np.where(joined, v, np.inf))
-        near = np.linalg.norm(p - self.target, axis=-1)
-        return np.where(near < self.size, np.minimum(best, near), best)
+        flat = np.ascontiguousarray(p.reshape(-1, 3))
+        out = np.empty(len(flat))
+        grid = (self.origin, self.size, self.shape)
+        field_query(
+            flat, self.dist.reshape(-1), self._flat_edges, NEIGHBOURS, grid, self.target, out
+        )
+        return out.reshape(p.shape[:-1])
 
 
 def shifted(a: NDArray[np.float64], d: NDArray[np.int64]) -> NDArray[np.float64]:

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from aftir_rl.core.kernel.geometry import fk_points
+from aftir_rl.core.kernel.sections import traced_deviation
 from aftir_rl.core.robot import (
     Posture,
     body_points,
@@ -298,29 +300,15 @@ def ftl_deviation(motion: FTLMotion, half_window: int = 12) -> tuple[float, floa
     so that is where its nearest point lies).
     """
     l, n = motion.route.section_length, motion.n_sections
-    tips = motion.tips()
-    pts = motion.points()
-    k = pts.shape[1] - 1
+    tips = np.ascontiguousarray(motion.tips())
+    k = n * SAMPLES_PER_SECTION
     back = n * l * (1.0 - np.arange(k + 1) / k)
-    s = motion.s
     worst, total = 0.0, 0.0
-    offsets = np.arange(-half_window, half_window + 1)
-    for lo in range(0, len(s), 64):
-        t = np.arange(lo, min(lo + 64, len(s)))
-        p = pts[t]  # (C, P, 3)
-        u = s[t, None] - back[None, :]  # (C, P)
-        on_axis = u <= s[0]
-        centre = np.searchsorted(s, u)  # (C, P)
-        # segment a -> a + 1 of the traced tip path, only segments already traced by entry t
-        a = np.clip(centre[..., None] + offsets, 0, None)  # (C, P, W)
-        a = np.minimum(a, np.maximum(t[:, None, None] - 1, 0))
-        b = np.minimum(a + 1, t[:, None, None])
-        pa, pb = tips[a], tips[b]
-        ab = pb - pa
-        w = np.einsum("cpwi,cpwi->cpw", p[:, :, None, :] - pa, ab)
-        w = np.clip(w / np.maximum(np.einsum("cpwi,cpwi->cpw", ab, ab), 1e-12), 0.0, 1.0)
-        d = np.linalg.norm(pa + w[..., None] * ab - p[:, :, None, :], axis=-1).min(axis=-1)
-        d = np.where(on_axis, np.hypot(p[..., 0], p[..., 1]), d)
-        worst = max(worst, float(d.max()))
-        total += float(d.sum())
-    return worst, total / (len(s) * (k + 1))
+    points = np.empty((64, k + 1, 3))
+    for lo in range(0, len(motion), 64):  # memory-bounded: 64 entries' backbones at a time
+        hi = min(lo + 64, len(motion))
+        dis, theta, phi = motion.dis[lo:hi], motion.theta[lo:hi], motion.phi[lo:hi]
+        fk_points(dis, theta, phi, l, SAMPLES_PER_SECTION, points[: hi - lo])
+        w, t = traced_deviation(points[: hi - lo], tips, motion.s, back, half_window, lo)
+        worst, total = max(worst, w), total + t
+    return worst, total / (len(motion) * (k + 1))

@@ -20,12 +20,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, PlanningError
+from aftir_rl.core.kernel.clearance import kernel_grid
+from aftir_rl.core.kernel.sections import postures_min_clearance
 from aftir_rl.core.robot import ArmSpec
 from aftir_rl.core.tank import Tank
-from aftir_rl.planning.ftl.model import FTLMotion, Route, ftl_deviation, ftl_motion
+from aftir_rl.planning.ftl.model import (
+    SAMPLES_PER_SECTION,
+    FTLMotion,
+    Route,
+    ftl_deviation,
+    ftl_motion,
+)
 from aftir_rl.planning.ftl.route import RouteResult, RouteSettings, plan_route
 from aftir_rl.planning.timing import TimedMotion, time_motion
 
@@ -132,24 +139,16 @@ def _timed(motion: FTLMotion, arm: ArmSpec) -> tuple[TimedMotion | None, str | N
 
 
 def motion_clearance(tank: Tank, motion: FTLMotion) -> float:
-    """Smallest clearance [cm] of the arm's surface over every entry of a motion."""
-    worst = np.inf
-    for lo in range(0, len(motion), 256):
-        part = replace_slice(motion, lo, lo + 256)
-        worst = min(worst, float(point_clearance(tank, part.points()).min()))
-    return worst - tank.arm.radius
+    """Smallest clearance [cm] of the arm's surface over every entry of a motion (exact).
 
-
-def replace_slice(motion: FTLMotion, lo: int, hi: int) -> FTLMotion:
-    """Entries ``lo:hi`` of a motion (for memory-bounded checks)."""
-    return replace(
-        motion,
-        s=motion.s[lo:hi],
-        dis=motion.dis[lo:hi],
-        theta=motion.theta[lo:hi],
-        phi=motion.phi[lo:hi],
-        stage_index=(),
+    Every entry's backbone sampled :data:`~aftir_rl.planning.ftl.model.SAMPLES_PER_SECTION`
+    times per section, compiled (:func:`~aftir_rl.core.kernel.sections.postures_min_clearance`).
+    """
+    l = motion.route.section_length
+    worst = postures_min_clearance(
+        motion.dis, motion.theta, motion.phi, l, SAMPLES_PER_SECTION, kernel_grid(tank)
     )
+    return worst - tank.arm.radius
 
 
 def plan_motion(

@@ -25,16 +25,24 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.core.collision import point_clearance, points_clear
+from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.errors import PlanningError
-from aftir_rl.core.robot import ArmSpec, forward_kinematics, section_transforms
+from aftir_rl.core.kernel import KernelTank
+from aftir_rl.core.kernel.clearance import kernel_grid
+from aftir_rl.core.kernel.sections import extend
+from aftir_rl.core.robot import ArmSpec, forward_kinematics
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.closing import close_batch, push_away, route_clearance
 from aftir_rl.planning.ftl.guide import NEIGHBOURS as NEIGHBOURS  # for aftir_rl.envs.ftl.fields
 from aftir_rl.planning.ftl.guide import GuideField, corridor
-from aftir_rl.planning.ftl.model import Route, clip_kappa, kappa_to_angles
+from aftir_rl.planning.ftl.model import Route, kappa_to_angles
 
 __all__ = ["RouteSettings", "RouteResult", "GuideField", "plan_route", "route_clearance"]
+
+
+#: Surface clearance [cm] beyond the margin below which the search's clearance cost uses the
+#: exact distance; farther samples use the clearance grid's value (within its slack).
+EXACT_RANGE = 3.0
 
 
 @dataclass(frozen=True)
@@ -110,18 +118,6 @@ def _changes(max_change: float) -> NDArray[np.float64]:
     return np.array(out)
 
 
-def _section_samples(
-    rot: NDArray[np.float64], pos: NDArray[np.float64], kappa: NDArray[np.float64], l: float, k: int
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Samples ``(B, k, 3)`` of one new section per state, and its end frame ``(B,3,3), (B,3)``."""
-    theta, phi = kappa_to_angles(kappa)
-    frac = np.arange(1, k + 1) / k
-    local = section_transforms(theta[:, None] * frac, phi[:, None], l * frac)  # (B, k, 4, 4)
-    pts = np.einsum("bij,bkj->bki", rot, local[..., :3, 3]) + pos[:, None, :]
-    end_rot = rot @ local[:, -1, :3, :3]
-    return pts, end_rot, pts[:, -1, :]
-
-
 def plan_route(
     tank: Tank,
     target: ArrayLike,
@@ -163,7 +159,9 @@ def plan_route(
     notes: list[str] = []
     for name, allowed in attempts:
         guide = GuideField(tank, target, allowed)
-        result = _beam(_Search(tank, arm, target, guide, settings, start, prefix))
+        result = _beam(
+            _Search(tank, arm, target, guide, settings, start, kernel_grid(tank), prefix)
+        )
         if result is not None:
             result.corridor = name
             result.notes = notes
@@ -186,6 +184,7 @@ class _Search:
     guide: GuideField
     settings: RouteSettings
     start: float
+    kernel_tank: KernelTank
     prefix: Route | None = None
 
 
@@ -334,26 +333,26 @@ def _expand(
     need = arm.radius + settings.margin + settings.slack
     last = beam.kap_hist[:, -1, :] if depth else np.zeros((len(beam.cost), 2))
     b, c = len(beam.cost), len(changes)
-    new_k = clip_kappa(last[:, None, :] + changes[None, :, :], arm.theta_max).reshape(-1, 2)
-    rep = np.repeat(np.arange(b), c)
-    pts, end_rot, end_pos = _section_samples(beam.rot[rep], beam.pos[rep], new_k, l, k)
-    count = len(rep)
+    count = b * c
     # sections needed so far: bent + straight below the floor must fit in the arm
-    n_needed = depth + 1 + np.ceil(beam.lead[rep] / l - 1e-9)
-    # the cheap bounded test first, exact distances (for the cost) only for the survivors
-    ok = (n_needed <= arm.max_sections) & points_clear(search.tank, pts, need)
+    allowed = depth + 1 + np.ceil(beam.lead / l - 1e-9) <= arm.max_sections
+    new_k, end_pos, cost = np.empty((count, 2)), np.empty((count, 3)), np.empty(count)
+    end_rot, ok = np.empty((count, 3, 3)), np.empty(count, dtype=bool)
+    clearance = (need, arm.radius, settings.margin, arm.radius + settings.margin + EXACT_RANGE)
+    extend(
+        beam.rot, beam.pos, np.ascontiguousarray(last), allowed, changes,
+        (arm.theta_max, l, k), clearance, search.kernel_tank,
+        new_k, end_rot, end_pos, cost, ok,
+    )  # fmt: skip
     if not np.any(ok):
         return count, None
     idx = np.flatnonzero(ok)
-    rep, new_k, pts, end_rot, end_pos = rep[idx], new_k[idx], pts[idx], end_rot[idx], end_pos[idx]
-    clear = point_clearance(search.tank, pts) - arm.radius  # surface clearance (B*C, k)
+    rep, new_k, end_rot, end_pos = idx // c, new_k[idx], end_rot[idx], end_pos[idx]
     dk = new_k - (beam.kap_hist[rep, -1, :] if depth else 0.0)
     g = (
         beam.cost[rep]
         + l
-        + settings.clearance_weight
-        * (l / k)
-        * np.sum(1.0 / np.maximum(clear - settings.margin, 0.25), axis=1)
+        + settings.clearance_weight * (l / k) * cost[idx]
         + settings.change_weight * l * np.einsum("ij,ij->i", dk, dk) / 10.0
     )
     h = search.guide(end_pos)
@@ -375,9 +374,13 @@ def _prune(
         [np.floor(cand.end_pos[keep] / settings.bin_cm), np.round(heading / settings.bin_heading)],
         axis=1,
     ).astype(np.int64)
-    order = keep[np.argsort(f[keep])]
-    key = key[np.argsort(f[keep])]
-    _, first = np.unique(key, axis=0, return_index=True)
+    sort = np.argsort(f[keep])
+    order, key = keep[sort], key[sort]
+    # one int64 per bin (14 bits a coordinate, 6 a heading component): unique in 1-D
+    packed = np.zeros(len(key), dtype=np.int64)
+    for column, bits in zip(key.T, (14, 14, 14, 6, 6, 6)):
+        packed = (packed << bits) + (column + (1 << (bits - 1)))
+    _, first = np.unique(packed, return_index=True)
     order = order[np.sort(first)][: settings.beam_width]
     rot, pos, hist = cand.end_rot[order], cand.end_pos[order], cand.hist[order]
     return _Beam(rot, pos, hist, beam.lead[cand.rep[order]], cand.g[order]), cand.h[order]
