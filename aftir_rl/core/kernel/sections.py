@@ -32,10 +32,11 @@ __all__ = [
     "tip_of",
     "close",
     "traced_deviation",
+    "fit_shape",
 ]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def clip_bend(kx: float, ky: float, limit: float) -> tuple[float, float, float, float, float]:
     """A bending vector shortened to ``limit`` [rad]: ``(κx, κy, θ, cos φ, sin φ)``."""
     norm = math.hypot(kx, ky)
@@ -47,7 +48,7 @@ def clip_bend(kx: float, ky: float, limit: float) -> tuple[float, float, float, 
     return kx, ky, theta, math.cos(phi), math.sin(phi)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def arc_point(theta: float, cp: float, sp: float, arc: float) -> tuple[float, float, float]:
     """The point ``arc`` [cm] along a section bent by ``θ`` over that arc, in its base frame."""
     h = 0.5 * theta
@@ -56,7 +57,7 @@ def arc_point(theta: float, cp: float, sp: float, arc: float) -> tuple[float, fl
     return radial * cp, radial * sp, arc * (sinc_h * math.cos(h))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def clearance_at(x: float, y: float, z: float, tank: KernelTank, exact_below: float) -> float:
     """Signed distance [cm]: exact where it may be below ``exact_below``, else the grid's value.
 
@@ -298,3 +299,59 @@ def traced_deviation(
             worst = max(worst, d)
             total += d
     return worst, total
+
+
+@njit(cache=True)
+def fit_shape(
+    dis: float,
+    kappa: NDArray[np.float64],
+    first_free: int,
+    goal: NDArray[np.float64],
+    weight: NDArray[np.float64],
+    l: float,
+    per: int,
+    iterations: int,
+) -> None:
+    """:func:`~aftir_rl.planning.ftl.model.fit_shape`'s Gauss-Newton, in place on ``kappa``.
+
+    Moves the bending vectors ``kappa[first_free:]`` so that the body's samples (``per`` a
+    section, from the base at height ``dis``) approach ``goal (N·per + 1, 3)``, sample ``p``
+    weighted by ``weight[p]``; forward differences of step 1e-6, damping 1e-6.
+    """
+    n = kappa.shape[0]
+    n_points = n * per + 1
+    nv = 2 * (n - first_free)
+    theta, phi = np.empty(n), np.empty(n)
+    base, trial, rot = np.empty((n_points, 3)), np.empty((n_points, 3)), np.empty((3, 3))
+    jac, err = np.empty((3 * n_points, nv)), np.empty(3 * n_points)
+    for _ in range(iterations):
+        _angles(kappa, theta, phi)
+        fk_row(dis, theta, phi, l, per, rot, base)
+        for p in range(n_points):
+            for a in range(3):
+                err[3 * p + a] = (goal[p, a] - base[p, a]) * weight[p]
+        for v in range(nv):
+            row, col = first_free + v // 2, v % 2
+            keep = kappa[row, col]
+            kappa[row, col] = keep + 1e-6
+            _angles(kappa, theta, phi)
+            fk_row(dis, theta, phi, l, per, rot, trial)
+            kappa[row, col] = keep
+            for p in range(n_points):
+                for a in range(3):
+                    jac[3 * p + a, v] = (trial[p, a] - base[p, a]) * weight[p] / 1e-6
+        step = np.linalg.solve(jac.T @ jac + 1e-6 * np.eye(nv), jac.T @ err)
+        for v in range(nv):
+            kappa[first_free + v // 2, v % 2] += step[v]
+        if np.abs(step).max() < 1e-7:
+            break
+
+
+@njit(cache=True)
+def _angles(
+    kappa: NDArray[np.float64], theta: NDArray[np.float64], phi: NDArray[np.float64]
+) -> None:
+    """``θ, φ`` of bending vectors ``(N, 2)``, in place (``φ = 0`` where straight)."""
+    for j in range(kappa.shape[0]):
+        theta[j] = math.hypot(kappa[j, 0], kappa[j, 1])
+        phi[j] = math.atan2(kappa[j, 1], kappa[j, 0]) if theta[j] > 1e-12 else 0.0

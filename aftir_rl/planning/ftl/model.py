@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.kernel.geometry import fk_points
-from aftir_rl.core.kernel.sections import traced_deviation
+from aftir_rl.core.kernel.sections import fit_shape, traced_deviation
 from aftir_rl.core.robot import (
     Posture,
     body_points,
@@ -191,6 +191,7 @@ def _fit_shape(
 
     Minimises the distance of the body's samples to the route at the same arc length: the best
     constant-curvature approximation of the body sliding along the curve (approximate FTL).
+    Compiled (:func:`aftir_rl.core.kernel.sections.fit_shape`).
     """
     l = route.section_length
     dis = s - n * l
@@ -201,30 +202,13 @@ def _fit_shape(
     free = np.flatnonzero(dis + (np.arange(n) + 1) * l > route.lead + 1e-9)
     if len(free) == 0:
         return kappa
-    kap = kappa.copy()
-    nv = 2 * len(free)
-    eps = 1e-6
     # the leader: the tip is held on the route far more firmly than the body
     weight = np.ones(n * per + 1)
     weight[-1] = TIP_WEIGHT
-
-    def samples(k: NDArray[np.float64]) -> NDArray[np.float64]:
-        th, ph = kappa_to_angles(k)
-        return body_points(dis, th, ph, l, per)
-
-    for _ in range(iterations):
-        base = samples(kap)  # (N*per + 1, 3)
-        res = goal.reshape(-1, 3)
-        res = np.concatenate([res[:1], res.reshape(n, per + 1, 3)[:, 1:].reshape(-1, 3)])
-        err = ((res - base) * weight[:, None]).reshape(-1)
-        trial = np.repeat(kap[None], nv, axis=0)
-        for v in range(nv):
-            trial[v, free[v // 2], v % 2] += eps
-        jac = (((samples(trial) - base[None]) * weight[None, :, None]).reshape(nv, -1) / eps).T
-        step, *_ = np.linalg.lstsq(jac.T @ jac + 1e-6 * np.eye(nv), jac.T @ err, rcond=None)
-        kap[free] += step.reshape(-1, 2)
-        if np.abs(step).max() < 1e-7:
-            break
+    res = goal.reshape(-1, 3)
+    res = np.concatenate([res[:1], res.reshape(n, per + 1, 3)[:, 1:].reshape(-1, 3)])
+    kap = np.array(kappa, dtype=np.float64)
+    fit_shape(float(dis), kap, int(free[0]), res, weight, l, per, iterations)
     return kap
 
 
