@@ -14,8 +14,10 @@ import pytest
 
 from aftir_rl.cli import plan as plan_cli
 from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.robot import Posture, body_points
 from aftir_rl.core.tank import load_tank
+from aftir_rl.planning.ftl.batch import plan_motions
 from aftir_rl.planning.ftl.model import Route, ftl_deviation, ftl_motion, ftl_postures, route_points
 from aftir_rl.planning.ftl.plan import plan_motion
 from aftir_rl.planning.posture.planner import Planner, random_free_targets
@@ -124,3 +126,38 @@ def test_unreachable_with_margin_gives_the_reason(tank, capsys):
     assert plan_cli.main(["--target", "100", "30", "3"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: Cannot reach the target") and "\n" not in err
+
+
+def test_pinned_outcomes_on_the_bench_bay2_targets(tank, scene):
+    """The benchmark's first bay-2 targets (seed 21): which complete, each checked by fcl.
+
+    Target 3 lies right behind the baffle beside the hatch; no route keeping the margin is
+    found there (before and after the compiled search, benchmarks/results/speed.md).
+    """
+    drawn = random_free_targets(Planner(tank), 20, seed=21, clearance=10.0)["bay2"][:6]
+    plans = plan_motions(tank, np.array(drawn))
+    assert [p.complete for p in plans] == [True, True, True, False, True, True]
+    for target, plan in zip(drawn, plans):
+        if plan.complete:
+            assert plan.tip_error_cm < 1e-6 and plan.ftl_deviation_cm[0] < 3.0
+            check_motion(tank, scene, plan.to_json(), target)
+
+
+@pytest.mark.slow
+def test_plan_motions_in_processes_equals_one_process(tank):
+    drawn = random_free_targets(Planner(tank), 3, seed=4, clearance=10.0)["bay1"]
+    here = plan_motions(tank, drawn)
+    there = plan_motions(tank, drawn, workers=2)
+    for a, b in zip(here, there):
+        assert a.complete == b.complete and a.min_clearance_cm == b.min_clearance_cm
+        if a.complete:
+            np.testing.assert_array_equal(a.motion.theta, b.motion.theta)
+
+
+def test_plan_motions_refuses_bad_input(tank):
+    with pytest.raises(ConfigError, match="shape"):
+        plan_motions(tank, [[1.0, 2.0]])
+    with pytest.raises(ConfigError, match="finite"):
+        plan_motions(tank, [[1.0, np.nan, 3.0]])
+    with pytest.raises(ConfigError, match="cells"):
+        plan_motions(tank, [[100.0, 60.0, 60.0]], cells=[None, None])

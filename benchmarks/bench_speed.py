@@ -1,0 +1,176 @@
+"""Follow-the-leader planning speed, side by side with a previous implementation, in one run.
+
+    python benchmarks/bench_speed.py [--n N] [--seed S] [--baseline REV] [--out FILE]
+
+The same targets (N random free targets per bay of the reference tank, at least 10 cm from
+every surface, and the four reference targets) are planned by
+:func:`aftir_rl.planning.ftl.plan.plan_motion` of this tree and of the git revision ``REV``
+(checked out in a temporary worktree and run in a subprocess, one after the other, each after
+one warm-up target so that compiling is not counted). Printed per set: completion, median, p90
+and max seconds per target and their ratios, the smallest clearance, the largest tip error and
+the FTL deviation of both. Then :func:`aftir_rl.planning.ftl.batch.plan_motions` over every
+target with one process per core. ``--baseline none`` skips the comparison.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: Run in a tree (this one or the baseline's) with the targets' JSON on stdin: prints one JSON
+#: row per target.
+WORKER = r"""
+import json, sys, time
+import numpy as np
+from aftir_rl.core.tank import load_tank
+from aftir_rl.planning.ftl.plan import plan_motion
+sets = json.load(sys.stdin)
+tank = load_tank("b737_center")
+plan_motion(tank, tank.targets[0])
+out = {}
+for name, targets in sets["sets"].items():
+    rows = []
+    for t in targets:
+        start = time.perf_counter()
+        p = plan_motion(tank, np.array(t))
+        rows.append({"seconds": time.perf_counter() - start, "complete": p.complete,
+                     "clearance": p.min_clearance_cm, "tip_error": p.tip_error_cm,
+                     "deviation": p.ftl_deviation_cm[0] if p.ftl_deviation_cm else None})
+    out[name] = rows
+print(json.dumps(out))
+"""
+
+
+def _targets(n: int, seed: int) -> dict[str, list[list[float]]]:
+    """The benchmark's target sets: the reference targets and ``n`` per bay."""
+    from aftir_rl.core.tank import load_tank
+    from aftir_rl.planning.posture.planner import Planner, random_free_targets
+
+    tank = load_tank("b737_center")
+    drawn = random_free_targets(Planner(tank), n, seed=seed, clearance=10.0)
+    return {
+        "reference": [list(map(float, t)) for t in tank.targets],
+        "bay1": [list(map(float, t)) for t in drawn["bay1"]],
+        "bay2": [list(map(float, t)) for t in drawn["bay2"]],
+    }
+
+
+def _run(tree: Path, sets: dict[str, list[list[float]]]) -> dict[str, list[dict]]:
+    """Plan every target with the package of ``tree`` in a fresh single-threaded process."""
+    env = dict(os.environ, PYTHONPATH=str(tree), OMP_NUM_THREADS="1")
+    payload = json.dumps({"sets": sets})
+    done = subprocess.run(
+        [sys.executable, "-c", WORKER], input=payload, capture_output=True, text=True,
+        env=env, cwd=tree, check=True,
+    )  # fmt: skip
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _baseline(rev: str, sets: dict[str, list[list[float]]]) -> dict[str, list[dict]]:
+    """:func:`_run` in a temporary worktree of ``rev``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "baseline"
+        subprocess.run(
+            ["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), rev],
+            check=True, capture_output=True,
+        )  # fmt: skip
+        try:
+            return _run(tree, sets)
+        finally:
+            subprocess.run(
+                ["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)],
+                check=False, capture_output=True,
+            )  # fmt: skip
+
+
+def _stats(rows: list[dict]) -> dict[str, float]:
+    """Completion, time percentiles and the worst outcomes of one set."""
+    secs = np.array([r["seconds"] for r in rows])
+    ok = [r for r in rows if r["complete"]]
+    return {
+        "complete": len(ok),
+        "n": len(rows),
+        "median": float(np.median(secs)),
+        "p90": float(np.percentile(secs, 90)),
+        "max": float(secs.max()),
+        "clearance": min((r["clearance"] for r in ok), default=float("nan")),
+        "tip_error": max((r["tip_error"] for r in ok), default=float("nan")),
+        "deviation": float(np.median([r["deviation"] for r in ok])) if ok else float("nan"),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--n", type=int, default=20, help="random targets per bay (default 20)")
+    parser.add_argument("--seed", type=int, default=21, help="seed of the random targets")
+    parser.add_argument("--baseline", default="37221ca", help="git revision to compare, or none")
+    parser.add_argument("--out", type=Path, help="write the rows and the table's numbers here")
+    args = parser.parse_args()
+    sets = _targets(args.n, args.seed)
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}; seed {args.seed}, {args.n} targets per bay, margin 1 cm\n"
+    )
+    runs = {"this tree": _run(ROOT, sets)}
+    if args.baseline != "none":
+        runs[args.baseline] = _baseline(args.baseline, sets)
+    print(
+        "| set | tree | complete | median s | p90 s | max s | min clearance (cm) | "
+        "tip error max (cm) | FTL deviation max, median (cm) |"
+    )
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+    table: dict[str, dict[str, dict[str, float]]] = {}
+    for name in sets:
+        for tree, rows in runs.items():
+            s = table.setdefault(name, {})[tree] = _stats(rows[name])
+            print(
+                f"| {name} | {tree} | {s['complete']}/{s['n']} | {s['median']:.3f} | "
+                f"{s['p90']:.3f} | {s['max']:.2f} | {s['clearance']:.2f} | "
+                f"{s['tip_error']:.1e} | {s['deviation']:.2f} |"
+            )
+        if len(runs) == 2:
+            new, old = (table[name][t] for t in runs)
+            print(
+                f"| {name} | ratio (old / new) | | {old['median'] / new['median']:.1f}× | "
+                f"{old['p90'] / new['p90']:.1f}× | {old['max'] / new['max']:.1f}× | | | |"
+            )
+    batch = _batch(sets)
+    print(
+        f"\nplan_motions, {os.cpu_count()} processes: {batch['n']} targets in "
+        f"{batch['seconds']:.1f} s ({batch['per_minute']:.0f} a minute), "
+        f"{batch['complete']} complete"
+    )
+    if args.out:
+        args.out.write_text(json.dumps({"runs": runs, "table": table, "batch": batch}, indent=1))
+
+
+def _batch(sets: dict[str, list[list[float]]]) -> dict[str, float]:
+    """Every target through :func:`plan_motions` with one process per core."""
+    from aftir_rl.core.tank import load_tank
+    from aftir_rl.planning.ftl.batch import plan_motions
+
+    targets = np.array([t for rows in sets.values() for t in rows])
+    start = time.perf_counter()
+    plans = plan_motions(load_tank("b737_center"), targets, workers=0)
+    seconds = time.perf_counter() - start
+    return {
+        "n": len(targets),
+        "seconds": seconds,
+        "per_minute": 60.0 * len(targets) / seconds,
+        "complete": sum(p.complete for p in plans),
+    }
+
+
+if __name__ == "__main__":
+    main()
