@@ -29,6 +29,7 @@ __all__ = [
     "min_clearance",
     "postures_min_clearance",
     "extend",
+    "chain",
     "tip_of",
     "close",
     "traced_deviation",
@@ -151,10 +152,19 @@ def extend(
             out_kappa[i, 0], out_kappa[i, 1] = kx, ky
             ok, cost = allowed[b], 0.0
             px, py, pz = pos[b, 0], pos[b, 1], pos[b, 2]
+            # sample j bends by h_j = j·h₁ (half its angle): sin, cos by the addition formulas
+            h1 = 0.5 * th / k
+            s1, c1 = math.sin(h1), math.cos(h1)
+            sj, cj = 0.0, 1.0
             for j in range(1, k + 1):
                 if not ok:
                     break
-                lx, ly, lz = arc_point(th * j / k, cp, sp, l * j / k)
+                sj, cj = sj * c1 + cj * s1, cj * c1 - sj * s1
+                h = h1 * j
+                sinc_h = 1.0 - h * h / 6.0 if abs(h) < 0.5 * SMALL else sj / h
+                arc = l * j / k
+                radial = arc * (h * sinc_h * sinc_h)
+                lx, ly, lz = radial * cp, radial * sp, arc * (sinc_h * cj)
                 px = r[0, 0] * lx + r[0, 1] * ly + r[0, 2] * lz + pos[b, 0]
                 py = r[1, 0] * lx + r[1, 1] * ly + r[1, 2] * lz + pos[b, 1]
                 pz = r[2, 0] * lx + r[2, 1] * ly + r[2, 2] * lz + pos[b, 2]
@@ -170,11 +180,20 @@ def extend(
 
 
 @njit(cache=True)
-def tip_of(lead: float, kappa: NDArray[np.float64], l: float) -> tuple[float, float, float]:
-    """The tip [cm] of a route: ``lead`` up the axis, then sections bent by ``kappa (M, 2)``."""
-    r = np.eye(3)
-    x, y, z = 0.0, 0.0, lead
-    for j in range(kappa.shape[0]):
+def chain(
+    kappa: NDArray[np.float64],
+    first: int,
+    stop: int,
+    l: float,
+    r: NDArray[np.float64],
+    start: tuple[float, float, float],
+) -> tuple[float, float, float]:
+    """The end of sections ``first..stop−1`` bent by ``kappa (M, 2)`` from frame ``r, start``.
+
+    ``r (3, 3)`` ends as the last section's end rotation (in place).
+    """
+    x, y, z = start
+    for j in range(first, stop):
         kx, ky = kappa[j, 0], kappa[j, 1]
         th = math.hypot(kx, ky)
         ph = math.atan2(ky, kx) if th > 1e-12 else 0.0
@@ -188,21 +207,67 @@ def tip_of(lead: float, kappa: NDArray[np.float64], l: float) -> tuple[float, fl
 
 
 @njit(cache=True)
+def tip_of(
+    lead: float, kappa: NDArray[np.float64], l: float, r: NDArray[np.float64]
+) -> tuple[float, float, float]:
+    """The tip [cm] of a route: ``lead`` up the axis, then sections bent by ``kappa (M, 2)``.
+
+    ``r (3, 3)`` is scratch space.
+    """
+    r[:] = 0.0
+    r[0, 0], r[1, 1], r[2, 2] = 1.0, 1.0, 1.0
+    return chain(kappa, 0, kappa.shape[0], l, r, (0.0, 0.0, lead))
+
+
+@njit(cache=True)
 def _dls_step(
-    jac: NDArray[np.float64], err: NDArray[np.float64], norm: float, l: float, lead_weight: float
-) -> tuple[NDArray[np.float64], float]:
-    """One bounded damped least-squares step ``(Δκ (nk,), Δlead)`` for Jacobian ``(3, nk)``."""
+    jac: NDArray[np.float64],
+    err: NDArray[np.float64],
+    norm: float,
+    l: float,
+    lead_weight: float,
+    dk: NDArray[np.float64],
+) -> float:
+    """One bounded damped least-squares step: ``Δκ`` into ``dk (nk,)``, ``Δlead`` returned.
+
+    ``jac (3, nk)``; the lead's column is ``(0, 0, l·lead_weight)``. The 3×3 system by Cramer.
+    """
     nk = jac.shape[1]
-    full = np.empty((3, nk + 1))
-    full[:, :nk] = jac
-    full[0, nk], full[1, nk], full[2, nk] = 0.0, 0.0, l * lead_weight
     damping = (1e-6 if norm > 5 else 1e-8) * l * l
-    a = full @ full.T + damping * np.eye(3)
-    step = full.T @ np.linalg.solve(a, err)
-    dk, dlead = step[:nk], step[nk] * l
-    size = math.sqrt(float(np.sum(dk * dk)))
-    scale = min(min(1.0, 0.3 / max(size, 1e-12)), 10.0 / max(abs(dlead), 1e-12))
-    return dk * scale, dlead * scale
+    a = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            v = 0.0
+            for c in range(nk):
+                v += jac[i, c] * jac[j, c]
+            a[i, j] = v
+    a[2, 2] += (l * lead_weight) ** 2
+    a[0, 0] += damping
+    a[1, 1] += damping
+    a[2, 2] += damping
+    det = (
+        a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1])
+        - a[0, 1] * (a[1, 0] * a[2, 2] - a[1, 2] * a[2, 0])
+        + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0])
+    )
+    y = np.empty(3)
+    for col in range(3):
+        m = a.copy()
+        m[0, col], m[1, col], m[2, col] = err[0], err[1], err[2]
+        y[col] = (
+            m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
+            - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+            + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0])
+        ) / det
+    size = 0.0
+    for c in range(nk):
+        dk[c] = jac[0, c] * y[0] + jac[1, c] * y[1] + jac[2, c] * y[2]
+        size += dk[c] * dk[c]
+    dlead = l * lead_weight * y[2] * l
+    scale = min(min(1.0, 0.3 / max(math.sqrt(size), 1e-12)), 10.0 / max(abs(dlead), 1e-12))
+    for c in range(nk):
+        dk[c] *= scale
+    return dlead * scale
 
 
 @njit(cache=True)
@@ -228,14 +293,19 @@ def close(
     m = kappa.shape[1]
     j0 = max(0, m - free)
     nk = 2 * (m - j0)
-    jac = np.empty((3, nk))
-    err = np.empty(3)
+    jac, err, dk = np.empty((3, nk)), np.empty(3), np.empty(nk)
+    r, r0 = np.empty((3, 3)), np.empty((3, 3))
     lead_weight = 1.0 if free_lead else 0.0
     for c in range(kappa.shape[0]):
         kap = kappa[c]
         lead[c] = min(max(lead[c], lead_lo[c]), lead_hi[c])
+        # the fixed sections' end frame, once: each tip below chains only the free ones
+        r0[:] = 0.0
+        r0[0, 0], r0[1, 1], r0[2, 2] = 1.0, 1.0, 1.0
+        q0 = chain(kap, 0, j0, l, r0, (0.0, 0.0, 0.0))
         for _ in range(iterations):
-            tx, ty, tz = tip_of(lead[c], kap, l)
+            r[:] = r0
+            tx, ty, tz = chain(kap, j0, m, l, r, (q0[0], q0[1], q0[2] + lead[c]))
             err[0], err[1], err[2] = target[0] - tx, target[1] - ty, target[2] - tz
             norm = math.sqrt(err[0] ** 2 + err[1] ** 2 + err[2] ** 2)
             if norm < 1e-7:
@@ -244,17 +314,18 @@ def close(
                 row, col = j0 + v // 2, v % 2
                 keep = kap[row, col]
                 kap[row, col] = keep + 1e-6
-                x, y, z = tip_of(lead[c], kap, l)
+                r[:] = r0
+                x, y, z = chain(kap, j0, m, l, r, (q0[0], q0[1], q0[2] + lead[c]))
                 kap[row, col] = keep
                 jac[0, v], jac[1, v], jac[2, v] = (x - tx) / 1e-6, (y - ty) / 1e-6, (z - tz) / 1e-6
-            dk, dlead = _dls_step(jac, err, norm, l, lead_weight)
+            dlead = _dls_step(jac, err, norm, l, lead_weight, dk)
             for j in range(j0, m):
                 kx, ky, _, _, _ = clip_bend(
                     kap[j, 0] + dk[2 * (j - j0)], kap[j, 1] + dk[2 * (j - j0) + 1], theta_max
                 )
                 kap[j, 0], kap[j, 1] = kx, ky
             lead[c] = min(max(lead[c] + dlead, lead_lo[c]), lead_hi[c])
-        tx, ty, tz = tip_of(lead[c], kap, l)
+        tx, ty, tz = tip_of(lead[c], kap, l, r)
         ok[c] = (
             math.sqrt((target[0] - tx) ** 2 + (target[1] - ty) ** 2 + (target[2] - tz) ** 2) < 1e-6
         )
