@@ -61,5 +61,6 @@ bench: $(STAMP)  ## every benchmark table of docs/benchmarks.md (about 20 minute
 tensorboard: $(STAMP)
 	$(VENV)/bin/tensorboard --logdir runs
 
-clean:
+clean:  ## also numba's caches (a kernel's cache does not see edits to the kernels it calls)
 	rm -rf runs .pytest_cache build *.egg-info docs/_build
+	find aftir_rl -name "*.nb[ic]" -delete

@@ -1,6 +1,6 @@
 """Follow-the-leader planning speed, side by side with a previous implementation, in one run.
 
-    python benchmarks/bench_speed.py [--n N] [--seed S] [--baseline REV] [--out FILE]
+    python benchmarks/bench_speed.py [--n N] [--seed S] [--baseline REV] [--batch B] [--out FILE]
 
 The same targets (N random free targets per bay of the reference tank, at least 10 cm from
 every surface, and the four reference targets) are planned by
@@ -9,7 +9,8 @@ every surface, and the four reference targets) are planned by
 one warm-up target so that compiling is not counted). Printed per set: completion, median, p90
 and max seconds per target and their ratios, the smallest clearance, the largest tip error and
 the FTL deviation of both. Then :func:`aftir_rl.planning.ftl.batch.plan_motions` over every
-target with one process per core. ``--baseline none`` skips the comparison.
+target (or ``B`` random bay-2 targets of seed ``S + 1``) with one process per core.
+``--baseline none`` skips the comparison.
 """
 
 from __future__ import annotations
@@ -115,6 +116,10 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=20, help="random targets per bay (default 20)")
     parser.add_argument("--seed", type=int, default=21, help="seed of the random targets")
     parser.add_argument("--baseline", default="37221ca", help="git revision to compare, or none")
+    parser.add_argument(
+        "--batch", type=int, default=0,
+        help="plan_motions over this many random bay-2 targets (default: the sets' targets)",
+    )  # fmt: skip
     parser.add_argument("--out", type=Path, help="write the rows and the table's numbers here")
     args = parser.parse_args()
     sets = _targets(args.n, args.seed)
@@ -145,7 +150,7 @@ def main() -> None:
                 f"| {name} | ratio (old / new) | | {old['median'] / new['median']:.1f}× | "
                 f"{old['p90'] / new['p90']:.1f}× | {old['max'] / new['max']:.1f}× | | | |"
             )
-    batch = _batch(sets)
+    batch = _batch(sets, args.batch, args.seed)
     print(
         f"\nplan_motions, {os.cpu_count()} processes: {batch['n']} targets in "
         f"{batch['seconds']:.1f} s ({batch['per_minute']:.0f} a minute), "
@@ -155,12 +160,14 @@ def main() -> None:
         args.out.write_text(json.dumps({"runs": runs, "table": table, "batch": batch}, indent=1))
 
 
-def _batch(sets: dict[str, list[list[float]]]) -> dict[str, float]:
-    """Every target through :func:`plan_motions` with one process per core."""
+def _batch(sets: dict[str, list[list[float]]], n: int, seed: int) -> dict[str, float]:
+    """The sets' targets, or ``n`` random bay-2 ones, through :func:`plan_motions` (all cores)."""
     from aftir_rl.core.tank import load_tank
     from aftir_rl.planning.ftl.batch import plan_motions
 
     targets = np.array([t for rows in sets.values() for t in rows])
+    if n:
+        targets = np.array(_targets(n, seed + 1)["bay2"])
     start = time.perf_counter()
     plans = plan_motions(load_tank("b737_center"), targets, workers=0)
     seconds = time.perf_counter() - start

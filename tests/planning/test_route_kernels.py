@@ -222,3 +222,17 @@ def test_fit_shape_equals_numpy_gauss_newton():
             break
     np.testing.assert_allclose(got, want, atol=1e-6)  # finite differences of step 1e-6
     np.testing.assert_array_equal(got[:2], kappa[:2])
+
+
+def test_guide_fields_are_kept_per_target_and_bounded():
+    from aftir_rl.planning.ftl import guide
+
+    tank = load_tank("b737_center")
+    first = guide.guide_field(tank, [100.0, 90.0, 50.0])
+    assert guide.guide_field(tank, [100.0, 90.0, 50.0]) is first
+    assert guide.guide_field(tank, [100.0, 90.0, 50.5]) is not first
+    for i in range(guide.GUIDE_CACHE_SIZE + 2):
+        guide.guide_field(tank, [100.0, 90.0, 10.0 + i])
+    assert len(guide._FIELDS[tank]) == guide.GUIDE_CACHE_SIZE
+    assert guide.guide_field(tank, [100.0, 90.0, 50.0]) is not first  # the oldest left
+    np.testing.assert_array_equal(guide.guide_field(tank, [100.0, 90.0, 50.0]).dist, first.dist)

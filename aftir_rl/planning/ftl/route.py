@@ -34,7 +34,7 @@ from aftir_rl.core.robot import ArmSpec, forward_kinematics
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.closing import close_batch, push_away, route_clearance
 from aftir_rl.planning.ftl.guide import NEIGHBOURS as NEIGHBOURS  # for aftir_rl.envs.ftl.fields
-from aftir_rl.planning.ftl.guide import GuideField, corridor
+from aftir_rl.planning.ftl.guide import GuideField, corridor, guide_field
 from aftir_rl.planning.ftl.model import Route, kappa_to_angles
 
 __all__ = ["RouteSettings", "RouteResult", "GuideField", "plan_route", "route_clearance"]
@@ -158,7 +158,7 @@ def plan_route(
     attempts.append(("whole tank", None))
     notes: list[str] = []
     for name, allowed in attempts:
-        guide = GuideField(tank, target, allowed)
+        guide = guide_field(tank, target, allowed)
         result = _beam(
             _Search(tank, arm, target, guide, settings, start, kernel_grid(tank), prefix)
         )
