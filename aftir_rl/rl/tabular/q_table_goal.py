@@ -7,13 +7,12 @@ filomat2018 eq. 1, ``Q(s,g,a) ← Q(s,g,a) + α [r + γ max_a' Q(s',g,a') − Q(
 on termination), with the step reward of ``AFTIR-TankGoal-v0`` (+100 entering ``g``, −100 on a
 hit, ``-step_penalty`` otherwise).
 
-The goals' tables are independent: one compiled sweep
-(:func:`~aftir_rl.rl.tabular.goal_kernel.goal_episodes`) runs every goal's ε-greedy episodes
-through the env's goal-independent model
-(:meth:`~aftir_rl.envs.tank_goal.TankGoalEnv.dynamics`), G independent Q-learning runs of the
-paper's algorithm, ``log_interval`` episodes per goal between two logs. Table, greedy policy
-and checkpoints: :class:`~aftir_rl.rl.tabular.goal_table.GoalTable`. Why this is learning, not
-value iteration, and how resuming behaves: docs/design.md §8; its speed: docs/benchmarks.md.
+The goals' tables are independent: a compiled sweep (:mod:`~aftir_rl.rl.tabular.goal_kernel`)
+runs every goal's ε-greedy episodes through the env's goal-independent model, G independent
+Q-learning runs of the paper's algorithm, ``log_interval`` episodes per goal between two logs.
+Table, greedy policy and checkpoints: :class:`~aftir_rl.rl.tabular.goal_table.GoalTable`. Why
+this is learning, not value iteration, and how resuming behaves: docs/design.md §8; its speed:
+docs/benchmarks.md.
 """
 
 from __future__ import annotations
