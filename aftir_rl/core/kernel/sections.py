@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from numpy.typing import NDArray
 
 from aftir_rl.core.kernel.arrays import KernelTank
@@ -93,7 +93,7 @@ def min_clearance(points: NDArray[np.float64], tank: KernelTank) -> float:
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def postures_min_clearance(
     dis: NDArray[np.float64],
     theta: NDArray[np.float64],
@@ -104,18 +104,21 @@ def postures_min_clearance(
 ) -> float:
     """The exact smallest signed distance [cm] of the backbones of postures ``(T,), (T, N)``.
 
-    Each posture sampled ``samples`` times per section (:func:`~.geometry.fk_row`), one at a time.
+    Each posture sampled ``samples`` times per section (:func:`~.geometry.fk_row`), in blocks
+    of 16 postures spread over the cores.
     """
-    points = np.empty((theta.shape[1] * samples + 1, 3))
-    rot = np.empty((3, 3))
-    best = math.inf
-    for t in range(theta.shape[0]):
-        fk_row(dis[t], theta[t], phi[t], section_length, samples, rot, points)
-        best = min(best, min_clearance(points, tank))
-    return best
+    n_t, n_points = theta.shape[0], theta.shape[1] * samples + 1
+    blocks = (n_t + 15) // 16
+    worst = np.full(blocks, math.inf)
+    for k in prange(blocks):
+        points, rot = np.empty((n_points, 3)), np.empty((3, 3))
+        for t in range(16 * k, min(16 * k + 16, n_t)):
+            fk_row(dis[t], theta[t], phi[t], section_length, samples, rot, points)
+            worst[k] = min(worst[k], min_clearance(points, tank))
+    return worst.min() if blocks else math.inf
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def extend(
     rot: NDArray[np.float64],
     pos: NDArray[np.float64],
@@ -142,7 +145,7 @@ def extend(
     theta_max, l, k = shape
     need, radius, margin, exact_below = clearance
     n_changes = changes.shape[0]
-    for b in range(rot.shape[0]):
+    for b in prange(rot.shape[0]):  # the states' rows are disjoint: one thread each
         r = rot[b]
         for c in range(n_changes):
             i = b * n_changes + c

@@ -87,8 +87,10 @@ _WORKER: dict[str, Any] = {}
 
 
 def _start(tank: Tank, margin: float) -> None:
-    """A worker's set-up: its tank and margin (the kernels compile or load on first use)."""
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    """A worker's set-up: its tank and margin, one thread (the processes share the cores)."""
+    import numba
+
+    numba.set_num_threads(1)
     _WORKER.update(tank=tank, margin=margin)
 
 
