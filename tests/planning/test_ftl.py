@@ -8,6 +8,8 @@ rule below the floor.
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -161,3 +163,18 @@ def test_plan_motions_refuses_bad_input(tank):
         plan_motions(tank, [[1.0, np.nan, 3.0]])
     with pytest.raises(ConfigError, match="cells"):
         plan_motions(tank, [[100.0, 60.0, 60.0]], cells=[None, None])
+
+
+@pytest.mark.slow
+def test_plan_motions_from_a_script_without_the_main_guard_says_why(tmp_path):
+    script = tmp_path / "no_guard.py"
+    script.write_text(
+        "from aftir_rl.core.tank import load_tank\n"
+        "from aftir_rl.planning.ftl.batch import plan_motions\n"
+        "plan_motions(load_tank('b737_center'), [[230, 140, 90], [-50, 72, 90]], workers=2)\n"
+    )
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=300)  # fmt: skip
+    assert done.returncode != 0
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("aftir_rl.core.errors.PlanningError") and "__main__" in last

@@ -3,7 +3,8 @@
 Each target is planned by :func:`~aftir_rl.planning.ftl.plan.plan_motion`; the tank's compiled
 kernels, clearance grid and guide edges are built once and shared by every target. With
 ``workers > 1`` the targets are split over that many processes (spawned, so safe beside torch
-or Ray in the caller), each of which builds them once.
+or Ray in the caller), each of which builds them once; a script that asks for workers must do
+so under ``if __name__ == "__main__":``, as for any spawned process.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from multiprocessing import get_context
 from typing import Any
 
@@ -19,7 +21,7 @@ from numpy.typing import ArrayLike
 from tqdm import tqdm
 
 from aftir_rl.core.config import DEFAULT_MARGIN
-from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.errors import ConfigError, PlanningError
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.plan import MotionPlan, plan_motion
 
@@ -52,6 +54,7 @@ def plan_motions(
     Raises:
         ConfigError: ``targets`` is not ``(T, 3)`` and finite, ``cells`` has another length,
             or ``workers`` is negative.
+        PlanningError: a worker process stopped (e.g. a script without the main guard).
 
     """
     points = np.asarray(targets, dtype=np.float64)
@@ -75,11 +78,19 @@ def plan_motions(
     chunks = [jobs[i : i + CHUNK] for i in range(0, len(jobs), CHUNK)]
     out: list[MotionPlan] = []
     context = get_context("spawn")
-    with ProcessPoolExecutor(workers, context, _start, (tank, margin)) as pool:
-        for part in pool.map(_plan_chunk, chunks):
-            out.extend(part)
-            bar.update(len(part))
-    bar.close()
+    try:
+        with ProcessPoolExecutor(workers, context, _start, (tank, margin)) as pool:
+            for part in pool.map(_plan_chunk, chunks):
+                out.extend(part)
+                bar.update(len(part))
+    except BrokenProcessPool:
+        raise PlanningError(
+            "a planning process stopped before it finished; from a script, call plan_motions "
+            'with workers other than 1 inside `if __name__ == "__main__":` (each worker '
+            "imports the script again)"
+        ) from None
+    finally:
+        bar.close()
     return out
 
 
