@@ -389,19 +389,18 @@ def _prune(
 def _close_beam(
     search: _Search, beam: _Beam, togo: NDArray[np.float64], depth: int, best: _Best | None
 ) -> _Best | None:
-    """Close the states nearest the target (``togo``: through free space) with 1 or 2 sections."""
+    """Close the states nearest the target (``togo``: through free space) with 0 to 2 sections."""
     l, max_sections = search.arm.section_length, search.arm.max_sections
     dist = np.linalg.norm(beam.pos - search.target, axis=1)
     in_guide = np.ceil(beam.lead / l - 1e-9)  # sections still straight below the floor
-    fits = depth + 1 + in_guide <= max_sections - 1
-    for extra, band in ((1, (0.3, 0.98)), (2, (0.6, 1.95))):
+    for extra, band in ((0, (0.0, 0.3)), (1, (0.3, 0.98)), (2, (0.6, 1.95))):
         # states from which `extra` sections of length l can end on the target: not too
-        # near (a section cannot fold back on itself) and not too far; nearest to go first
+        # near (a section cannot fold back on itself) and not too far; nearest to go first.
+        # A state already within 0.3 l re-bends its own last two sections (extra 0).
         near = np.flatnonzero(
-            (dist > band[0] * l)
+            (dist >= band[0] * l)
             & (dist < band[1] * l)
             & (togo < 2.2 * l)
-            & fits
             & (depth + 1 + extra + in_guide <= max_sections)
         )
         picks = list(near[np.argsort(togo[near])][: search.settings.closings])
@@ -425,7 +424,8 @@ def _close_picks(
     if shift > 0:
         window = (np.maximum(lead[picks] - shift, -25.0), lead[picks] + shift)
     target, l, tmax = search.target, search.arm.section_length, search.arm.theta_max
-    closed = close_batch(lead[picks], starts, target, l, tmax, free=extra + 1, lead_range=window)
+    free = max(extra + 1, 2)
+    closed = close_batch(lead[picks], starts, target, l, tmax, free=free, lead_range=window)
     for i, out in zip(picks, closed):
         if out is not None:
             best = _keep(search, best, out[1], out[0], float(beam.cost[i]), extra)
