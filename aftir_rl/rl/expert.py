@@ -154,7 +154,8 @@ class FTLExpert:
         target = np.asarray(target, dtype=np.float64)
         tank = self.sim.tank
         tries = 0
-        for settings in SEARCH_VARIANTS:
+        # each setting once whatever its slack (the slacks below replace it)
+        for settings in dict.fromkeys(replace(v, slack=0.0) for v in SEARCH_VARIANTS):
             for slack in SLACKS:  # more slack while the env's deployment grazes
                 left = self.max_seconds - (time.perf_counter() - start)
                 if left <= 0:

@@ -48,6 +48,9 @@ SEARCH_VARIANTS: tuple[RouteSettings, ...] = (
     RouteSettings(
         clearance_weight=1.0, change_weight=20.0, beam_width=400, bin_cm=6.0, bin_heading=0.3
     ),
+    # more room for the deviation between stages, for routes whose deployment grazes
+    RouteSettings(clearance_weight=1.0, change_weight=20.0, slack=3.0),
+    RouteSettings(clearance_weight=2.0, change_weight=40.0, slack=3.0, max_change=0.5),
 )
 
 #: Largest follow-the-leader deviation [cm] a motion should keep (the published FTL anchors:
