@@ -22,6 +22,7 @@ from aftir_rl.core.tank import load_tank
 from aftir_rl.planning.ftl.batch import plan_motions
 from aftir_rl.planning.ftl.model import Route, ftl_deviation, ftl_motion, ftl_postures, route_points
 from aftir_rl.planning.ftl.plan import plan_motion
+from aftir_rl.planning.ftl.route import RouteSettings, plan_route
 from aftir_rl.planning.posture.planner import Planner, random_free_targets
 
 REFERENCE = [(230, 140, 90), (-50, 140, 10), (-50, 72, 90), (230, 72, 10)]
@@ -195,3 +196,13 @@ def test_plan_motions_from_a_script_without_the_main_guard_says_why(tmp_path):
     assert done.returncode != 0
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("aftir_rl.core.errors.PlanningError") and "__main__" in last
+
+
+def test_a_route_continuing_a_prefix_keeps_it(tank):
+    full = plan_motion(tank, (200.0, 10.0, 50.0)).motion.route
+    prefix = Route(full.lead, full.kappa[:-1], full.section_length)  # all but its last section
+    target = full.tip() + [0.0, 0.0, -8.0]
+    route = plan_route(tank, target, settings=RouteSettings(), prefix=prefix).route
+    assert route.lead == prefix.lead
+    np.testing.assert_array_equal(route.kappa[: prefix.n_route_sections], prefix.kappa)
+    assert np.linalg.norm(route.tip() - target) < 1e-6

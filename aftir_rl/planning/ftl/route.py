@@ -393,7 +393,11 @@ def _close_beam(
     l, max_sections = search.arm.section_length, search.arm.max_sections
     dist = np.linalg.norm(beam.pos - search.target, axis=1)
     in_guide = np.ceil(beam.lead / l - 1e-9)  # sections still straight below the floor
+    # a prefix's sections stay: re-bending two sections needs two of this search's own
+    own = depth + 1 - (search.prefix.n_route_sections if search.prefix is not None else 0)
     for extra, band in ((0, (0.0, 0.3)), (1, (0.3, 0.98)), (2, (0.6, 1.95))):
+        if extra == 0 and own < 2:
+            continue
         # states from which `extra` sections of length l can end on the target: not too
         # near (a section cannot fold back on itself) and not too far; nearest to go first.
         # A state already within 0.3 l re-bends its own last two sections (extra 0).
