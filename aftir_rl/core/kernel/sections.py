@@ -1,11 +1,12 @@
 """Compiled kernels of the follow-the-leader planner: sections, tips, closing and clearances.
 
-Each computes, per candidate in one compiled loop, what the planner's numpy definitions do
-(:mod:`aftir_rl.planning.ftl.route` and :mod:`~aftir_rl.planning.ftl.closing`; tested equal in
-``tests/planning/test_route_kernels.py``): a new route section from every beam state
-(:func:`extend`), route tips (:func:`tip_of`), closing routes on a target by damped least squares
-(:func:`close`), and the exact smallest clearance of many backbones (:func:`min_clearance`,
-:func:`postures_min_clearance`), pruned by the clearance grid as the env's step is.
+Each computes in one compiled loop what the planner (:mod:`aftir_rl.planning.ftl`) defines,
+tested against numpy in ``tests/planning/test_route_kernels.py``: a new route section from every
+beam state (:func:`extend`), route tips (:func:`tip_of`), closing routes on a target by damped
+least squares (:func:`close`), the exact smallest clearance of many backbones
+(:func:`min_clearance`, :func:`postures_min_clearance`, pruned by the clearance grid as the env's
+step is), the deployment's FTL deviation (:func:`traced_deviation`) and its between-stage shape
+fit (:func:`fit_shape`).
 
 numba caches a function by its own file only: after editing :mod:`.geometry`, clear the caches
 (``make clean``) so these kernels recompile against it.
