@@ -94,7 +94,7 @@ def min_clearance(points: NDArray[np.float64], tank: KernelTank) -> float:
     return best
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def postures_min_clearance(
     dis: NDArray[np.float64],
     theta: NDArray[np.float64],
@@ -105,18 +105,15 @@ def postures_min_clearance(
 ) -> float:
     """The exact smallest signed distance [cm] of the backbones of postures ``(T,), (T, N)``.
 
-    Each posture sampled ``samples`` times per section (:func:`~.geometry.fk_row`), in blocks
-    of 16 postures spread over the cores.
+    Each posture sampled ``samples`` times per section (:func:`~.geometry.fk_row`), one at a time.
     """
-    n_t, n_points = theta.shape[0], theta.shape[1] * samples + 1
-    blocks = (n_t + 15) // 16
-    worst = np.full(blocks, math.inf)
-    for k in prange(blocks):
-        points, rot = np.empty((n_points, 3)), np.empty((3, 3))
-        for t in range(16 * k, min(16 * k + 16, n_t)):
-            fk_row(dis[t], theta[t], phi[t], section_length, samples, rot, points)
-            worst[k] = min(worst[k], min_clearance(points, tank))
-    return worst.min() if blocks else math.inf
+    points = np.empty((theta.shape[1] * samples + 1, 3))
+    rot = np.empty((3, 3))
+    best = math.inf
+    for t in range(theta.shape[0]):
+        fk_row(dis[t], theta[t], phi[t], section_length, samples, rot, points)
+        best = min(best, min_clearance(points, tank))
+    return best
 
 
 @njit(cache=True, parallel=True)
@@ -415,11 +412,50 @@ def fit_shape(
             for p in range(n_points):
                 for a in range(3):
                     jac[3 * p + a, v] = (trial[p, a] - base[p, a]) * weight[p] / 1e-6
-        step = np.linalg.solve(jac.T @ jac + 1e-6 * np.eye(nv), jac.T @ err)
+        step = _normal_solve(jac, err, 1e-6)
         for v in range(nv):
             kappa[first_free + v // 2, v % 2] += step[v]
         if np.abs(step).max() < 1e-7:
             break
+
+
+@njit(cache=True)
+def _normal_solve(
+    jac: NDArray[np.float64], err: NDArray[np.float64], damping: float
+) -> NDArray[np.float64]:
+    """``(JᵀJ + damping·I)⁻¹ Jᵀ err`` by Gaussian elimination with partial pivoting (no BLAS)."""
+    nv = jac.shape[1]
+    a = np.empty((nv, nv + 1))
+    for i in range(nv):
+        for j in range(i, nv):
+            v = 0.0
+            for p in range(jac.shape[0]):
+                v += jac[p, i] * jac[p, j]
+            a[i, j], a[j, i] = v, v
+        a[i, i] += damping
+        v = 0.0
+        for p in range(jac.shape[0]):
+            v += jac[p, i] * err[p]
+        a[i, nv] = v
+    for col in range(nv):
+        pivot = col
+        for row in range(col + 1, nv):
+            if abs(a[row, col]) > abs(a[pivot, col]):
+                pivot = row
+        if pivot != col:
+            for j in range(nv + 1):
+                a[col, j], a[pivot, j] = a[pivot, j], a[col, j]
+        for row in range(col + 1, nv):
+            f = a[row, col] / a[col, col]
+            for j in range(col, nv + 1):
+                a[row, j] -= f * a[col, j]
+    x = np.empty(nv)
+    for row in range(nv - 1, -1, -1):
+        v = a[row, nv]
+        for j in range(row + 1, nv):
+            v -= a[row, j] * x[j]
+        x[row] = v / a[row, row]
+    return x
 
 
 @njit(cache=True)
