@@ -26,7 +26,7 @@ from aftir_rl.core.collision import CollisionScene
 from aftir_rl.core.errors import ConfigError, PlanningError
 from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.envs.ftl.spec import TRAINING_ONLY_KWARGS
-from aftir_rl.planning.ftl.plan import SEARCH_VARIANTS
+from aftir_rl.planning.ftl.plan import SEARCH_VARIANTS, warm_up
 from aftir_rl.planning.ftl.route import plan_route
 
 __all__ = ["ExpertPlan", "FTLExpert", "SLACKS", "route_actions"]
@@ -149,10 +149,12 @@ class FTLExpert:
         """A motion to ``target`` that the env replays to success, or None within the budget.
 
         ``state``: an env whose arm the motion starts from (default: the start of an episode).
+        The budget starts once the planner's kernels are compiled (:func:`warm_up`).
         """
+        tank = self.sim.tank
+        warm_up(tank)
         start = time.perf_counter()
         target = np.asarray(target, dtype=np.float64)
-        tank = self.sim.tank
         tries = 0
         # each setting once whatever its slack (the slacks below replace it)
         for settings in dict.fromkeys(replace(v, slack=0.0) for v in SEARCH_VARIANTS):

@@ -14,13 +14,8 @@ import pytest
 
 from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.kernel.clearance import kernel_grid
-from aftir_rl.core.kernel.sections import (
-    close,
-    extend,
-    fit_shape,
-    postures_min_clearance,
-    traced_deviation,
-)
+from aftir_rl.core.kernel.deployment import fit_shape, traced_deviation
+from aftir_rl.core.kernel.sections import close, extend, postures_min_clearance
 from aftir_rl.core.robot import body_points, kappa_to_angles, tip_position
 from aftir_rl.core.tank import load_tank
 from aftir_rl.planning.ftl.guide import NEIGHBOURS, GuideField, shifted

@@ -2,7 +2,8 @@
 
 One loop per arm or point, no temporaries. By concern: :mod:`.geometry` (forward kinematics,
 shift-and-copy, the tank's signed distance and the arms' clearance, usable targets), :mod:`.guide`
-(the guide field's queries), :mod:`.arrays` (the arrays they read), :mod:`.packing` and
+(the guide field: Dijkstra and queries), :mod:`.sections` and :mod:`.deployment` (the route
+search and the deployment), :mod:`.arrays` (the arrays they read), :mod:`.packing` and
 :mod:`.clearance` (a tank packed into those arrays, with its clearance grid). Compiled on first
 use and cached beside the files (``cache=True``); each is tested equal to its numpy definition.
 """

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from aftir_rl.core.kernel.deployment import fit_shape, traced_deviation
 from aftir_rl.core.kernel.geometry import fk_points
-from aftir_rl.core.kernel.sections import fit_shape, traced_deviation
 from aftir_rl.core.robot import (
     Posture,
     body_points,

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, PlanningError
 from aftir_rl.core.kernel.clearance import kernel_grid
@@ -36,7 +37,14 @@ from aftir_rl.planning.ftl.model import (
 from aftir_rl.planning.ftl.route import RouteResult, RouteSettings, plan_route
 from aftir_rl.planning.timing import TimedMotion, time_motion
 
-__all__ = ["MotionPlan", "plan_motion", "motion_summary", "DEFAULT_MARGIN", "SEARCH_VARIANTS"]
+__all__ = [
+    "MotionPlan",
+    "plan_motion",
+    "motion_summary",
+    "warm_up",
+    "DEFAULT_MARGIN",
+    "SEARCH_VARIANTS",
+]
 
 #: Route-search settings tried in turn (the margin is set per call): the first whose motion
 #: keeps the margin and the deviation goal wins; otherwise the complete one of least deviation.
@@ -295,6 +303,27 @@ def _waypoints(
         lo_idx = i
         departure.append(float(np.linalg.norm(tips - centre, axis=1).min()))
     return index, (max(departure), float(np.mean(departure)))
+
+
+_WARM: set[str] = set()
+
+
+def warm_up(tank: Tank) -> None:
+    """Compile (or load from numba's cache) the planner's kernels once per process.
+
+    A fresh install compiles them on first use (about half a minute on 2 cores); a caller with a
+    time budget calls this before starting its clock. Plans one motion straight up from the
+    panel to the first height with room (whatever its outcome) the first time in a process.
+    """
+    if "ftl" in _WARM:
+        return
+    _WARM.add("ftl")
+    centre = np.asarray(tank.panel.center, dtype=np.float64)
+    height = float(tank.box_max[2]) - float(tank.box_min[2])
+    points = np.array([[centre[0], centre[1], f * height] for f in (0.5, 0.35, 0.65, 0.2)])
+    room = point_clearance(tank, points) >= tank.arm.radius + DEFAULT_MARGIN + 1.0
+    if room.any():
+        plan_motion(tank, points[int(np.argmax(room))])
 
 
 def motion_summary(plan: Any) -> dict[str, Any]:
