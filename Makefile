@@ -13,6 +13,7 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[dev,all,docs,zoo]" -c constraints.txt
 	$(PY) -m ipykernel install --sys-prefix --name python3 >/dev/null
+	$(PY) scripts/warm_kernels.py  # numba's kernels, compiled once (about 40 s)
 	touch $(STAMP)
 
 train: $(STAMP)  ## default Q-learning job: the four reference targets of the two-bay tank
