@@ -319,8 +319,9 @@ def warm_up(tank: Tank) -> None:
         return
     _WARM.add("ftl")
     centre = np.asarray(tank.panel.center, dtype=np.float64)
-    height = float(tank.box_max[2]) - float(tank.box_min[2])
-    points = np.array([[centre[0], centre[1], f * height] for f in (0.5, 0.35, 0.65, 0.2)])
+    floor, height = float(tank.box_min[2]), float(tank.box_max[2]) - float(tank.box_min[2])
+    heights = [floor + f * height for f in (0.5, 0.35, 0.65, 0.2)]
+    points = np.array([[centre[0], centre[1], z] for z in heights])
     room = point_clearance(tank, points) >= tank.arm.radius + DEFAULT_MARGIN + 1.0
     if room.any():
         plan_motion(tank, points[int(np.argmax(room))])
