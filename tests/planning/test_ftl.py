@@ -206,3 +206,9 @@ def test_a_route_continuing_a_prefix_keeps_it(tank):
     assert route.lead == prefix.lead
     np.testing.assert_array_equal(route.kappa[: prefix.n_route_sections], prefix.kappa)
     assert np.linalg.norm(route.tip() - target) < 1e-6
+
+
+@pytest.mark.parametrize("target", [(1e308, 0.0, 0.0), (500.0, 0.0, 50.0), (100.0, 60.0, 15.0)])
+def test_a_target_outside_or_in_a_solid_is_refused_in_one_short_line(tank, target):
+    plan = plan_motion(tank, target)  # far outside the box; inside the baffle below the hatch
+    assert not plan.complete and "inside a solid or wall" in plan.reason and len(plan.reason) < 200

@@ -148,8 +148,9 @@ def plan_route(
     need = arm.radius + settings.margin
     tip_clear = float(point_clearance(tank, target[None])[0])
     if tip_clear < need:
+        where = f"{tip_clear:.2f} cm from the tank" if tip_clear >= 0 else "inside a solid or wall"
         raise PlanningError(
-            f"Cannot reach the target: it lies {tip_clear:.2f} cm from the tank, closer than "
+            f"Cannot reach the target: it lies {where}, closer than "
             f"the arm's radius {arm.radius:g} cm plus the margin {settings.margin:g} cm"
         )
     attempts: list[tuple[str, NDArray[np.bool_] | None]] = []
