@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.actuation import ActuatorLimits
+from aftir_rl.core.camera import Camera
 
 __all__ = [
     "ArmSpec",
@@ -49,6 +50,7 @@ class ArmSpec:
         radius: body radius used for collision checking [cm].
         theta_max: bound on ``|θ_i|`` [rad].
         limits: the actuators' speed, acceleration and travel limits.
+        camera: the tip camera (what an inspection sees).
 
     """
 
@@ -57,6 +59,7 @@ class ArmSpec:
     radius: float = 2.5
     theta_max: float = math.pi / 2
     limits: ActuatorLimits = ActuatorLimits()
+    camera: Camera = Camera()
 
     def __post_init__(self) -> None:
         if not self.section_length > 0:

@@ -13,6 +13,7 @@ from aftir_rl.cli import tour as tour_cli
 from aftir_rl.core.robot import forward_kinematics
 from aftir_rl.planning.ftl import tour as tour_module
 from aftir_rl.planning.ftl.model import Route
+from aftir_rl.planning.ftl.tree import shared
 
 pytest.importorskip("ortools")
 pytest.importorskip("toppra")
@@ -42,12 +43,12 @@ def test_nearest_first_visits_every_node_once():
 def test_shared_prefixes():
     kappa = np.array([[0.1, 0.0], [0.2, 0.1], [0.0, 0.3]])
     a = Route(15.0, kappa, 50.0)
-    assert tour_module._shared(a, Route(15.0, kappa[:2], 50.0)) == (115.0, 2)
+    assert shared(a, Route(15.0, kappa[:2], 50.0)) == (115.0, 2)
     other = kappa.copy()
     other[1, 0] += 1e-9
-    assert tour_module._shared(a, Route(15.0, other, 50.0)) == (65.0, 1)
-    assert tour_module._shared(a, Route(30.0, kappa, 50.0)) == (15.0, 0)  # the straight lead
-    assert tour_module._shared(Route(-10.0, kappa, 50.0), a) == (-10.0, 0)  # in the guide
+    assert shared(a, Route(15.0, other, 50.0)) == (65.0, 1)
+    assert shared(a, Route(30.0, kappa, 50.0)) == (15.0, 0)  # the straight lead
+    assert shared(Route(-10.0, kappa, 50.0), a) == (-10.0, 0)  # in the guide
 
 
 @pytest.mark.slow

@@ -19,6 +19,7 @@ import numpy as np
 import yaml
 
 from aftir_rl.core.actuation import ActuatorLimits
+from aftir_rl.core.camera import Camera
 from aftir_rl.core.config import (
     CONFIG_DIR,
     MAX_YAML_BYTES,
@@ -168,7 +169,7 @@ def _parse_cell_size(value: Any, lo: Vec3, hi: Vec3, src: str) -> float:
 
 def _parse_arm(data: Mapping[str, Any], src: str) -> ArmSpec:
     """The ``arm`` section (defaults for the keys it leaves out)."""
-    keys = {"section_length", "max_sections", "radius", "theta_max", "limits"}
+    keys = {"section_length", "max_sections", "radius", "theta_max", "limits", "camera"}
     arm = section(data, "arm", keys, src)
     try:
         return ArmSpec(
@@ -181,6 +182,7 @@ def _parse_arm(data: Mapping[str, Any], src: str) -> ArmSpec:
             radius=to_float(arm.get("radius", 2.5), f"{src}: arm.radius", limit=MAX_COORD),
             theta_max=to_float(arm.get("theta_max", math.pi / 2), f"{src}: arm.theta_max"),
             limits=ActuatorLimits.from_mapping(arm.get("limits"), f"{src}: arm.limits"),
+            camera=Camera.from_mapping(arm.get("camera"), f"{src}: arm.camera"),
         )
     except ValueError as exc:
         if isinstance(exc, ConfigError):

@@ -1,7 +1,7 @@
 """Inspection tours: one deployment that visits many targets, retracting only where routes part.
 
-:func:`plan_tour` grows a tree of follow-the-leader routes: a target's route continues a prefix
-of another's where it can (:func:`plan_motion`'s ``prefix``), so the arm at one target retracts
+:func:`plan_tour` grows a tree of follow-the-leader routes (:mod:`~aftir_rl.planning.ftl.tree`:
+a target's route continues a prefix of another's where it can), so the arm at one target retracts
 only to where the next target's route departs from its own. The
 cost of going from target ``i`` to ``j`` is the time-optimal duration of retracting ``i`` to
 their common prefix plus deploying ``j`` from it (:mod:`aftir_rl.planning.timing`, each leg from
@@ -12,7 +12,7 @@ and back, solved by OR-Tools (the ``robot`` extra). docs/robot.md has the detail
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -22,16 +22,13 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.extras import require
-from aftir_rl.core.robot import forward_kinematics
 from aftir_rl.core.tank import Tank
-from aftir_rl.planning.ftl.model import FTLMotion, Route, ftl_motion, kappa_to_angles
-from aftir_rl.planning.ftl.plan import SEARCH_VARIANTS, motion_clearance, plan_motion
+from aftir_rl.planning.ftl.model import FTLMotion, ftl_motion, kappa_to_angles
+from aftir_rl.planning.ftl.plan import motion_clearance
+from aftir_rl.planning.ftl.tree import RouteTree, grow_tree, shared
 from aftir_rl.planning.timing import TimedMotion, joint_positions, time_motion
 
-__all__ = ["Tour", "plan_tour"]
-
-#: Prefixes of the tree a new target's route is tried from (the nearest ends first).
-BRANCH_TRIES = 8
+__all__ = ["Tour", "plan_tour", "tour_of_tree"]
 
 
 @dataclass
@@ -115,44 +112,6 @@ class Tour:
         }
 
 
-@dataclass
-class _Tree:
-    """The routes planned so far (by target index) and where each came from."""
-
-    targets: NDArray[np.float64]
-    routes: dict[int, Route] = field(default_factory=dict)
-    branches: dict[int, tuple[int | None, int]] = field(default_factory=dict)
-
-    def prefixes(
-        self, target: NDArray[np.float64], l: float, among: Sequence[int] | None = None
-    ) -> list[tuple[float, int, Route]]:
-        """Distinct prefixes of the routes (or ``among``'s) ending 0.5-6 sections from it."""
-        found: dict[bytes, tuple[float, int, Route]] = {}
-        for i in self.routes if among is None else among:
-            route = self.routes[i]
-            theta, phi = kappa_to_angles(route.kappa)
-            ends = forward_kinematics(route.lead, theta, phi, l)[1:-1, :3, 3]  # after 1..M-1
-            for d, end in enumerate(ends, start=1):
-                gap = float(np.linalg.norm(end - target))
-                key = np.append(route.kappa[:d].ravel(), route.lead).tobytes()
-                if 0.5 * l <= gap <= 6.0 * l and key not in found:
-                    found[key] = (gap, i, Route(route.lead, route.kappa[:d], l))
-        return sorted(found.values(), key=lambda item: item[0])[:BRANCH_TRIES]
-
-
-def _shared(a: Route, b: Route) -> tuple[float, int]:
-    """The arc length [cm] up to which two routes are the same, and their shared sections.
-
-    Up to the shorter straight lead when they differ there (the arm is straight on the axis).
-    """
-    if a.lead != b.lead:
-        return min(a.lead, b.lead), 0
-    d = 0
-    while d < min(len(a.kappa), len(b.kappa)) and np.array_equal(a.kappa[d], b.kappa[d]):
-        d += 1
-    return a.lead + d * a.section_length, d
-
-
 #: Where a leg from or to the panel turns: before every deployment's first entry.
 PANEL = -np.inf
 
@@ -161,53 +120,6 @@ def _part(motion: FTLMotion, s0: float) -> slice:
     """The entries of a deployment from its last entry at or before arc length ``s0`` [cm]."""
     first = int(np.searchsorted(motion.s, s0 + 1e-9, side="right")) - 1
     return slice(max(first, 0), len(motion))
-
-
-def _branch(
-    tank: Tank, tree: _Tree, j: int, margin: float, among: Sequence[int] | None = None
-) -> bool:
-    """Plan target ``j``'s route as a continuation of a prefix of the tree; whether one was."""
-    target = tree.targets[j]
-    for _, i, prefix in tree.prefixes(target, tank.arm.section_length, among):
-        if i == j:
-            continue
-        plan = plan_motion(tank, target, margin=margin, prefix=prefix, variants=SEARCH_VARIANTS[:2])
-        if plan.complete and plan.motion is not None:
-            tree.routes[j] = plan.motion.route
-            tree.branches[j] = (i, prefix.n_route_sections)
-            return True
-    return False
-
-
-def _grow(
-    tank: Tank, targets: NDArray[np.float64], margin: float, say: Callable[[str], None]
-) -> tuple[_Tree, list[tuple[int, str]]]:
-    """The tree of routes, and the targets no motion reaches (with the reason).
-
-    Nearest the panel first, each target continues a prefix of the tree where it can, else gets
-    a route of its own (a root); then every route that shares no section with the largest
-    family of routes tries again from that family's prefixes.
-    """
-    tree, failures = _Tree(targets), []
-    order = np.argsort(np.linalg.norm(targets, axis=1)).tolist()
-    for j in order:
-        if not tree.routes or not _branch(tank, tree, j, margin):
-            plan = plan_motion(tank, targets[j], margin=margin)
-            if plan.complete and plan.motion is not None:
-                tree.routes[j], tree.branches[j] = plan.motion.route, (None, 0)
-            else:
-                failures.append((j, plan.reason or "no motion"))
-        say(f"target {j}: {'no motion' if j not in tree.routes else 'planned'}")
-
-    # the routes that do not share a section with the trunk most share try again from it
-    def family(k: int) -> list[int]:
-        return [i for i in tree.routes if _shared(tree.routes[i], tree.routes[k])[1] > 0]
-
-    trunk = max(tree.routes, key=lambda k: len(family(k)))
-    for j in order:
-        if j in tree.routes and j not in family(trunk):
-            _branch(tank, tree, j, margin, among=family(trunk))
-    return tree, sorted(failures)
 
 
 def _order(costs: NDArray[np.float64], seconds: float) -> list[int]:
@@ -275,14 +187,28 @@ def plan_tour(
     """
     start, say = time.perf_counter(), progress or (lambda text: None)
     targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
-    tree, failures = _grow(tank, targets, margin, say)
+    tree, failures = grow_tree(tank, targets, margin, say)
     if not tree.routes:
         raise PlanningError("no target of the tour has a motion: " + failures[0][1])
     roots = sum(i is None for i, _ in tree.branches.values())
     say(f"route tree: {len(tree.routes)} routes from {roots} of their own")
+    tour = tour_of_tree(tank, tree, margin, solver_seconds)
+    tour.failures, tour.seconds = failures, time.perf_counter() - start
+    return tour
+
+
+def tour_of_tree(
+    tank: Tank, tree: RouteTree, margin: float = DEFAULT_MARGIN, solver_seconds: float = 2.0
+) -> Tour:
+    """The tour that visits every target of a planned tree (``seconds``: this call's time).
+
+    Raises :class:`~aftir_rl.core.errors.PlanningError` where the joined motion keeps less
+    than ``margin``.
+    """
+    start = time.perf_counter()
     motions = _deployments(tank, tree)
-    tour = _assemble(tank, targets, tree, motions, solver_seconds)
-    tour.failures, tour.margin_cm = failures, margin
+    tour = _assemble(tank, tree.targets, tree, motions, solver_seconds)
+    tour.margin_cm = margin
     if tour.min_clearance_cm < margin:  # where two legs meet, a joining move grazes the tank
         raise PlanningError(
             f"the joined tour keeps only {tour.min_clearance_cm:.2f} cm of the margin {margin:g} cm"
@@ -291,7 +217,7 @@ def plan_tour(
     return tour
 
 
-def _deployments(tank: Tank, tree: _Tree) -> dict[int, FTLMotion]:
+def _deployments(tank: Tank, tree: RouteTree) -> dict[int, FTLMotion]:
     """Each route's deployment with the same number of sections (the tour's arm).
 
     Without the entries that repeat the one before: deployments with more sections than their
@@ -315,7 +241,7 @@ class _Legs:
     """The legs between targets: where two routes part, and the timed parts of deployments."""
 
     tank: Tank
-    tree: _Tree
+    tree: RouteTree
     motions: dict[int, FTLMotion]
     suffix: dict[tuple[int, float], TimedMotion] = field(default_factory=dict)
 
@@ -323,7 +249,7 @@ class _Legs:
         """Where the leg from ``a`` to ``b`` turns back (``None``: the panel)."""
         if a is None or b is None:
             return PANEL
-        return _shared(self.tree.routes[a], self.tree.routes[b])[0]
+        return shared(self.tree.routes[a], self.tree.routes[b])[0]
 
     def timed_from(self, j: int, s0: float) -> TimedMotion:
         """The time-optimal schedule of target ``j``'s deployment from arc length ``s0`` [cm]."""
@@ -369,7 +295,7 @@ class _Legs:
 def _assemble(
     tank: Tank,
     targets: NDArray[np.float64],
-    tree: _Tree,
+    tree: RouteTree,
     motions: dict[int, FTLMotion],
     solver_seconds: float,
 ) -> Tour:
