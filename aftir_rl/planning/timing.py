@@ -27,6 +27,9 @@ from aftir_rl.core.robot import angles_to_kappa
 
 __all__ = ["TimedMotion", "joint_names", "joint_positions", "time_motion"]
 
+#: Gridpoints toppra gets for a move between two postures alone (a straight line in joint space).
+STRAIGHT_GRID = 33
+
 
 def joint_names(n_sections: int) -> list[str]:
     """``dis`` then ``section_<i>_kx``, ``section_<i>_ky``: the joints a timed motion reports."""
@@ -170,13 +173,23 @@ def time_motion(
     velocity, acceleration = np.zeros_like(joints), np.zeros_like(joints)
     t = np.zeros(len(joints))
     if keep.sum() >= 2:
-        sd, sdd, path = _toppra(ta, ss[keep], stacked[keep], limits)
+        grid, points = ss[keep], stacked[keep]
+        if len(grid) == 2:  # at rest at both ends: toppra needs gridpoints between to move
+            u = np.linspace(0.0, 1.0, STRAIGHT_GRID)[:, None]
+            grid, points = (
+                grid[0] + u[:, 0] * (grid[1] - grid[0]),
+                (1 - u) * points[0] + u * points[1],
+            )
+        sd, sdd, path = _toppra(ta, grid, points, limits)
         index = np.searchsorted(np.flatnonzero(keep), np.arange(len(joints)), side="right") - 1
-        ds = np.diff(ss[keep])
-        t = np.concatenate([[0.0], np.cumsum(2 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300))])
+        t = np.concatenate(
+            [[0.0], np.cumsum(2 * np.diff(grid) / np.maximum(sd[:-1] + sd[1:], 1e-300))]
+        )
+        accel_grid = np.concatenate([sdd, sdd[-1:]])  # a gridpoint's interval (the last: its own)
+        if len(grid) > keep.sum():  # without the gridpoint put between
+            t, sd, accel_grid = t[[0, -1]], sd[[0, -1]], accel_grid[[0, -1]]
         m = joints.shape[1]
         first, second = path(ss[keep], 1)[:, :m], path(ss[keep], 2)[:, :m]
-        accel_grid = np.concatenate([sdd, sdd[-1:]])  # a gridpoint's interval (the last: its own)
         velocity = (first * sd[:, None])[index]
         acceleration = (second * sd[:, None] ** 2 + first * accel_grid[:, None])[index]
         # entries that do not move share their gridpoint's time; only the last moves on

@@ -93,6 +93,18 @@ def test_a_straight_push_is_the_trapezoid():
     assert timed.velocities[0, 0] == 0.0 and abs(timed.velocities[-1, 0]) < 1e-6
 
 
+@pytest.mark.parametrize("d", [0.238, 3.0, 40.0])
+def test_two_postures_at_rest_are_the_time_optimal_move(d):
+    """No posture between (a tour's joining move): full acceleration, then full braking."""
+    limits = ActuatorLimits()
+    dis, zeros = np.array([-620.0, -620.0 - d]), np.zeros((2, 12))
+    timed = time_motion(dis, zeros, zeros, 50.0, limits)
+    v, a = limits.module_speed, limits.module_accel
+    optimum = d / v + v / a if d >= v * v / a else 2 * np.sqrt(d / a)  # trapezoid or triangle
+    assert timed.duration == pytest.approx(optimum, rel=1e-3)
+    assert np.allclose(timed.velocities, 0.0)
+
+
 def test_limits_hold_and_the_postures_stay(corner_plan):
     timing, motion = corner_plan.timing, corner_plan.motion
     limits, n = timing.limits, motion.n_sections
