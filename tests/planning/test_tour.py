@@ -13,7 +13,7 @@ from aftir_rl.cli import tour as tour_cli
 from aftir_rl.core.robot import forward_kinematics
 from aftir_rl.planning.ftl import tour as tour_module
 from aftir_rl.planning.ftl.model import Route
-from aftir_rl.planning.ftl.tree import shared
+from aftir_rl.planning.ftl.tree import shared, union_length
 
 pytest.importorskip("ortools")
 pytest.importorskip("toppra")
@@ -49,6 +49,19 @@ def test_shared_prefixes():
     assert shared(a, Route(15.0, other, 50.0)) == (65.0, 1)
     assert shared(a, Route(30.0, kappa, 50.0)) == (15.0, 0)  # the straight lead
     assert shared(Route(-10.0, kappa, 50.0), a) == (-10.0, 0)  # in the guide
+
+
+def test_the_union_of_routes_counts_shared_prefixes_once():
+    kappa = np.array([[0.1, 0.0], [0.2, 0.1], [0.0, 0.3]])
+    a, b = Route(15.0, kappa, 50.0), Route(15.0, kappa[:2], 50.0)
+    other = kappa.copy()
+    other[2] += 0.1
+    c = Route(15.0, other, 50.0)
+    assert union_length([]) == 0.0
+    assert union_length([a]) == a.length == 165.0
+    assert union_length([a, b]) == 165.0  # b is a prefix of a
+    assert union_length([a, c]) == 15.0 + 4 * 50.0  # they part after two sections
+    assert union_length([a, Route(30.0, kappa, 50.0)]) == 30.0 + 6 * 50.0  # other leads
 
 
 @pytest.mark.slow

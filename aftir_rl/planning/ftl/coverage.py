@@ -31,7 +31,7 @@ from aftir_rl.core.tank import Tank
 from aftir_rl.core.tank.surface import SurfaceSamples, surface_samples
 from aftir_rl.planning.ftl.model import Route, kappa_to_angles
 from aftir_rl.planning.ftl.tour import Tour, tour_of_tree
-from aftir_rl.planning.ftl.tree import RouteTree, grow_tree
+from aftir_rl.planning.ftl.tree import RouteTree, grow_tree, shared
 
 __all__ = ["CoveragePlan", "plan_coverage", "route_poses", "seen_by_routes", "viewpoint_lattice"]
 
@@ -147,6 +147,12 @@ def _greedy(seen: NDArray[np.bool_], goal: float) -> tuple[list[int], float]:
     return picks, float(covered.mean())
 
 
+def _most_shared(routes: dict[int, Route], k: int) -> tuple[int | None, int]:
+    """The route that shares most sections with route ``k``, and how many (``None``, 0: none)."""
+    best = max(((shared(routes[k], r)[1], i) for i, r in routes.items() if i != k), default=(0, 0))
+    return (best[1], best[0]) if best[0] else (None, 0)
+
+
 def plan_coverage(
     tank: Tank,
     box: tuple[ArrayLike, ArrayLike],
@@ -173,20 +179,23 @@ def plan_coverage(
     tree, _ = grow_tree(tank, candidates, margin, lambda text: None)
     if not tree.routes:
         raise PlanningError("no candidate viewpoint has a follow-the-leader motion")
-    index = sorted(tree.routes)
-    seen = seen_by_routes(tank, [tree.routes[j] for j in index], surface)
+    # a viewpoint's route: the tree's (sharing more) or its own (seeing other things)
+    rows = [(j, tree.routes[j]) for j in sorted(tree.routes)]
+    rows += [(j, tree.own[j]) for j in sorted(tree.own) if tree.own[j] is not tree.routes.get(j)]
+    seen = seen_by_routes(tank, [route for _, route in rows], surface)
     # aimed a little above the goal: a fresh sample of the surface should measure at least it
     aim = min(1.0, goal + AIM_ERRORS * np.sqrt(goal * (1 - goal) / seen.shape[1]))
     picks, estimate = _greedy(seen, aim)
-    chosen = [index[p] for p in picks]
-    say(f"{len(index)} routes; {len(chosen)} viewpoints see {100 * estimate:.1f}% of the surface")
-    renumber = {j: k for k, j in enumerate(chosen)}
+    say(f"{len(rows)} routes; {len(picks)} viewpoints see {100 * estimate:.1f}% of the surface")
+    chosen = [rows[p] for p in picks]
+    routes = dict(enumerate(route for _, route in chosen))
     sub = RouteTree(
-        candidates[chosen],
-        {k: tree.routes[j] for k, j in enumerate(chosen)},
-        {k: (renumber.get(tree.branches[j][0]), tree.branches[j][1]) for k, j in enumerate(chosen)},
+        candidates[[j for j, _ in chosen]],
+        routes=routes,
+        own={k: tree.own[j] for k, (j, _) in enumerate(chosen) if j in tree.own},
+        branches={k: _most_shared(routes, k) for k in routes},
     )
     tour = tour_of_tree(tank, sub, margin, solver_seconds)
     seconds = time.perf_counter() - start
     tour.seconds = seconds
-    return CoveragePlan(tour, goal, estimate, candidates, len(index), surface, seconds)
+    return CoveragePlan(tour, goal, estimate, candidates, len(tree.routes), surface, seconds)

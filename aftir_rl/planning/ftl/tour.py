@@ -23,7 +23,7 @@ from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.extras import require
 from aftir_rl.core.tank import Tank
-from aftir_rl.planning.ftl.model import FTLMotion, ftl_motion, kappa_to_angles
+from aftir_rl.planning.ftl.model import FTLMotion, Route, ftl_motion, kappa_to_angles
 from aftir_rl.planning.ftl.plan import motion_clearance
 from aftir_rl.planning.ftl.tree import RouteTree, grow_tree, shared
 from aftir_rl.planning.timing import TimedMotion, joint_positions, time_motion
@@ -206,8 +206,16 @@ def tour_of_tree(
     than ``margin``.
     """
     start = time.perf_counter()
-    motions = _deployments(tank, tree)
+    n = max(route.min_sections() for route in [*tree.routes.values(), *tree.own.values()])
+    motions = _deployments(tank, tree.routes, n)
     tour = _assemble(tank, tree.targets, tree, motions, solver_seconds)
+    # the baseline: one deployment and retraction per target along its own route
+    own = _deployments(tank, {j: tree.own.get(j, tree.routes[j]) for j in tree.routes}, n)
+    arm = tank.arm
+    tour.separate_s = 2 * sum(
+        time_motion(m.dis, m.theta, m.phi, arm.section_length, arm.limits).duration
+        for m in own.values()
+    )
     tour.margin_cm = margin
     if tour.min_clearance_cm < margin:  # where two legs meet, a joining move grazes the tank
         raise PlanningError(
@@ -217,17 +225,16 @@ def tour_of_tree(
     return tour
 
 
-def _deployments(tank: Tank, tree: RouteTree) -> dict[int, FTLMotion]:
-    """Each route's deployment with the same number of sections (the tour's arm).
+def _deployments(tank: Tank, routes: dict[int, Route], n: int) -> dict[int, FTLMotion]:
+    """Each route's deployment with ``n`` sections (the tour's arm).
 
     Without the entries that repeat the one before: deployments with more sections than their
     route needs repeat a posture at some stages (to 1e-13 cm), and a schedule needs time to move.
     """
     arm = tank.arm
-    n = max(route.min_sections() for route in tree.routes.values())
     h0 = min(float(tank.start_point[2]), 20.0)
     out = {}
-    for j, route in tree.routes.items():
+    for j, route in routes.items():
         m = ftl_motion(route, n, h0, theta_max=arm.theta_max)
         q = joint_positions(m.dis, m.theta, m.phi)
         keep = np.concatenate([[True], np.abs(np.diff(q, axis=0)).max(axis=1) > 1e-9])
@@ -323,7 +330,7 @@ def _assemble(
         arrivals=arrivals,
         legs=legs,
         branches={j: tree.branches[j] for j in order},
-        separate_s=2 * sum(legs_of.duration_from(j, PANEL) for j in index),
+        separate_s=0.0,
         failures=[],
         min_clearance_cm=motion_clearance(tank, whole),
         section_length=tank.arm.section_length,

@@ -19,7 +19,7 @@ from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.model import Route, kappa_to_angles
 from aftir_rl.planning.ftl.plan import SEARCH_VARIANTS, plan_motion
 
-__all__ = ["RouteTree", "grow_tree", "shared", "BRANCH_TRIES"]
+__all__ = ["RouteTree", "grow_tree", "shared", "union_length", "BRANCH_TRIES"]
 
 #: Prefixes of the tree a new target's route is tried from (the nearest ends first).
 BRANCH_TRIES = 8
@@ -27,18 +27,20 @@ BRANCH_TRIES = 8
 
 @dataclass
 class RouteTree:
-    """The routes planned so far (by target index) and where each came from."""
+    """The routes planned so far (by target index), where each came from, and each target's own.
+
+    ``own``: the route planned alone (what one deployment per target uses).
+    """
 
     targets: NDArray[np.float64]
     routes: dict[int, Route] = field(default_factory=dict)
+    own: dict[int, Route] = field(default_factory=dict)
     branches: dict[int, tuple[int | None, int]] = field(default_factory=dict)
 
-    def prefixes(
-        self, target: NDArray[np.float64], l: float, among: Sequence[int] | None = None
-    ) -> list[tuple[float, int, Route]]:
-        """Distinct prefixes of the routes (or ``among``'s) ending 0.5-6 sections from it."""
+    def prefixes(self, target: NDArray[np.float64], l: float) -> list[tuple[float, int, Route]]:
+        """Distinct prefixes of the routes ending 0.5-6 sections from it, the nearest first."""
         found: dict[bytes, tuple[float, int, Route]] = {}
-        for i in self.routes if among is None else among:
+        for i in self.routes:
             route = self.routes[i]
             theta, phi = kappa_to_angles(route.kappa)
             ends = forward_kinematics(route.lead, theta, phi, l)[1:-1, :3, 3]  # after 1..M-1
@@ -63,20 +65,35 @@ def shared(a: Route, b: Route) -> tuple[float, int]:
     return a.lead + d * a.section_length, d
 
 
-def _branch(
-    tank: Tank, tree: RouteTree, j: int, margin: float, among: Sequence[int] | None = None
-) -> bool:
-    """Plan target ``j``'s route as a continuation of a prefix of the tree; whether one was."""
-    target = tree.targets[j]
-    for _, i, prefix in tree.prefixes(target, tank.arm.section_length, among):
+def union_length(routes: Sequence[Route]) -> float:
+    """The length [cm] of the union of routes, shared prefixes counted once.
+
+    The straight lead to the highest first bend, and every distinct section once (routes with
+    the same lead and first sections share them).
+    """
+    if not routes:
+        return 0.0
+    keys = {
+        np.append(route.kappa[:d].ravel(), route.lead).tobytes()
+        for route in routes
+        for d in range(1, route.n_route_sections + 1)
+    }
+    return max(route.lead for route in routes) + len(keys) * routes[0].section_length
+
+
+def _improve(tank: Tank, tree: RouteTree, j: int, margin: float) -> None:
+    """Replace target ``j``'s route by the continuation of a prefix that shortens the union most."""
+    target, others = tree.targets[j], [r for i, r in tree.routes.items() if i != j]
+    best = union_length([*others, tree.routes[j]]) if j in tree.routes else np.inf
+    for _, i, prefix in tree.prefixes(target, tank.arm.section_length):
         if i == j:
             continue
         plan = plan_motion(tank, target, margin=margin, prefix=prefix, variants=SEARCH_VARIANTS[:2])
         if plan.complete and plan.motion is not None:
-            tree.routes[j] = plan.motion.route
-            tree.branches[j] = (i, prefix.n_route_sections)
-            return True
-    return False
+            length = union_length([*others, plan.motion.route])
+            if length < best - 1e-6:
+                best, tree.routes[j] = length, plan.motion.route
+                tree.branches[j] = (i, prefix.n_route_sections)
 
 
 def grow_tree(
@@ -84,27 +101,25 @@ def grow_tree(
 ) -> tuple[RouteTree, list[tuple[int, str]]]:
     """The tree of routes, and the targets no motion reaches (with the reason).
 
-    Nearest the panel first, each target continues a prefix of the tree where it can, else gets
-    a route of its own (a root); then every route that shares no section with the largest
-    family of routes tries again from that family's prefixes.
+    Every target first gets its own motion (``own``: what one deployment each would use). Then,
+    nearest the panel first, each target's route becomes the continuation of a prefix of the
+    tree that makes the union of the routes shortest, if one does better than its own; a
+    second pass tries again with every route in the tree.
     """
     tree, failures = RouteTree(targets), []
     order = np.argsort(np.linalg.norm(targets, axis=1)).tolist()
     for j in order:
-        if not tree.routes or not _branch(tank, tree, j, margin):
-            plan = plan_motion(tank, targets[j], margin=margin)
-            if plan.complete and plan.motion is not None:
-                tree.routes[j], tree.branches[j] = plan.motion.route, (None, 0)
-            else:
-                failures.append((j, plan.reason or "no motion"))
-        say(f"target {j}: {'no motion' if j not in tree.routes else 'planned'}")
-
-    # the routes that do not share a section with the trunk most share try again from it
-    def family(k: int) -> list[int]:
-        return [i for i in tree.routes if shared(tree.routes[i], tree.routes[k])[1] > 0]
-
-    trunk = max(tree.routes, key=lambda k: len(family(k)))
-    for j in order:
-        if j in tree.routes and j not in family(trunk):
-            _branch(tank, tree, j, margin, among=family(trunk))
-    return tree, sorted(failures)
+        plan = plan_motion(tank, targets[j], margin=margin)
+        if plan.complete and plan.motion is not None:
+            tree.own[j] = plan.motion.route
+        else:
+            failures.append((j, plan.reason or "no motion"))
+    for sweep in range(2):
+        for j in order:
+            if sweep == 0 and j in tree.own:
+                tree.routes[j], tree.branches[j] = tree.own[j], (None, 0)
+            if tree.routes or sweep:
+                _improve(tank, tree, j, margin)
+            if sweep:
+                say(f"target {j}: {'no motion' if j not in tree.routes else 'planned'}")
+    return tree, sorted(f for f in failures if f[0] not in tree.routes)
