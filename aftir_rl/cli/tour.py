@@ -137,6 +137,8 @@ def _write(out: Path, tank_name: str, tour: Any, extra: dict[str, Any] | None = 
 
 def _coverage(args: argparse.Namespace, tank: Any, say: Any) -> int:
     """``--coverage``: plan the viewpoints' tour, measure what it sees, write the run."""
+    import sys
+
     from aftir_rl.experiments.coverage import measure_coverage
     from aftir_rl.planning.ftl.coverage import plan_coverage
 
@@ -154,6 +156,9 @@ def _coverage(args: argparse.Namespace, tank: Any, say: Any) -> int:
               "measured": measured.to_json()}  # fmt: skip
     _write(Path(args.output), args.tank, plan.tour, {"coverage.json": report})
     tour = plan.tour
+    if measured.fraction < args.coverage:
+        print(f"below the goal: the candidates' routes see {100 * plan.estimate:.1f}% by the "
+              "planner's estimate (try a smaller --spacing)", file=sys.stderr)  # fmt: skip
     print(
         f"coverage tour of {len(tour.order)} viewpoints: {tour.duration:.1f} s; bay {args.bay}'s "
         f"surface seen: {100 * measured.fraction:.1f}% measured by ray casting (planner's estimate "

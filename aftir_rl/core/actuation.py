@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.core.config import brief, to_float
+from aftir_rl.core.config import brief, numbers_from_mapping
 from aftir_rl.core.errors import ConfigError
 
 __all__ = ["ActuatorLimits"]
@@ -72,21 +71,7 @@ class ActuatorLimits:
     @classmethod
     def from_mapping(cls, data: Any, where: str) -> ActuatorLimits:
         """Limits from a YAML mapping (``where`` names it in errors); unknown keys are refused."""
-        if data is None:
-            return cls()
-        if not isinstance(data, Mapping):
-            raise ConfigError(f"{where}: expected a mapping of limits, got {brief(data)}")
-        known = {item.name for item in dataclasses.fields(cls)}
-        unknown = sorted(str(key) for key in data if key not in known)
-        if unknown:
-            raise ConfigError(
-                f"{where}: unknown key {brief(unknown[0])}; known: {', '.join(sorted(known))}"
-            )
-        values = {key: to_float(value, f"{where}.{key}", MAX_LIMIT) for key, value in data.items()}
-        try:
-            return cls(**values)
-        except ConfigError as exc:
-            raise ConfigError(f"{where}: {exc}") from None
+        return numbers_from_mapping(cls, data, where, "limits", MAX_LIMIT)
 
     def rate_bounds(self, n_sections: int, kind: str) -> NDArray[np.float64]:
         """Speed (``kind="speed"``) or acceleration bounds, ``(1 + 5N,)``.

@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.core.config import brief, to_float
+from aftir_rl.core.config import brief, numbers_from_mapping
 from aftir_rl.core.errors import ConfigError
 
 __all__ = ["Camera"]
@@ -58,21 +57,7 @@ class Camera:
     @classmethod
     def from_mapping(cls, data: Any, where: str) -> Camera:
         """A camera from a YAML mapping (``where`` names it in errors); unknown keys are refused."""
-        if data is None:
-            return cls()
-        if not isinstance(data, Mapping):
-            raise ConfigError(f"{where}: expected a mapping, got {brief(data)}")
-        known = {item.name for item in dataclasses.fields(cls)}
-        unknown = sorted(str(key) for key in data if key not in known)
-        if unknown:
-            raise ConfigError(
-                f"{where}: unknown key {brief(unknown[0])}; known: {', '.join(sorted(known))}"
-            )
-        values = {key: to_float(value, f"{where}.{key}", 1e5) for key, value in data.items()}
-        try:
-            return cls(**values)
-        except ConfigError as exc:
-            raise ConfigError(f"{where}: {exc}") from None
+        return numbers_from_mapping(cls, data, where, "camera settings", 1e5)
 
     def cosines(self) -> NDArray[np.float64]:
         """``(cos half fov, range, cos max incidence, cos min incidence)`` for the kernels."""

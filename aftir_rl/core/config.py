@@ -405,3 +405,26 @@ def from_mapping(cls: type[T], data: dict[str, Any], source: str) -> T:
         return cls(**kwargs)
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"{source}: {shorten(str(exc), 300)}") from None
+
+
+def numbers_from_mapping(cls: type[T], data: Any, where: str, what: str, limit: float) -> T:
+    """The frozen dataclass ``cls`` of numbers from a YAML mapping of ``what`` (None: defaults).
+
+    Unknown keys are refused; every value is a finite number of at most ``limit``; ``cls``
+    checks the rest and raises :class:`ConfigError`, which gets ``where`` in front.
+    """
+    if data is None:
+        return cls()
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: expected a mapping of {what}, got {brief(data)}")
+    known = {item.name for item in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted(str(key) for key in data if key not in known)
+    if unknown:
+        raise ConfigError(
+            f"{where}: unknown key {brief(unknown[0])}; known: {', '.join(sorted(known))}"
+        )
+    values = {key: to_float(value, f"{where}.{key}", limit) for key, value in data.items()}
+    try:
+        return cls(**values)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None

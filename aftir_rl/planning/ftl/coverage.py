@@ -168,7 +168,9 @@ def plan_coverage(
 
     ``samples`` surface points are drawn by area; candidate viewpoints lie on a lattice of
     ``spacing`` cm; ``seed`` sets both.
-    Raises :class:`~aftir_rl.core.errors.PlanningError` when no candidate has a route.
+
+    Raises :class:`~aftir_rl.core.errors.PlanningError` when no candidate has a route that
+    sees any of the surface.
     """
     start, say = time.perf_counter(), progress or (lambda text: None)
     if not 0 < goal <= 1:
@@ -186,6 +188,8 @@ def plan_coverage(
     # aimed a little above the goal: a fresh sample of the surface should measure at least it
     aim = min(1.0, goal + AIM_ERRORS * np.sqrt(goal * (1 - goal) / seen.shape[1]))
     picks, estimate = _greedy(seen, aim)
+    if not picks:
+        raise PlanningError("no candidate viewpoint's route sees any of the surface")
     say(f"{len(rows)} routes; {len(picks)} viewpoints see {100 * estimate:.1f}% of the surface")
     chosen = [rows[p] for p in picks]
     routes = dict(enumerate(route for _, route in chosen))
