@@ -99,12 +99,15 @@ def test_a_box_in_the_way_shades_the_floor_below_it():
     assert np.array_equal(rays[sure & floor], truth[sure & floor])
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_kernel_and_rays_agree_on_random_poses_in_the_737(seed):
-    tank = load_tank("b737_center")
+@pytest.mark.parametrize(("name", "bay", "seed"), [("b737_center", 2, 0), ("b737_center", 2, 1),
+                                                   ("wing:5:2", 3, 2)])  # fmt: skip
+def test_kernel_and_rays_agree_on_random_poses(name, bay, seed):
+    """In the 737 and in a wing whose walls lie under the thin wedges of its taper."""
+    tank = load_tank(name)
     rng = np.random.default_rng(seed)
-    surface = surface_samples(tank, tank.bay(2), 1500, seed=seed)
-    tips = viewpoint_lattice(tank, tank.bay(2), 25.0, seed)[rng.permutation(20)[:6]]
+    surface = surface_samples(tank, tank.bay(bay), 1500, seed=seed)
+    lattice = viewpoint_lattice(tank, tank.bay(bay), 25.0, seed)
+    tips = lattice[rng.permutation(len(lattice))[:6]]
     looks = rng.normal(size=(len(tips), 3))
     looks /= np.linalg.norm(looks, axis=1, keepdims=True)
     for c, w in zip(tips, looks):
@@ -127,11 +130,21 @@ def test_a_coarse_coverage_tour_sees_what_its_planner_expects():
     pytest.importorskip("ortools")
     pytest.importorskip("toppra")
     tank = load_tank("b737_center")
-    plan = plan_coverage(tank, tank.bay(2), goal=0.7, spacing=40.0, samples=600, seed=7)
-    assert plan.estimate >= 0.7 and len(plan.tour.order) < plan.planned
+    plan = plan_coverage(tank, tank.bay(2), goal=0.6, spacing=60.0, samples=600, seed=7)
+    assert plan.estimate >= 0.6 and plan.spacing == 60.0
     measured = measure_coverage(tank, plan.tour.motion, tank.bay(2), samples=1500, seed=8)
-    assert measured.fraction >= 0.7 - 0.035  # a fresh sample of 1,500 points: ±1.2% (1 sd)
+    assert measured.fraction >= 0.6 - 0.04  # a fresh sample of 1,500 points: ±1.3% (1 sd)
     assert plan.tour.min_clearance_cm >= 1.0
+
+
+@pytest.mark.slow
+def test_a_lattice_too_coarse_for_the_goal_is_made_finer():
+    pytest.importorskip("ortools")
+    pytest.importorskip("toppra")
+    tank = load_tank("b737_center")
+    plan = plan_coverage(tank, tank.bay(2), goal=0.7, spacing=60.0, samples=600, seed=7)
+    assert plan.spacing < 60.0  # the first lattice's four routes see too little
+    assert plan.estimate >= 0.7 and len(plan.tour.order) < plan.planned
 
 
 @pytest.mark.slow

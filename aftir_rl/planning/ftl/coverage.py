@@ -39,6 +39,10 @@ __all__ = ["CoveragePlan", "plan_coverage", "route_poses", "seen_by_routes", "vi
 POSE_STEP = 2.0
 #: The pick aims this many standard errors of the samples' share above the goal.
 AIM_ERRORS = 1.5
+#: A lattice whose routes fall short of the goal is tried again this much finer, down to
+#: :data:`MIN_SPACING` [cm].
+REFINE = 0.7
+MIN_SPACING = 14.0
 #: Candidate viewpoints stay this far [cm] from every surface.
 VIEWPOINT_CLEARANCE = 10.0
 
@@ -52,6 +56,7 @@ class CoveragePlan:
         goal: the share of the surface asked for.
         estimate: the share of the samples the chosen routes see (the planner's estimate).
         candidates: the candidate viewpoints ``(C, 3)`` [cm], and ``planned`` how many had a route.
+        spacing: the spacing of their lattice [cm].
         samples: the surface samples the estimate counts.
         seconds: planning time [s].
 
@@ -62,6 +67,7 @@ class CoveragePlan:
     estimate: float
     candidates: NDArray[np.float64]
     planned: int
+    spacing: float
     samples: SurfaceSamples
     seconds: float
 
@@ -73,6 +79,7 @@ class CoveragePlan:
             "viewpoints": len(self.tour.order),
             "candidates": len(self.candidates),
             "candidates_planned": self.planned,
+            "spacing_cm": self.spacing,
             "surface_samples": len(self.samples.points),
             "surface_area_cm2": self.samples.area_cm2,
             "seconds": self.seconds,
@@ -167,7 +174,8 @@ def plan_coverage(
     """A tour whose tip camera sees ``goal`` of the surface in ``box`` (or as much as it can).
 
     ``samples`` surface points are drawn by area; candidate viewpoints lie on a lattice of
-    ``spacing`` cm; ``seed`` sets both.
+    ``spacing`` cm, made :data:`REFINE` times finer while their routes see too little; ``seed``
+    sets both.
 
     Raises :class:`~aftir_rl.core.errors.PlanningError` when no candidate has a route that
     sees any of the surface.
@@ -176,21 +184,22 @@ def plan_coverage(
     if not 0 < goal <= 1:
         raise ConfigError(f"coverage goal must be in (0, 1], got {goal:g}")
     surface = surface_samples(tank, box, samples, seed)
-    candidates = viewpoint_lattice(tank, box, spacing, seed)
-    say(f"{len(surface.points)} surface samples, {len(candidates)} candidate viewpoints")
-    tree, _ = grow_tree(tank, candidates, margin, lambda text: None)
-    if not tree.routes:
-        raise PlanningError("no candidate viewpoint has a follow-the-leader motion")
-    # a viewpoint's route: the tree's (sharing more) or its own (seeing other things)
-    rows = [(j, tree.routes[j]) for j in sorted(tree.routes)]
-    rows += [(j, tree.own[j]) for j in sorted(tree.own) if tree.own[j] is not tree.routes.get(j)]
-    seen = seen_by_routes(tank, [route for _, route in rows], surface)
     # aimed a little above the goal: a fresh sample of the surface should measure at least it
-    aim = min(1.0, goal + AIM_ERRORS * np.sqrt(goal * (1 - goal) / seen.shape[1]))
-    picks, estimate = _greedy(seen, aim)
+    aim = min(1.0, goal + AIM_ERRORS * np.sqrt(goal * (1 - goal) / len(surface.points)))
+    while True:
+        candidates = viewpoint_lattice(tank, box, spacing, seed)
+        say(f"{len(surface.points)} surface samples, {len(candidates)} candidate viewpoints")
+        tree, _ = grow_tree(tank, candidates, margin, lambda text: None)
+        # a viewpoint's route: the tree's (sharing more) or its own (seeing other things)
+        rows = [(j, tree.routes[j]) for j in sorted(tree.routes)]
+        rows += [(j, r) for j, r in sorted(tree.own.items()) if r is not tree.routes.get(j)]
+        picks, estimate = _greedy(seen_by_routes(tank, [r for _, r in rows], surface), aim)
+        say(f"{len(rows)} routes; {len(picks)} viewpoints see {100 * estimate:.1f}% of it")
+        if estimate >= aim or spacing * REFINE < MIN_SPACING:
+            break
+        spacing *= REFINE  # short of the goal: a finer lattice
     if not picks:
-        raise PlanningError("no candidate viewpoint's route sees any of the surface")
-    say(f"{len(rows)} routes; {len(picks)} viewpoints see {100 * estimate:.1f}% of the surface")
+        raise PlanningError("no candidate viewpoint has a route that sees any of the surface")
     chosen = [rows[p] for p in picks]
     routes = dict(enumerate(route for _, route in chosen))
     sub = RouteTree(
@@ -202,4 +211,6 @@ def plan_coverage(
     tour = tour_of_tree(tank, sub, margin, solver_seconds)
     seconds = time.perf_counter() - start
     tour.seconds = seconds
-    return CoveragePlan(tour, goal, estimate, candidates, len(tree.routes), surface, seconds)
+    return CoveragePlan(
+        tour, goal, estimate, candidates, len(tree.routes), spacing, surface, seconds
+    )
