@@ -1,7 +1,8 @@
 """Pages of the documentation generated from the package itself when Sphinx starts.
 
 - ``envs/<id>.md`` for every id of :data:`aftir_rl.ENV_IDS`: the env's registration, its spaces
-  as ``gym.make`` builds them, a picture from its ``rgb_array`` render after a few random steps,
+  as ``gym.make`` builds them, a picture from its ``rgb_array`` render (after a few random steps;
+  the follow-the-leader env after the planner's motion),
   and its class docstring (description, spaces, rewards, episode end, arguments, version
   history), Gymnasium's layout.
 - ``pretrained.md``: the policies shipped with the package, from their cards.
@@ -47,23 +48,46 @@ def _docstring(cls: Any) -> str:
     return ROLE.sub(r"{\1}`\2`", body).strip()
 
 
-def _picture(env_id: str, static: Path) -> str:
-    """Render the env after 20 random steps (seed 0) into ``_static/envs/<id>.png``."""
-    from PIL import Image
+#: The follow-the-leader env's picture: the planner's motion to this bay-2 target, replayed.
+STAGED_TARGET = (180.0, 120.0, 60.0)
 
+
+def _staged(env_id: str) -> tuple[Any, str]:
+    """The env to draw, and its caption.
+
+    After 20 random steps (seed 0); the follow-the-leader env after the expert's motion to
+    :data:`STAGED_TARGET` (the arm through the hatch).
+    """
     env = gym.make(env_id, render_mode="rgb_array")
+    if env_id == "AFTIR-ArmFTL-v0":
+        from aftir_rl.rl.expert import FTLExpert
+
+        plan = FTLExpert().plan(STAGED_TARGET)
+        if plan is not None:
+            env.reset(seed=0, options={"target": STAGED_TARGET})
+            for action in plan.actions:
+                env.step(action)
+            return env, f"after the planner's motion to {STAGED_TARGET} cm in bay 2"
     env.reset(seed=0)
     env.action_space.seed(0)
     for _ in range(20):
         _, _, terminated, truncated, _ = env.step(env.action_space.sample())
         if terminated or truncated:
             break
+    return env, "after 20 random steps"
+
+
+def _picture(env_id: str, static: Path) -> tuple[str, str]:
+    """Render the staged env into ``_static/envs/<id>.png``; its path and caption."""
+    from PIL import Image
+
+    env, caption = _staged(env_id)
     frame = np.asarray(env.render())
     env.close()
     out = static / "envs" / f"{env_id}.png"
     out.parent.mkdir(parents=True, exist_ok=True)
     Image.fromarray(frame).save(out)
-    return f"../_static/envs/{env_id}.png"
+    return f"../_static/envs/{env_id}.png", caption
 
 
 def _env_page(env_id: str, static: Path) -> str:
@@ -87,10 +111,10 @@ def _env_page(env_id: str, static: Path) -> str:
         rows.append(("Vector env", vector))
     table = "\n".join(f"| {k} | {v} |" for k, v in rows)
     summary = (inspect.getdoc(cls) or "").split("\n", 1)[0]
-    picture = _picture(env_id, static)
+    picture, caption = _picture(env_id, static)
     return (
         f"# `{env_id}`\n\n{summary}\n\n"
-        f"![{env_id} after 20 random steps]({picture})\n\n"
+        f"![{env_id} {caption}]({picture})\n\n"
         f"| | |\n|---|---|\n{table}\n\n{_docstring(cls)}\n"
     )
 
