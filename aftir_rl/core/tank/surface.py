@@ -86,16 +86,17 @@ def surface_samples(tank: Tank, box: tuple[ArrayLike, ArrayLike], count: int, se
         raise ConfigError(f"no surface of {tank.name} inside {lo.tolist()}..{hi.tolist()}")
     part = trimesh.Trimesh(mesh.vertices, mesh.faces[near], process=False)
     rng = np.random.default_rng(seed)
-    points, normals, drawn = [], [], 0
-    while sum(map(len, points)) < count and drawn < 64 * count:
+    points: list[NDArray[np.float64]] = []
+    normals: list[NDArray[np.float64]] = []
+    kept, drawn = 0, 0
+    while kept < count and drawn < 64 * count:
         xyz, faces = trimesh.sample.sample_surface(part, 4 * count, seed=rng)
         n = part.face_normals[faces]
         inside = np.all((xyz >= lo) & (xyz <= hi), axis=1)
         inside[inside] = _facing_free_space(tank, xyz[inside], n[inside])
         points.append(xyz[inside])
         normals.append(n[inside])
-        drawn += len(xyz)
-    kept = sum(map(len, points))
+        kept, drawn = kept + int(inside.sum()), drawn + len(xyz)
     if kept == 0:
         raise ConfigError(f"no surface of {tank.name} inside the box faces its free space")
     area = float(part.area) * kept / drawn

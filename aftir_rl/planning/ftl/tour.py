@@ -44,7 +44,8 @@ class Tour:
         legs: per leg ``{"from", "to", "depart_cm", "duration_s"}`` (``None``: the panel).
         branches: per reached target the target whose route it continues and the sections
             shared (``None`` and 0 for a route of its own).
-        separate_s: the duration of one deployment and retraction per target.
+        separate_s: the duration of one deployment and retraction per target along its own route
+            (planned alone; the tree's route where it has none).
         failures: ``(index, reason)`` of the targets no motion reaches.
         min_clearance_cm: the least clearance of the arm's surface along the motion.
         section_length: ``l`` [cm].
