@@ -189,7 +189,8 @@ def plan_coverage(
     while True:
         candidates = viewpoint_lattice(tank, box, spacing, seed)
         say(f"{len(surface.points)} surface samples, {len(candidates)} candidate viewpoints")
-        tree, _ = grow_tree(tank, candidates, margin, lambda text: None)
+        # one sweep: a viewpoint may take its own route anyway (step 2 of docs/robot.md)
+        tree, _ = grow_tree(tank, candidates, margin, lambda text: None, sweeps=1)
         # a viewpoint's route: the tree's (sharing more) or its own (seeing other things)
         rows = [(j, tree.routes[j]) for j in sorted(tree.routes)]
         rows += [(j, r) for j, r in sorted(tree.own.items()) if r is not tree.routes.get(j)]

@@ -97,14 +97,18 @@ def _improve(tank: Tank, tree: RouteTree, j: int, margin: float) -> None:
 
 
 def grow_tree(
-    tank: Tank, targets: NDArray[np.float64], margin: float, say: Callable[[str], None]
+    tank: Tank,
+    targets: NDArray[np.float64],
+    margin: float,
+    say: Callable[[str], None],
+    sweeps: int = 2,
 ) -> tuple[RouteTree, list[tuple[int, str]]]:
     """The tree of routes, and the targets no motion reaches (with the reason).
 
     Every target first gets its own motion (``own``: what one deployment each would use). Then,
     nearest the panel first, each target's route becomes the continuation of a prefix of the
-    tree that makes the union of the routes shortest, if one does better than its own; a
-    second pass tries again with every route in the tree.
+    tree that makes the union of the routes shortest, if one does better than its own; each
+    further sweep tries again with every route in the tree.
     """
     tree, failures = RouteTree(targets), []
     order = np.argsort(np.linalg.norm(targets, axis=1)).tolist()
@@ -114,12 +118,12 @@ def grow_tree(
             tree.own[j] = plan.motion.route
         else:
             failures.append((j, plan.reason or "no motion"))
-    for sweep in range(2):
+    for sweep in range(sweeps):
         for j in order:
             if sweep == 0 and j in tree.own:
                 tree.routes[j], tree.branches[j] = tree.own[j], (None, 0)
             if tree.routes or sweep:
                 _improve(tank, tree, j, margin)
-            if sweep:
+            if sweep == sweeps - 1:
                 say(f"target {j}: {'no motion' if j not in tree.routes else 'planned'}")
     return tree, sorted(f for f in failures if f[0] not in tree.routes)
