@@ -156,6 +156,15 @@ def test_bay_2_coverage_tour_sees_90_percent_and_passes_the_check(tmp_path, caps
     assert "measured by ray casting" in capsys.readouterr().out
 
 
+def test_the_pick_takes_the_largest_gain_first_and_stops_without_one():
+    from aftir_rl.planning.ftl import coverage
+
+    seen = np.array([[1, 1, 0, 0, 0], [1, 1, 1, 0, 0], [0, 0, 0, 1, 0]], dtype=np.bool_)
+    assert coverage._greedy(seen, 0.8) == ([1, 2], 0.8)
+    assert coverage._greedy(seen, 1.0) == ([1, 2], 0.8)  # nothing sees the last column
+    assert coverage._greedy(np.zeros((0, 5), dtype=np.bool_), 0.9) == ([], 0.0)
+
+
 def test_surface_samples_refuse_bad_counts():
     tank = _room()
     with pytest.raises(ConfigError):

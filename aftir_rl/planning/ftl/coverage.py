@@ -144,7 +144,7 @@ def seen_by_routes(
 def _greedy(seen: NDArray[np.bool_], goal: float) -> tuple[list[int], float]:
     """Rows picked one by one by the columns they add until ``goal`` of them are covered."""
     covered, picks = np.zeros(seen.shape[1], dtype=np.bool_), []
-    while covered.mean() < goal:
+    while len(seen) and covered.mean() < goal:
         gain = seen[:, ~covered].sum(axis=1)
         best = int(np.argmax(gain))
         if gain[best] == 0:
@@ -174,8 +174,8 @@ def plan_coverage(
     """A tour whose tip camera sees ``goal`` of the surface in ``box`` (or as much as it can).
 
     ``samples`` surface points are drawn by area; candidate viewpoints lie on a lattice of
-    ``spacing`` cm, made :data:`REFINE` times finer while their routes see too little; ``seed``
-    sets both.
+    ``spacing`` cm, made :data:`REFINE` times finer while their routes see too little (the
+    lattice whose routes see most is kept); ``seed`` sets both.
 
     Raises :class:`~aftir_rl.core.errors.PlanningError` when no candidate has a route that
     sees any of the surface.
@@ -186,6 +186,7 @@ def plan_coverage(
     surface = surface_samples(tank, box, samples, seed)
     # aimed a little above the goal: a fresh sample of the surface should measure at least it
     aim = min(1.0, goal + AIM_ERRORS * np.sqrt(goal * (1 - goal) / len(surface.points)))
+    best: tuple[float, Any] | None = None
     while True:
         candidates = viewpoint_lattice(tank, box, spacing, seed)
         say(f"{len(surface.points)} surface samples, {len(candidates)} candidate viewpoints")
@@ -196,11 +197,14 @@ def plan_coverage(
         rows += [(j, r) for j, r in sorted(tree.own.items()) if r is not tree.routes.get(j)]
         picks, estimate = _greedy(seen_by_routes(tank, [r for _, r in rows], surface), aim)
         say(f"{len(rows)} routes; {len(picks)} viewpoints see {100 * estimate:.1f}% of it")
+        if picks and (best is None or estimate > best[0]):
+            best = (estimate, (candidates, tree, rows, picks, spacing))
         if estimate >= aim or spacing * REFINE < MIN_SPACING:
             break
         spacing *= REFINE  # short of the goal: a finer lattice
-    if not picks:
+    if best is None:
         raise PlanningError("no candidate viewpoint has a route that sees any of the surface")
+    estimate, (candidates, tree, rows, picks, spacing) = best
     chosen = [rows[p] for p in picks]
     routes = dict(enumerate(route for _, route in chosen))
     sub = RouteTree(
