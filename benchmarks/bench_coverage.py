@@ -12,13 +12,11 @@ duration, planning and measuring seconds, the least clearance and the check; the
 from __future__ import annotations
 
 import argparse
-import json
-from pathlib import Path
 
 from aftir_rl.core.tank import load_tank
-from aftir_rl.experiments.bench import machine_facts
+from aftir_rl.experiments.bench import write_results
 from aftir_rl.experiments.coverage import measure_coverage
-from aftir_rl.experiments.execution import TimedRun, check_motion
+from aftir_rl.experiments.execution import check_tour
 from aftir_rl.planning.ftl.coverage import plan_coverage
 
 
@@ -41,9 +39,7 @@ def main() -> None:
         plan = plan_coverage(tank, box, args.goal, seed=seed)
         tour = plan.tour
         measured = measure_coverage(tank, tour.motion, box)
-        dis, theta, phi = tour.motion
-        run = TimedRun(dis, theta, phi, tour.timing, tour.section_length, tour.margin_cm)
-        problems = check_motion(run, tank)
+        problems = check_tour(tank, tour)
         row = {
             "seed": seed,
             **plan.report_json(),
@@ -58,10 +54,7 @@ def main() -> None:
                  f"{tour.duration:.0f}", f"{plan.seconds:.1f}", f"{measured.seconds:.1f}",
                  f"{tour.min_clearance_cm:.2f}", row["check"]]  # fmt: skip
         print(f"| {seed} | " + " | ".join(map(str, cells)) + " |", flush=True)
-    print(machine_facts())
-    if args.json:
-        out = {"machine": machine_facts(), "options": vars(args), "rows": rows}
-        Path(args.json).write_text(json.dumps(out, indent=1))
+    write_results(args.json, args, rows)
 
 
 if __name__ == "__main__":

@@ -12,14 +12,12 @@ planning time, and the machine.
 from __future__ import annotations
 
 import argparse
-import json
 import time
-from pathlib import Path
 
 import numpy as np
 
 from aftir_rl.core.tank import load_tank
-from aftir_rl.experiments.bench import machine_facts, target_sets
+from aftir_rl.experiments.bench import target_sets, write_results
 from aftir_rl.experiments.execution import TimedRun, check_motion
 from aftir_rl.planning.ftl.plan import plan_motion
 
@@ -56,10 +54,7 @@ def main() -> None:
         print(f"| {name} | {len(done)}/{len(sets[name])} | {ok}/{len(done)} | "
               f"{np.median(durations):.1f} | {max(durations):.1f} | "
               f"{np.median([r['timing_ms'] for r in done]):.0f} |", flush=True)  # fmt: skip
-    print(machine_facts())
-    if args.json:
-        out = {"machine": machine_facts(), "options": vars(args), "rows": rows}
-        Path(args.json).write_text(json.dumps(out, indent=1))
+    write_results(args.json, args, rows)
 
 
 if __name__ == "__main__":

@@ -12,25 +12,16 @@ seconds, the least clearance and the check; then the machine.
 from __future__ import annotations
 
 import argparse
-import json
 import time
-from pathlib import Path
 
 import numpy as np
 
 from aftir_rl.core.tank import load_tank
-from aftir_rl.experiments.bench import machine_facts
-from aftir_rl.experiments.execution import TimedRun, check_motion
+from aftir_rl.experiments.bench import write_results
+from aftir_rl.experiments.execution import check_tour
 from aftir_rl.planning.ftl.tour import plan_tour
 from aftir_rl.planning.posture.context import random_free_targets
 from aftir_rl.planning.posture.planner import Planner
-
-
-def _checked(tank, tour) -> list[str]:
-    """``aftir check``'s problems with the tour (empty: it passes)."""
-    dis, theta, phi = tour.motion
-    run = TimedRun(dis, theta, phi, tour.timing, tour.section_length, tour.margin_cm)
-    return check_motion(run, tank)
 
 
 def main() -> None:
@@ -49,7 +40,7 @@ def main() -> None:
         start = time.perf_counter()
         tour = plan_tour(tank, np.array(targets))
         seconds = time.perf_counter() - start
-        problems = _checked(tank, tour)
+        problems = check_tour(tank, tour)
         row = {
             "seed": seed,
             "reached": len(tour.order),
@@ -68,10 +59,7 @@ def main() -> None:
                  f"{tour.separate_s:.0f}", f"{row['ratio']:.2f}", f"{seconds:.1f}",
                  f"{tour.min_clearance_cm:.2f}", row["check"]]  # fmt: skip
         print(f"| {seed} | " + " | ".join(map(str, cells)) + " |", flush=True)
-    print(machine_facts())
-    if args.json:
-        out = {"machine": machine_facts(), "options": vars(args), "rows": rows}
-        Path(args.json).write_text(json.dumps(out, indent=1))
+    write_results(args.json, args, rows)
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ docs/benchmarks.md, "Comparing every method".
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import platform
@@ -33,6 +34,7 @@ __all__ = [
     "Outcome",
     "Row",
     "target_sets",
+    "write_results",
     "method_outcome",
     "run_benchmark",
     "format_table",
@@ -223,3 +225,15 @@ def env_steps_per_second(env_id: str, steps: int, **kwargs: Any) -> float:
     seconds = time.perf_counter() - start
     env.close()
     return steps / seconds
+
+
+def write_results(path: str | None, options: Any, rows: list[dict[str, Any]]) -> None:
+    """Print the machine below a benchmark's table; with ``path``, write the JSON too.
+
+    The file holds ``{machine, options, rows}`` (``options``: the script's parsed arguments).
+    """
+    machine = machine_facts()
+    print(machine)
+    if path:
+        out = {"machine": machine, "options": vars(options), "rows": rows}
+        Path(path).write_text(json.dumps(out, indent=1))

@@ -34,6 +34,7 @@ __all__ = [
     "SPACES",
     "TimedRun",
     "check_motion",
+    "check_tour",
     "export_motion",
     "read_timed",
     "timed_run_tank",
@@ -270,3 +271,10 @@ def export_motion(run: TimedRun, fmt: str, space: str = "joints") -> str:
         )
     header = {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "panel"}
     return json.dumps({"header": header, "joint_names": names, "points": points}, indent=1) + "\n"
+
+
+def check_tour(tank: Tank, tour: Any) -> list[str]:
+    """:func:`check_motion` of a planned tour (a :class:`~aftir_rl.planning.ftl.tour.Tour`)."""
+    dis, theta, phi = tour.motion
+    return check_motion(TimedRun(dis, theta, phi, tour.timing, tour.section_length,
+                                 tour.margin_cm), tank)  # fmt: skip

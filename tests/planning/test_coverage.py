@@ -111,11 +111,13 @@ def test_kernel_and_rays_agree_on_random_poses(name, bay, seed):
     tips = lattice[rng.permutation(len(lattice))[:6]]
     looks = rng.normal(size=(len(tips), 3))
     looks /= np.linalg.norm(looks, axis=1, keepdims=True)
+    seen = 0
     for c, w in zip(tips, looks):
         kernel, rays = _both(tank, c[None], w[None], surface)
-        assert rays.sum() > 0 or kernel.sum() == 0
         # they may differ only at edges: the kernel's line of sight stops 2 cm short
         assert (kernel != rays).mean() <= 0.01
+        seen += int(rays.sum())
+    assert seen >= 100  # the poses see something, so agreeing is not agreeing on nothing
 
 
 def test_bad_coverage_options_get_one_line(tmp_path, capsys):

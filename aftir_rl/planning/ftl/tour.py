@@ -210,13 +210,6 @@ def tour_of_tree(
     n = max(route.min_sections() for route in [*tree.routes.values(), *tree.own.values()])
     motions = _deployments(tank, tree.routes, n)
     tour = _assemble(tank, tree.targets, tree, motions, solver_seconds)
-    # the baseline: one deployment and retraction per target along its own route
-    own = _deployments(tank, {j: tree.own.get(j, tree.routes[j]) for j in tree.routes}, n)
-    arm = tank.arm
-    tour.separate_s = 2 * sum(
-        time_motion(m.dis, m.theta, m.phi, arm.section_length, arm.limits).duration
-        for m in own.values()
-    )
     tour.margin_cm = margin
     if tour.min_clearance_cm < margin:  # where two legs meet, a joining move grazes the tank
         raise PlanningError(
@@ -331,12 +324,25 @@ def _assemble(
         arrivals=arrivals,
         legs=legs,
         branches={j: tree.branches[j] for j in order},
-        separate_s=0.0,
+        separate_s=_separate_s(tank, tree, legs_of),
         failures=[],
         min_clearance_cm=motion_clearance(tank, whole),
         section_length=tank.arm.section_length,
         margin_cm=DEFAULT_MARGIN,
     )
+
+
+def _separate_s(tank: Tank, tree: RouteTree, legs: _Legs) -> float:
+    """One deployment and retraction per target along its own route (the baseline).
+
+    A target whose tour route is its own reuses the tour's timed deployment.
+    """
+    n, arm = next(iter(legs.motions.values())).theta.shape[1], tank.arm
+    other = {j: r for j, r in tree.own.items() if j in legs.motions and r is not tree.routes[j]}
+    total = sum(legs.duration_from(j, PANEL) for j in legs.motions if j not in other)
+    for m in _deployments(tank, other, n).values():
+        total += time_motion(m.dis, m.theta, m.phi, arm.section_length, arm.limits).duration
+    return 2 * total
 
 
 def _bridged(pieces: list[tuple[Any, ...]], tank: Tank) -> list[tuple[Any, ...]]:
