@@ -15,6 +15,7 @@ import contextlib
 import multiprocessing
 import os
 import re
+import warnings
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -166,13 +167,15 @@ def _save(minari: Any, dataset_id: str, buffers: list[Any], env: gym.Env) -> Non
     if dataset_id in minari.list_local_datasets():
         minari.load_dataset(dataset_id).storage.update_episodes(buffers)
     else:
-        minari.create_dataset_from_buffers(
-            dataset_id,
-            buffers,
-            env=env,
-            algorithm_name="aftir_rl.rl.expert.FTLExpert",
-            description="Follow-the-leader expert episodes of AFTIR-ArmFTL-v0",
-        )
+        with warnings.catch_warnings():  # Minari's advice to name an author, a permalink...
+            warnings.filterwarnings("ignore", category=UserWarning, module=r"minari\.")
+            minari.create_dataset_from_buffers(
+                dataset_id,
+                buffers,
+                env=env,
+                algorithm_name="aftir_rl.rl.expert.FTLExpert",
+                description="Follow-the-leader expert episodes of AFTIR-ArmFTL-v0",
+            )
 
 
 def write_dataset(

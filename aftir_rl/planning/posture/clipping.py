@@ -164,14 +164,20 @@ def gauss_newton(
         h: central-difference step of the Jacobian.
 
     Returns:
-        The last ``x`` (the caller checks it), or None where the Jacobian vanishes.
+        The last ``x`` (the caller checks it), or None where the Jacobian vanishes. It stops
+        early once three steps in a row have not cut the gap by a tenth: the goal lies out of
+        reach within ``limits`` (a clipped step then circles a gap it cannot close), while
+        every converging case seen cuts it by half or more a step.
 
     """
+    gaps: list[float] = []
     for _ in range(iterations):
         value, jac = finite_differences(fn, x, h)
         error = value - goal
-        if np.linalg.norm(error) < tol:
+        gap = float(np.linalg.norm(error))
+        if gap < tol or len(gaps) >= 3 and gap > 0.9 * min(gaps[:-2]):
             break
+        gaps.append(gap)
         if len(error) == 1:  # one equation: the minimum-norm step in closed form
             grad = jac[0]
             norm2 = float(grad @ grad)
