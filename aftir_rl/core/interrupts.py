@@ -16,7 +16,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
 
-__all__ = ["deferred", "held", "on_signal", "requested", "reset"]
+__all__ = ["deferred", "held", "on_signal", "request", "requested", "reset"]
 
 #: The line printed when a second signal ends the process at once.
 AT_ONCE = "interrupted twice: stopped at once; an unfinished run stays in its .NAME.partial folder"
@@ -30,6 +30,15 @@ class _State:
 def requested() -> bool:
     """Whether a stop was requested (a first Ctrl-C or SIGTERM) since :func:`reset`."""
     return _State.requested
+
+
+def request() -> None:
+    """Ask the loops to stop as a first signal would inside :func:`deferred` (never raises).
+
+    For a process that learns of the request another way than a signal: a Ray Tune trial is
+    told by its sweep (:mod:`aftir_rl.experiments.tune`).
+    """
+    _State.requested = True
 
 
 def reset() -> None:

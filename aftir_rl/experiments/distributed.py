@@ -19,6 +19,7 @@ import contextlib
 import math
 import os
 import re
+import signal
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -174,6 +175,34 @@ def ray_session(
         yield ray
     finally:
         ray.shutdown()
+
+
+def kill_local_workers(titles: Sequence[str], root: int | None = None) -> int:
+    """SIGKILL the Ray workers below ``root`` whose process title starts with one of ``titles``.
+
+    ``root`` defaults to this process: a local Ray it started has its raylet, and so its
+    workers, below it. Process titles are ``ray::ImplicitFunc.train`` and the like. Returns how
+    many were killed (0 where there is no ``/proc``).
+    """
+    children: dict[int, list[int]] = {}
+    titles_of: dict[int, str] = {}
+    for entry in Path("/proc").glob("[0-9]*"):
+        try:
+            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            cmdline = (entry / "cmdline").read_bytes().split(b"\0", 1)[0]
+        except (OSError, IndexError, ValueError):
+            continue  # ended meanwhile, or not ours to read
+        children.setdefault(ppid, []).append(int(entry.name))
+        titles_of[int(entry.name)] = cmdline.decode(errors="replace")
+    killed, todo = 0, list(children.get(os.getpid() if root is None else root, []))
+    while todo:
+        pid = todo.pop()
+        todo.extend(children.get(pid, []))
+        if titles_of.get(pid, "").startswith(tuple(titles)):
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+                killed += 1
+    return killed
 
 
 def _check_reachable(address: str, seconds: float = 10.0) -> None:

@@ -20,6 +20,8 @@ import csv
 import dataclasses
 import math
 import os
+import threading
+import time
 from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
@@ -28,6 +30,7 @@ from typing import Any
 from aftir_rl.core import interrupts
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import UNFINISHED, atomic_open, check_writable_dir, write_json
+from aftir_rl.experiments.distributed import kill_local_workers
 from aftir_rl.experiments.search_space import DISTRIBUTIONS, Dimension, load_search_space
 
 __all__ = [
@@ -43,6 +46,10 @@ ALGOS = ("ppo", "sac", "td3")
 #: Bounds of the command line's numbers.
 MAX_TRIALS, MAX_EVALUATIONS = 10_000, 100
 METRIC = "eval/success_rate"
+#: The file in a sweep folder that tells its trials to stop (written on Ctrl-C or SIGTERM).
+STOP_FILE = ".stop"
+#: Process titles of a trial's Ray worker (its actor, or a worker about to become one).
+TRIAL_PROCESSES = ("ray::ImplicitFunc", "ray::_trial", "ray::IDLE")
 #: Ray Tune's settings for a sweep: its own CSV/JSON/TensorBoard loggers off (the trials' run
 #: directories hold the logs), and Ctrl-C left to :mod:`aftir_rl.core.interrupts`, which ends
 #: the trials (``_stop_on_request``).
@@ -72,11 +79,25 @@ def _plain(value: Any) -> Any:
 
 def _trial(params: dict[str, Any], algo: str, base: Any, logdir: str, seed: int) -> None:
     """Train one trial with ``params`` and report every evaluation to Ray Tune."""
+    finished = threading.Event()
+    flag = Path(logdir) / STOP_FILE
+    threading.Thread(target=_wait_for_stop, args=(flag, finished), daemon=True).start()
+    try:
+        _train_trial(params, algo, base, logdir, seed)
+    except KeyboardInterrupt:
+        pass  # the sweep asked: the run stays unfinished with its checkpoint, to resume
+    finally:
+        finished.set()
+
+
+def _train_trial(params: dict[str, Any], algo: str, base: Any, logdir: str, seed: int) -> None:
     from ray import tune
 
     from aftir_rl.rl.sb3.evaluation import save_model
     from aftir_rl.rl.sb3.train import train_sb3
 
+    if interrupts.requested():
+        return
     hyper = {**base.hyperparameters, **{k: _plain(v) for k, v in params.items()}}
     config = dataclasses.replace(base, hyperparameters=hyper)
     total = config.total_timesteps
@@ -103,6 +124,22 @@ def _trial(params: dict[str, Any], algo: str, base: Any, logdir: str, seed: int)
         algo, config, seed=seed, logdir=logdir, progress_bar=False, on_evaluation=report
     )
     tune.report({**last, "run_dir": summary["run_dir"], "completed": 1})
+
+
+def _wait_for_stop(flag: Path, finished: threading.Event, grace: float = 1.5) -> None:
+    """A trial's watcher thread: the sweep's stop file becomes this process's stop request.
+
+    Ray Tune stops a trial when it reports (at an evaluation), or kills its actor 10 s after
+    asking. Training stops at its next step instead, with a checkpoint; a trial still starting
+    (imports) or in an evaluation after ``grace`` seconds ends its process, its run keeping its
+    last checkpoint (every write is atomic).
+    """
+    while not flag.exists():
+        if finished.wait(0.1):
+            return
+    interrupts.request()
+    if not finished.wait(grace):
+        os._exit(0)
 
 
 def _finish_stopped(run_dir: Path, result: dict[str, Any], algo: str, env_id: str) -> None:
@@ -176,7 +213,7 @@ def run_sweep(
     for key, value in TUNE_ENVIRONMENT.items():
         os.environ.setdefault(key, value)
     with ray_session(ray, workers):
-        tuner = _make_tuner(algo, base, space, trials, sweep, seed, verbose)
+        tuner = _make_tuner(algo, base, space, trials, sweep, seed, verbose, ray == "local")
         with interrupts.deferred():
             grid = tuner.fit()
         rows = [_trial_row(grid[i], space, algo, env_id) for i in range(len(grid))]
@@ -213,12 +250,18 @@ def _make_tuner(
     sweep: Path,
     seed: int,
     verbose: int,
+    local: bool,
 ) -> Any:
-    """Ray Tune's tuner: Optuna samples ``space``, ASHA stops trailing trials at each rung."""
+    """Ray Tune's tuner: Optuna samples ``space``, ASHA stops trailing trials at each rung.
+
+    ``local``: Ray runs on this machine, started by this process.
+    """
+    import optuna
     from ray import tune
     from ray.tune.schedulers import ASHAScheduler
     from ray.tune.search.optuna import OptunaSearch
 
+    optuna.logging.set_verbosity(optuna.logging.WARNING)  # not "A new study created" on stderr
     trainable = tune.with_resources(
         tune.with_parameters(_trial, algo=algo, base=base, logdir=str(sweep), seed=seed),
         {"cpu": base.n_envs},
@@ -245,20 +288,33 @@ def _make_tuner(
             storage_path=str(sweep),
             verbose=verbose,
             log_to_file=True,
-            stop=_stop_on_request(),
+            stop=_stop_on_request(sweep / STOP_FILE, local=local),
         ),
     )
 
 
-def _stop_on_request() -> Any:
-    """A Tune stopper that ends every trial once a stop is requested (Ctrl-C, SIGTERM)."""
+def _stop_on_request(flag: Path, local: bool, grace: float = 1.0) -> Any:
+    """A Tune stopper that ends every trial once a stop is requested (Ctrl-C, SIGTERM).
+
+    It also writes ``flag``, which the trials watch (:func:`_wait_for_stop`): each stops at its
+    next step instead of at its next evaluation. With a ``local`` Ray, trials still starting
+    (Ray Tune would wait 10 s for them) are killed after ``grace`` seconds.
+    """
     from ray.tune import Stopper
+
+    def end_the_rest() -> None:
+        time.sleep(grace)
+        kill_local_workers(TRIAL_PROCESSES)
 
     class StopOnRequest(Stopper):
         def __call__(self, trial_id: str, result: dict[str, Any]) -> bool:
             return False
 
         def stop_all(self) -> bool:
+            if interrupts.requested() and not flag.exists():
+                flag.touch()
+                if local:
+                    threading.Thread(target=end_the_rest, daemon=True).start()
             return interrupts.requested()
 
     return StopOnRequest()
