@@ -133,7 +133,9 @@ def _add_q_table_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
         help="one goal-conditioned run (AFTIR-TankGoal-v0) that learns every reachable cell",
     )
     add_seed_option(q, _SEED_HELP)
-    add_run_dir_options(q, "parent of the run directories (default runs/)", "q_table.npz")
+    add_run_dir_options(
+        q, "parent of the run directories (default runs/)", "q_table.npz (q_table_goal.npz)"
+    )
     q.add_argument(
         "--no-postures",
         action="store_true",
@@ -354,10 +356,14 @@ def _main_all_targets(args: argparse.Namespace, config: Any) -> int:
     with interrupts.held():  # torch (the logger): Ctrl-C is taken once it is imported
         from aftir_rl.rl.tabular.train import train_q_table_all_targets
 
-    if args.target or args.resume:
-        raise ConfigError("--all-targets learns every cell: drop --target and --resume")
+    if args.target:
+        raise ConfigError("--all-targets learns every cell: drop --target")
     s = train_q_table_all_targets(
-        config, seed=args.seed, logdir=args.logdir, progress_bar=not args.no_progress
+        config,
+        seed=args.seed,
+        logdir=args.logdir,
+        progress_bar=not args.no_progress,
+        resume=args.resume,
     )
     print(
         f"every target of {s['tank']}: {s['n_goals']} goals, {s['episodes']} episodes "

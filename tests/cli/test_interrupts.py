@@ -314,6 +314,29 @@ def test_q_table_ctrl_c_at_episode_k_resumes_to_the_same_q_table(tmp_path, monke
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("k", random.Random(12).sample(range(1, 10), 1))
+def test_all_targets_ctrl_c_at_sweep_k_resumes_to_the_same_table(tmp_path, monkeypatch, capsys, k):
+    from aftir_rl.rl.tabular import GoalQLearning
+
+    args = ["q_table", "--all-targets", "--episodes", "500", "--no-progress"]
+    assert train.main([*args, "--logdir", str(tmp_path / "straight")]) == 0
+    (straight,) = (tmp_path / "straight").iterdir()
+    with monkeypatch.context() as m:  # the config's log_interval is 50: 10 sweeps of the goals
+        _stop_at(m, GoalQLearning, "_sweep", lambda agent: agent.episodes_done == 50 * (k - 1))
+        assert train.main([*args, "--logdir", str(tmp_path / "cut")]) == 130
+    partial = _resume_dir(_one_line(capsys.readouterr().err))
+    assert partial.name.endswith(".partial")
+    assert GoalQLearning.read_checkpoint(partial / "q_table_goal.npz")[2]["episodes_done"] == 50 * k
+    again = [*args, "--resume", str(partial), "--logdir", str(tmp_path / "again")]
+    assert train.main(again) == 0
+    (resumed,) = (tmp_path / "again").iterdir()
+    q1, _, m1 = GoalQLearning.read_checkpoint(straight / "q_table_goal.npz")
+    q2, _, m2 = GoalQLearning.read_checkpoint(resumed / "q_table_goal.npz")
+    assert np.array_equal(q1, q2)
+    assert (m1["episodes_done"], m1["num_timesteps"]) == (m2["episodes_done"], m2["num_timesteps"])
+
+
+@pytest.mark.slow
 def test_ppo_stopped_at_a_step_resumes_to_the_same_total(tmp_path, monkeypatch, capsys):
     from aftir_rl.rl.sb3 import AtomicCheckpoint
 

@@ -142,6 +142,7 @@ def train_all_targets(
     log_interval: int | None = None,
     progress_bar: bool = False,
     callback: Callable[[GoalQLearning], bool] | None = None,
+    agent: GoalQLearning | None = None,
 ) -> tuple[GoalQLearning, dict[str, Any]]:
     """Learn a greedy path to every reachable free cell of a tank in one goal-conditioned run.
 
@@ -156,6 +157,8 @@ def train_all_targets(
         log_interval: episodes per goal between logger dumps; default ``config.log_interval``.
         progress_bar: show a tqdm bar.
         callback: see :meth:`GoalQLearning.learn`.
+        agent: an agent to train further (a checkpoint's, loaded with its env) instead of a new
+            one; ``tank`` and ``seed`` are then its own.
 
     Returns:
         The trained agent and a summary: ``tank``, ``seed``, ``episodes`` (per goal),
@@ -167,20 +170,22 @@ def train_all_targets(
     config = config or QLearningConfig()
     tank = config.tank if tank is None else tank
     episodes = config.episodes if episodes is None else int(episodes)
-    env = TankGoalEnv(tank=tank, step_penalty=config.step_penalty)
-    agent = GoalQLearning.from_config(env, config, seed=seed)
+    if agent is None:
+        env = TankGoalEnv(tank=tank, step_penalty=config.step_penalty)
+        agent = GoalQLearning.from_config(env, config, seed=seed)
     start = time.perf_counter()
-    agent.learn(
-        episodes,
-        callback=callback,
-        progress_bar=progress_bar,
-        logger=logger,
-        log_interval=config.log_interval if log_interval is None else log_interval,
-    )
+    if episodes > 0:  # 0: a resumed run that had trained them all
+        agent.learn(
+            episodes,
+            callback=callback,
+            progress_bar=progress_bar,
+            logger=logger,
+            log_interval=config.log_interval if log_interval is None else log_interval,
+        )
     seconds = time.perf_counter() - start
     summary = {
-        "tank": env.tank.name,
-        "seed": seed,
+        "tank": agent.tank.name,
+        "seed": agent.seed,
         "episodes": agent.episodes_done,
         "num_timesteps": agent.num_timesteps,
         "seconds": seconds,

@@ -28,9 +28,13 @@ from aftir_rl.rl.tabular.paths import path_summary
 
 if TYPE_CHECKING:
     from aftir_rl.envs.tank_grid import TankGridEnv
+    from aftir_rl.rl.tabular.learning import TabularAgent
     from aftir_rl.rl.tabular.q_table import QLearning
 
 __all__ = ["resumed_target", "train_q_table", "train_q_table_all_targets"]
+
+#: The table of an ``--all-targets`` run.
+GOAL_TABLE = "q_table_goal.npz"
 
 
 def train_q_table(
@@ -172,7 +176,7 @@ def _make_agent(config: Any, env: Any, checkpoint: Path | None, seed: int) -> QL
     return agent
 
 
-def _run_start(agent: QLearning, checkpoint: Path | None) -> int:
+def _run_start(agent: TabularAgent, checkpoint: Path | None) -> int:
     """The episode count the run counts ``config.episodes`` from.
 
     Resuming an unfinished run (stopped by Ctrl-C) continues it: from that run's own start.
@@ -319,33 +323,72 @@ def _save_target_run(
 
 
 def train_q_table_all_targets(
-    config: Any, seed: int = 0, logdir: str | Path = "runs", progress_bar: bool = True
+    config: Any,
+    seed: int = 0,
+    logdir: str | Path = "runs",
+    progress_bar: bool = True,
+    resume: str | Path | None = None,
 ) -> dict[str, Any]:
     """One goal-conditioned Q-learning run for every reachable cell of the tank.
 
     Writes ``runs/q_table_goal__AFTIR-TankGoal-v0__all__{seed}__{time}/`` with
     ``q_table_goal.npz``, ``summary.json``, ``progress.csv`` and TensorBoard events
-    (``eval/success_rate``: the share of goals whose greedy path reaches them).
-    """
-    from aftir_rl.rl.tabular.q_table_goal import train_all_targets
+    (``eval/success_rate``: the share of goals whose greedy path reaches them). A stop request
+    (Ctrl-C) ends learning after the current sweep over the goals and keeps the table, with its
+    generator's state, in the unfinished run directory; ``resume`` (that directory, or its
+    ``q_table_goal.npz``) finishes it to the table an uninterrupted run of the seed learns; a
+    finished run's trains ``config.episodes`` more.
 
+    Raises:
+        CheckpointError: ``resume`` is unreadable or was trained in another tank.
+        KeyboardInterrupt: a stop request, once the table is saved; its message says where.
+
+    """
+    from aftir_rl.envs.tank_goal import TankGoalEnv
+    from aftir_rl.rl.tabular.q_table_goal import GoalQLearning, train_all_targets
+
+    env = TankGoalEnv(tank=config.tank, step_penalty=config.step_penalty)
+    if resume is None:
+        agent = GoalQLearning.from_config(env, config, seed=seed)
+        begin = 0
+    else:
+        checkpoint = Path(resume)
+        checkpoint = checkpoint / GOAL_TABLE if checkpoint.is_dir() else checkpoint
+        agent = GoalQLearning.load(checkpoint, env)
+        begin = _run_start(agent, checkpoint)
+        seed = agent.seed if agent.seed is not None else seed
+    episodes = max(0, config.episodes - (agent.episodes_done - begin))
     name = run_name("q_table_goal", "AFTIR-TankGoal-v0", "all", seed)
-    run_dir = Path(logdir) / name
-    with staged_dir(run_dir) as partial, run_logger(partial) as logger:
+    extra = {"config": dataclasses.asdict(config), "tank": config.tank}
+    staged = staged_dir(
+        Path(logdir) / name,
+        keep=lambda d: (d / GOAL_TABLE).is_file(),
+        start={"episodes": begin},
+    )
+    with staged as partial, run_logger(partial) as logger:
         params = {**dataclasses.asdict(config), "seed": seed, "target": "all"}
         logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
-        agent, summary = train_all_targets(
-            config=config, seed=seed, logger=logger, progress_bar=progress_bar
-        )
+        extra["tank"] = keep_run_tank(config.tank, partial)
+        with interrupts.deferred():  # a stop request ends learning after the current sweep
+            agent, summary = train_all_targets(
+                config=config,
+                episodes=episodes,
+                logger=logger,
+                progress_bar=progress_bar,
+                callback=lambda _: not interrupts.requested(),
+                agent=agent,
+            )
+        if interrupts.requested():
+            agent.save(partial / GOAL_TABLE, extra=extra)
+            raise KeyboardInterrupt(
+                f"the table after {agent.episodes_done} episodes per goal is saved in "
+                f"{partial}; continue with --all-targets --resume {partial}"
+            )
         logger.record("eval/success_rate", summary["n_reached"] / summary["n_goals"])
         logger.record("eval/bfs_optimal_rate", summary["n_optimal"] / summary["n_goals"])
         logger.dump(step=agent.num_timesteps)
-        tank = keep_run_tank(config.tank, partial)
-        agent.save(
-            partial / "q_table_goal.npz",
-            extra={"config": dataclasses.asdict(config), "tank": tank},
-        )
-        summary["tank"] = tank
+        agent.save(partial / GOAL_TABLE, extra=extra)
+        summary["tank"] = extra["tank"]
         write_json(partial / "summary.json", summary)
-    summary["run_dir"] = str(run_dir)
+    summary["run_dir"] = str(Path(logdir) / name)
     return summary
