@@ -10,7 +10,9 @@ one warm-up target so that compiling is not counted). Printed per set: completio
 and max seconds per target and their ratios, the smallest clearance, the largest tip error and
 the FTL deviation of both. Then :func:`aftir_rl.planning.ftl.batch.plan_motions` over every
 target (or ``B`` random bay-2 targets of seed ``S + 1``) with one process per core.
-``--baseline none`` skips the comparison.
+``--baseline none`` skips the comparison. ``--tsm REV`` adds TSM (the three-segment posture
+method, 1 cm margin) on the reference targets and the bay-2 ones, best of three runs per target,
+side by side with revision ``REV``.
 """
 
 from __future__ import annotations
@@ -52,6 +54,34 @@ for name, targets in sets["sets"].items():
 print(json.dumps(out))
 """
 
+#: :data:`WORKER` for TSM: the posture method, best of ``repeats`` runs per target.
+TSM_WORKER = r"""
+import json, sys, time
+import numpy as np
+from aftir_rl.core.errors import PlanningError
+from aftir_rl.planning.posture.planner import Planner
+sets = json.load(sys.stdin)
+planner = Planner("b737_center")
+planner.plan(np.array(sets["sets"]["reference"][0]), method="tsm")
+out = {}
+for name, targets in sets["sets"].items():
+    rows = []
+    for t in targets:
+        best, r = float("inf"), None
+        for _ in range(sets["repeats"]):
+            start = time.perf_counter()
+            try:
+                r = planner.plan(np.array(t), method="tsm")
+            except PlanningError:
+                r = None
+            best = min(best, time.perf_counter() - start)
+        rows.append({"seconds": best, "complete": r is not None, "deviation": 0.0,
+                     "clearance": r.clearance_cm if r else None,
+                     "tip_error": r.error_cm if r else None})
+    out[name] = rows
+print(json.dumps(out))
+"""
+
 
 def _targets(n: int, seed: int) -> dict[str, list[list[float]]]:
     """The benchmark's target sets: the reference targets and ``n`` per bay."""
@@ -67,18 +97,22 @@ def _targets(n: int, seed: int) -> dict[str, list[list[float]]]:
     }
 
 
-def _run(tree: Path, sets: dict[str, list[list[float]]]) -> dict[str, list[dict]]:
+def _run(
+    tree: Path, sets: dict[str, list[list[float]]], worker: str = WORKER
+) -> dict[str, list[dict]]:
     """Plan every target with the package of ``tree`` in a fresh single-threaded process."""
     env = dict(os.environ, PYTHONPATH=str(tree), OMP_NUM_THREADS="1")
-    payload = json.dumps({"sets": sets})
+    payload = json.dumps({"sets": sets, "repeats": 3})
     done = subprocess.run(
-        [sys.executable, "-c", WORKER], input=payload, capture_output=True, text=True,
+        [sys.executable, "-c", worker], input=payload, capture_output=True, text=True,
         env=env, cwd=tree, check=True,
     )  # fmt: skip
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def _baseline(rev: str, sets: dict[str, list[list[float]]]) -> dict[str, list[dict]]:
+def _baseline(
+    rev: str, sets: dict[str, list[list[float]]], worker: str = WORKER
+) -> dict[str, list[dict]]:
     """:func:`_run` in a temporary worktree of ``rev``."""
     with tempfile.TemporaryDirectory() as tmp:
         tree = Path(tmp) / "baseline"
@@ -87,7 +121,7 @@ def _baseline(rev: str, sets: dict[str, list[list[float]]]) -> dict[str, list[di
             check=True, capture_output=True,
         )  # fmt: skip
         try:
-            return _run(tree, sets)
+            return _run(tree, sets, worker)
         finally:
             subprocess.run(
                 ["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)],
@@ -121,6 +155,7 @@ def main() -> None:
         help="plan_motions over this many random bay-2 targets (default: the sets' targets)",
     )  # fmt: skip
     parser.add_argument("--out", type=Path, help="write the rows and the table's numbers here")
+    parser.add_argument("--tsm", metavar="REV", help="also TSM's time, against revision REV")
     args = parser.parse_args()
     sets = _targets(args.n, args.seed)
     print(
@@ -156,8 +191,36 @@ def main() -> None:
         f"{batch['seconds']:.1f} s ({batch['per_minute']:.0f} a minute), "
         f"{batch['complete']} complete"
     )
+    out = {"runs": runs, "table": table, "batch": batch}
+    if args.tsm:
+        out["tsm"] = _tsm(sets, args.tsm)
     if args.out:
-        args.out.write_text(json.dumps({"runs": runs, "table": table, "batch": batch}, indent=1))
+        args.out.write_text(json.dumps(out, indent=1))
+
+
+def _tsm(sets: dict[str, list[list[float]]], rev: str) -> dict[str, dict[str, dict[str, float]]]:
+    """TSM on the reference and bay-2 targets in this tree and ``rev``; print their table."""
+    sets = {k: sets[k] for k in ("reference", "bay2")}
+    runs = {"this tree": _run(ROOT, sets, TSM_WORKER), rev: _baseline(rev, sets, TSM_WORKER)}
+    print("\nTSM (best of 3 runs per target, 1 cm margin):\n")
+    print(
+        "| set | tree | complete | median ms | max ms | min clearance (cm) | tip error max (cm) |"
+    )
+    print("|---|---|---:|---:|---:|---:|---:|")
+    table: dict[str, dict[str, dict[str, float]]] = {}
+    for name in sets:
+        for tree, rows in runs.items():
+            t = table.setdefault(name, {})[tree] = _stats(rows[name])
+            print(
+                f"| {name} | {tree} | {t['complete']}/{t['n']} | {t['median'] * 1e3:.1f} | "
+                f"{t['max'] * 1e3:.1f} | {t['clearance']:.2f} | {t['tip_error']:.1e} |"
+            )
+        new, old = (table[name][t] for t in runs)
+        print(
+            f"| {name} | ratio (old / new) | | {old['median'] / new['median']:.1f}× | "
+            f"{old['max'] / new['max']:.1f}× | | |"
+        )
+    return table
 
 
 def _batch(sets: dict[str, list[list[float]]], n: int, seed: int) -> dict[str, float]:

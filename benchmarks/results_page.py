@@ -104,6 +104,17 @@ def seeds_section(files: list[dict[str, Any]]) -> str:
             f"{_pm(s, 'collision_rate', 100, '.0f')} | {_clearance(d['runs'])} | "
             f"{_pm(s, 'train_seconds', 1 / 60, '.1f')} |"
         )
+    for d in files:
+        made = (d.get("demos") or {}).get("made")
+        if made:
+            lines.append(
+                f"\n{d['recipe']}: each seed first clones ({d['demos']['bc_epochs']} passes) "
+                f"{made['episodes']} expert episodes ({made['steps']:,} steps; "
+                f"{made['skipped']} targets without a motion skipped), written in the same run "
+                f"from reset seed {made['seed']:,} in {made['seconds'] / 60:.1f} minutes by "
+                f"{made['workers']} processes; the minutes per seed count the cloning, not the "
+                "dataset."
+            )
     lines += ["", "Each seed, and the machine it trained on:", ""]
     lines += [
         "| recipe | seed | steps | minutes | success | tip error (cm) | contacts | least "
