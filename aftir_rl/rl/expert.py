@@ -138,7 +138,7 @@ class FTLExpert:
         least = math.inf
         for t, a in enumerate(actions[: self.max_steps]):
             _, _, done, _, info = sim.step(a)
-            least = min(least, self.scene.check(sim.posture).clearance_cm)
+            least = min(least, self.scene.clearance(sim.posture))
             if least < b.margin:
                 return False, t + 1, least
             if done:
