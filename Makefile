@@ -37,8 +37,8 @@ fuzz: $(STAMP)
 	AFTIR_FUZZ_CASES=$(FUZZ_CASES) OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist load tests/cli/test_fuzz_runs.py
 
 lint: $(STAMP)
-	$(PY) -m ruff check aftir_rl tests benchmarks scripts docs/_ext docs/conf.py
-	$(PY) -m ruff format --check aftir_rl tests benchmarks scripts docs/_ext docs/conf.py
+	$(PY) -m ruff check aftir_launch.py aftir_rl tests benchmarks scripts docs/_ext docs/conf.py
+	$(PY) -m ruff format --check aftir_launch.py aftir_rl tests benchmarks scripts docs/_ext docs/conf.py
 	$(PY) -m mypy
 
 # The documentation site into docs/_build/html, offline, warnings as errors; the env pages and

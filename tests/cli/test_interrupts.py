@@ -489,6 +489,24 @@ def test_a_second_sigint_exits_at_once_and_leaves_the_run_unfinished(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("delay", random.Random(13).sample([0.1, 0.15, 0.2, 0.3, 0.5], 2))
+def test_ctrl_c_while_the_console_script_imports_is_one_line(tmp_path, delay):
+    script = Path(sys.executable).parent / "aftir"
+    if not script.is_file() or "aftir_launch" not in script.read_text(errors="replace"):
+        pytest.skip("the aftir console script of this install is not aftir_launch's")
+    args = [str(script), "train", "q_table", "--all-targets", "--no-progress"]
+    proc = subprocess.Popen(
+        [*args, "--logdir", str(tmp_path)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+        text=True, cwd=tmp_path,
+    )  # fmt: skip
+    time.sleep(delay)  # inside `import aftir_rl` (gymnasium, numpy) or just after
+    code, seconds = _interrupt(proc, signal.SIGINT)
+    err = proc.stderr.read()
+    assert code == 130 and seconds < 5, err
+    assert _one_line(err).startswith("interrupted")
+
+
+@pytest.mark.slow
 def test_sigint_to_bench_and_evaluate(tmp_path):
     rng = random.Random(8)
     proc = _start(["aftir_rl.bench", "--n-random", "3", "--quiet", "--rrt-seconds", "1"], tmp_path)
