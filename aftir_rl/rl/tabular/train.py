@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     from aftir_rl.envs.tank_grid import TankGridEnv
     from aftir_rl.rl.tabular.learning import TabularAgent
     from aftir_rl.rl.tabular.q_table import QLearning
+    from aftir_rl.rl.tabular.q_table_goal import GoalQLearning
 
 __all__ = ["resumed_target", "train_q_table", "train_q_table_all_targets"]
 
@@ -290,6 +291,10 @@ def _has_q_table(partial: Path) -> bool:
     return (partial / "q_table.npz").is_file()
 
 
+def _has_goal_table(partial: Path) -> bool:
+    return (partial / GOAL_TABLE).is_file()
+
+
 def _checkpoint_extra(env: Any, config: Any, target: Sequence[float]) -> dict[str, Any]:
     """What a target's ``q_table.npz`` holds besides the agent's own metadata."""
     base = cast("TankGridEnv", env.unwrapped)
@@ -344,27 +349,14 @@ def train_q_table_all_targets(
         KeyboardInterrupt: a stop request, once the table is saved; its message says where.
 
     """
-    from aftir_rl.envs.tank_goal import TankGoalEnv
-    from aftir_rl.rl.tabular.q_table_goal import GoalQLearning, train_all_targets
+    from aftir_rl.rl.tabular.q_table_goal import train_all_targets
 
-    env = TankGoalEnv(tank=config.tank, step_penalty=config.step_penalty)
-    if resume is None:
-        agent = GoalQLearning.from_config(env, config, seed=seed)
-        begin = 0
-    else:
-        checkpoint = Path(resume)
-        checkpoint = checkpoint / GOAL_TABLE if checkpoint.is_dir() else checkpoint
-        agent = GoalQLearning.load(checkpoint, env)
-        begin = _run_start(agent, checkpoint)
-        seed = agent.seed if agent.seed is not None else seed
+    agent, begin = _goal_agent(config, seed, resume)
+    seed = agent.seed if agent.seed is not None else seed
     episodes = max(0, config.episodes - (agent.episodes_done - begin))
     name = run_name("q_table_goal", "AFTIR-TankGoal-v0", "all", seed)
     extra = {"config": dataclasses.asdict(config), "tank": config.tank}
-    staged = staged_dir(
-        Path(logdir) / name,
-        keep=lambda d: (d / GOAL_TABLE).is_file(),
-        start={"episodes": begin},
-    )
+    staged = staged_dir(Path(logdir) / name, keep=_has_goal_table, start={"episodes": begin})
     with staged as partial, run_logger(partial) as logger:
         params = {**dataclasses.asdict(config), "seed": seed, "target": "all"}
         logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
@@ -392,3 +384,22 @@ def train_q_table_all_targets(
         write_json(partial / "summary.json", summary)
     summary["run_dir"] = str(Path(logdir) / name)
     return summary
+
+
+def _goal_agent(config: Any, seed: int, resume: str | Path | None) -> tuple[GoalQLearning, int]:
+    """A new goal-conditioned agent, or ``resume``'s; and the episode count its run starts from.
+
+    Raises:
+        CheckpointError: ``resume`` is unreadable or was trained in another tank.
+
+    """
+    from aftir_rl.envs.tank_goal import TankGoalEnv
+    from aftir_rl.rl.tabular.q_table_goal import GoalQLearning
+
+    env = TankGoalEnv(tank=config.tank, step_penalty=config.step_penalty)
+    if resume is None:
+        return GoalQLearning.from_config(env, config, seed=seed), 0
+    checkpoint = Path(resume)
+    checkpoint = checkpoint / GOAL_TABLE if checkpoint.is_dir() else checkpoint
+    agent = GoalQLearning.load(checkpoint, env)
+    return agent, _run_start(agent, checkpoint)
