@@ -30,8 +30,8 @@ test-all: $(STAMP)
 	$(PYTEST)
 
 # The run-directory fuzzer: FUZZ_CASES mutated run directories for each of view, evaluate,
-# rollout and rank_checkpoints (test-all runs 5 each; .ci/run 2,000: about 22 minutes on 2
-# cores, rank_checkpoints the longest at 20).
+# rollout and rank_checkpoints (test-all runs 5 each; .ci/run 300; 2,000 take about 23 minutes
+# on 2 cores, rank_checkpoints the longest).
 FUZZ_CASES ?= 2000
 fuzz: $(STAMP)
 	AFTIR_FUZZ_CASES=$(FUZZ_CASES) OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist load tests/cli/test_fuzz_runs.py

@@ -7,7 +7,7 @@ zip and npz members: dropped, extra, corrupt, deflate bombs, sizes that lie) and
 runs on every mutated copy. Every case must end in exit 0 or 2, with one line on stderr for 2,
 no traceback, within :data:`tests.fuzz.CASE_SECONDS`, and the process's peak memory must stay
 under :data:`PEAK_MB`. ``AFTIR_FUZZ_CASES`` sets the number of cases per command (5 in
-``make test-all``, 2,000 in ``make fuzz``, which CI runs).
+``make test-all``, 300 in CI, 2,000 in ``make fuzz``).
 """
 
 from __future__ import annotations
