@@ -35,7 +35,7 @@ from aftir_rl.cli.args import (
     add_target_option,
     check_margin,
 )
-from aftir_rl.cli.guard import cli
+from aftir_rl.cli.guard import cli, exit_with
 from aftir_rl.core import interrupts
 from aftir_rl.core.config import CONFIG_DIR, DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, ConfigError
@@ -111,8 +111,8 @@ def _add_q_table_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
     )
     q.add_argument(
         "--config",
-        default=str(CONFIG_DIR / "q_table.yaml"),
-        help="YAML of QLearningConfig fields (default: configs/q_table.yaml)",
+        help="YAML of QLearningConfig fields (default: configs/q_table.yaml, or with --resume "
+        "the resumed run's own)",
     )
     q.add_argument(
         "--tank",
@@ -244,13 +244,19 @@ def _sb3_configs(args: argparse.Namespace) -> list[Any]:
     The numbers of the command line, ``--env-kwargs`` and ``--hyperparams`` apply to every stage
     (a short try of a whole curriculum); ``--env`` alone trains the env's entry in the
     hyperparameter file (or in ``--config``'s, if it is one), with a named config it replaces the
-    config's env.
+    config's env. ``--resume`` without ``--config`` trains the resumed run's own config.
     """
     from aftir_rl.rl.sb3.curriculum import is_curriculum, load_curriculum
     from aftir_rl.rl.sb3.hyperparams import entry_config, is_hyperparams_file, load_sb3_config
+    from aftir_rl.rl.sb3.loading import resumed_config
     from aftir_rl.rl.sb3.overrides import with_overrides
 
-    if args.config is None:
+    own = resumed_config(args.resume) if args.config is None and args.resume else None
+    if own is not None:
+        if own[0] != args.algo:
+            raise ConfigError(f"--resume {args.resume}: a {own[0]} run, not {args.algo}")
+        configs = [own[1]]
+    elif args.config is None:
         configs = [entry_config(args.algo, args.env or DEFAULT_SB3_ENV_ID)]
     elif is_curriculum(args.config):
         if args.env:
@@ -331,11 +337,19 @@ def _say_rollout(algo: str, config: Any) -> None:
 def _q_table_config(args: argparse.Namespace) -> Any:
     """The ``QLearningConfig`` of ``--config`` with ``--episodes``; the other numbers checked.
 
+    Without ``--config``: the config of the run ``--resume`` names, else ``configs/q_table.yaml``.
+
     Raises:
         AftirError: the config or a number of the command line is refused.
 
     """
-    config = load_q_table_config(args.config)
+    config = None
+    if args.config is None and args.resume is not None:
+        from aftir_rl.rl.tabular.train import resumed_config
+
+        config = resumed_config(args.resume, args.all_targets)
+    if config is None:
+        config = load_q_table_config(args.config or CONFIG_DIR / "q_table.yaml")
     if args.tank is not None:
         from aftir_rl.core.tank import load_tank
 
@@ -421,4 +435,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main())

@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
 from aftir_rl.core import interrupts
-from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN, brief
+from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN, brief, from_mapping
 from aftir_rl.core.errors import CheckpointError
 from aftir_rl.core.files import DISK_ERRNOS, staged_dir, unfinished_start, write_json
-from aftir_rl.core.tank.loading import keep_run_tank
+from aftir_rl.core.tank.loading import keep_run_tank, resolve_run_tank
 from aftir_rl.rl.common import check_env_id, hyperparameter_text, run_name
 from aftir_rl.rl.logs import run_logger
 from aftir_rl.rl.tabular.path_logs import MotionOptions, log_greedy_path
@@ -150,6 +150,36 @@ def resumed_target(resume: str | Path) -> list[float]:
     return [float(v) for v in meta["target"]]
 
 
+def resumed_config(resume: str | Path, all_targets: bool = False) -> Any | None:
+    """The ``QLearningConfig`` the run of a checkpoint was trained with, in the tank it keeps.
+
+    ``resume`` is a ``q_table.npz`` (``q_table_goal.npz`` with ``all_targets``) or the run
+    directory holding it; with this config, ``--resume DIR`` alone finishes the run as it was
+    started (its episodes, hyperparameters and tank). None if it holds no config.
+
+    Raises:
+        CheckpointError: unreadable.
+        ConfigError: its config or tank is not one this package writes.
+
+    """
+    from aftir_rl.rl.tabular.q_table import QLearning, QLearningConfig
+    from aftir_rl.rl.tabular.q_table_goal import GoalQLearning
+
+    path = Path(resume)
+    if path.is_dir():
+        path = path / (GOAL_TABLE if all_targets else "q_table.npz")
+    meta = (
+        GoalQLearning.read_checkpoint(path)[2]
+        if all_targets
+        else QLearning.read_checkpoint(path)[1]
+    )
+    data = meta.get("config")
+    if not isinstance(data, dict):
+        return None
+    config = from_mapping(QLearningConfig, data, f"{path}: config")
+    return dataclasses.replace(config, tank=resolve_run_tank(meta.get("tank"), path.parent))
+
+
 def _make_agent(config: Any, env: Any, checkpoint: Path | None, seed: int) -> QLearning:
     """A fresh agent, or the checkpoint's after checking it was trained for this target and tank.
 
@@ -238,7 +268,8 @@ def _keep_learnt(
         KeyboardInterrupt: ``exc`` is one (a stop request): once saved, saying where.
 
     """
-    if isinstance(exc, KeyboardInterrupt):
+    if isinstance(exc, KeyboardInterrupt):  # a tank given by path is kept, as a finished run's
+        extra = {**extra, "tank": keep_run_tank(extra["tank"], partial)}
         agent.save(partial / "q_table.npz", extra=extra)
         raise KeyboardInterrupt(
             f"the Q-table after {agent.episodes_done} episodes is saved in {partial}; "
