@@ -5,7 +5,8 @@ in it would print Python's traceback. These entry points install a handler befor
 nothing has started yet, so it prints ``interrupted`` and exits 130 at once. Each command's own
 handler (:mod:`aftir_rl.cli.guard`: stop after the current step, save, say how to resume)
 replaces it while the command runs. This module lives outside the package because importing
-anything inside it runs the package's ``__init__`` first.
+anything inside it runs the package's ``__init__`` first; that ``__init__`` calls
+:func:`take_signals` too when it is imported by ``python -m aftir_rl...``.
 """
 
 from __future__ import annotations
@@ -25,10 +26,16 @@ def _stopped(signum: int, frame: FrameType | None) -> None:
         os._exit(130)
 
 
-def _run(module: str) -> int:
+def take_signals() -> None:
+    """Until a command installs its own handler, Ctrl-C and SIGTERM print one line, exit 130."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _stopped)
+
+
+def _run(module: str) -> int:
+    take_signals()
     code: int = importlib.import_module(module).main()
+    importlib.import_module("aftir_rl.cli.guard").exit_with(code)  # Ctrl-C held off from here
     return code
 
 

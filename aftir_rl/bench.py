@@ -1,8 +1,7 @@
 """``python -m aftir_rl.bench``: see :mod:`aftir_rl.cli.bench`."""
 
-import sys
-
 from aftir_rl.cli.bench import main
+from aftir_rl.cli.guard import exit_with
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main())

@@ -1,8 +1,7 @@
 """``python -m aftir_rl.evaluate``: see :mod:`aftir_rl.cli.evaluate`."""
 
-import sys
-
 from aftir_rl.cli.evaluate import main
+from aftir_rl.cli.guard import exit_with
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main())

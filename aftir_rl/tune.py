@@ -1,8 +1,7 @@
 """``python -m aftir_rl.tune``: see :mod:`aftir_rl.cli.tune`."""
 
-import sys
-
+from aftir_rl.cli.guard import exit_with
 from aftir_rl.cli.tune import main
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main())

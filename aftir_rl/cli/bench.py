@@ -25,7 +25,7 @@ from aftir_rl.cli.args import (
     add_seconds_option,
     add_seed_option,
 )
-from aftir_rl.cli.guard import cli, preload
+from aftir_rl.cli.guard import cli, exit_with, preload
 from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import write_json
@@ -219,4 +219,4 @@ def _check_inputs(models: Sequence[str], json_path: str | None) -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main())

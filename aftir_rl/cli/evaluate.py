@@ -29,7 +29,7 @@ from aftir_rl.cli.args import (
     add_target_option,
     check_margin,
 )
-from aftir_rl.cli.guard import cli, preload
+from aftir_rl.cli.guard import cli, exit_with, preload
 from aftir_rl.core.config import DEFAULT_MARGIN, EVAL_SEED
 from aftir_rl.core.errors import AftirError, ConfigError
 from aftir_rl.core.files import check_writable_dir, write_json
@@ -213,4 +213,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main())

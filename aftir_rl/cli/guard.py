@@ -18,14 +18,14 @@ import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any, TypeVar
+from typing import Any, NoReturn, TypeVar
 
 from aftir_rl.core import interrupts
 from aftir_rl.core.config import shorten
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import describe_write_error
 
-__all__ = ["cli", "preload"]
+__all__ = ["cli", "exit_with", "preload"]
 
 F = TypeVar("F", bound=Callable[..., int])
 
@@ -91,6 +91,25 @@ def preload(*modules: str) -> None:
     with interrupts.held():
         for name in modules:
             importlib.import_module(name)
+
+
+def exit_with(code: int) -> NoReturn:
+    """End a command's process with ``code``: its output flushed, then Ctrl-C ignored.
+
+    Once a command has finished and said so, a signal while the interpreter exits (atexit work,
+    freeing torch and the other modules: up to a second) would kill it with SIGINT's status and
+    no word, as Python puts the default handlers back first; ignored (not blocked: that holds
+    for one thread only), the process exits with the status it reported.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    if threading.current_thread() is threading.main_thread():
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, signal.SIG_IGN)
+    sys.exit(code)
 
 
 def _exit_at_once(signum: int, frame: Any) -> None:

@@ -11,6 +11,8 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+from aftir_rl.cli.guard import exit_with
+
 __all__ = ["SUBCOMMANDS", "main"]
 
 #: subcommand -> (module holding ``main(argv)``, one line of help)
@@ -89,4 +91,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main())

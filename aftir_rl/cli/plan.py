@@ -13,7 +13,7 @@ import sys
 from collections.abc import Sequence
 
 from aftir_rl.cli.args import OneLineParser, add_margin_option, add_target_option, check_margin
-from aftir_rl.cli.guard import cli
+from aftir_rl.cli.guard import cli, exit_with
 from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, PlanningError
 from aftir_rl.planning.posture.context import PlannedPosture
@@ -94,4 +94,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main())

@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -22,7 +21,7 @@ from aftir_rl.cli.args import (
     add_ray_options,
     add_seed_option,
 )
-from aftir_rl.cli.guard import cli, preload
+from aftir_rl.cli.guard import cli, exit_with, preload
 from aftir_rl.core.config import CONFIG_DIR
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.experiments.search_space import load_search_space
@@ -159,4 +158,4 @@ def _print_trials(out: dict[str, Any], keys: list[str], algo: str) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main())

@@ -13,7 +13,7 @@ import sys
 from collections.abc import Sequence
 
 from aftir_rl.cli.args import OneLineParser, bounded_int
-from aftir_rl.cli.guard import cli
+from aftir_rl.cli.guard import cli, exit_with
 from aftir_rl.core.errors import AftirError
 
 __all__ = ["build_parser", "main"]
@@ -67,4 +67,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_with(main())

@@ -304,7 +304,7 @@ def test_q_table_ctrl_c_at_episode_k_resumes_to_the_same_q_table(tmp_path, monke
     assert partial.name.startswith(".") and partial.name.endswith(".partial")
     assert read_q_table(partial / "q_table.npz")[1]["episodes_done"] == k
     # --resume alone: the checkpoint's target, the run's own episode count
-    again = ["q_table", "--resume", str(partial), "--episodes", "400", "--no-postures"]
+    again = ["q_table", "--resume", str(partial), "--no-postures"]
     assert train.main([*again, "--logdir", str(tmp_path / "again"), "--no-progress"]) == 0
     (resumed,) = (tmp_path / "again").iterdir()
     q1, m1 = read_q_table(straight / "q_table.npz")
@@ -489,15 +489,19 @@ def test_a_second_sigint_exits_at_once_and_leaves_the_run_unfinished(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("delay", random.Random(13).sample([0.1, 0.15, 0.2, 0.3, 0.5], 2))
-def test_ctrl_c_while_the_console_script_imports_is_one_line(tmp_path, delay):
+@pytest.mark.parametrize("how", ["console script", "python -m"])
+@pytest.mark.parametrize("delay", random.Random(13).sample([0.05, 0.1, 0.15, 0.2, 0.3, 0.5], 2))
+def test_ctrl_c_while_the_command_imports_is_one_line(tmp_path, how, delay):
     script = Path(sys.executable).parent / "aftir"
-    if not script.is_file() or "aftir_launch" not in script.read_text(errors="replace"):
+    if how == "python -m":
+        args = [sys.executable, "-m", "aftir_rl.train", "q_table"]
+    elif script.is_file() and "aftir_launch" in script.read_text(errors="replace"):
+        args = [str(script), "train", "q_table"]
+    else:
         pytest.skip("the aftir console script of this install is not aftir_launch's")
-    args = [str(script), "train", "q_table", "--all-targets", "--no-progress"]
     proc = subprocess.Popen(
-        [*args, "--logdir", str(tmp_path)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-        text=True, cwd=tmp_path,
+        [*args, "--all-targets", "--no-progress", "--logdir", str(tmp_path)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
     )  # fmt: skip
     time.sleep(delay)  # inside `import aftir_rl` (gymnasium, numpy) or just after
     code, seconds = _interrupt(proc, signal.SIGINT)
