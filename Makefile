@@ -29,12 +29,15 @@ test: $(STAMP)  ## the test suite (fast; long checks are marked slow and run by 
 test-all: $(STAMP)
 	$(PYTEST)
 
-# The run-directory fuzzer: FUZZ_CASES mutated run directories for each of view, evaluate,
-# rollout and rank_checkpoints (test-all runs 5 each; .ci/run 300; 2,000 take about 23 minutes
-# on 2 cores, rank_checkpoints the longest).
+# Faults: the run-directory fuzzer, FUZZ_CASES mutated run directories for each of view,
+# evaluate, rollout and rank_checkpoints (test-all runs 5 each), then Ctrl-C at SIGINT_MOMENTS
+# random moments of each long command (test-all: 1), one at a time so that no other process
+# slows its exit.
 FUZZ_CASES ?= 2000
+SIGINT_MOMENTS ?= 20
 fuzz: $(STAMP)
-	AFTIR_FUZZ_CASES=$(FUZZ_CASES) OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist load tests/cli/test_fuzz_runs.py
+	AFTIR_FUZZ_CASES=$(FUZZ_CASES) OMP_NUM_THREADS=1 $(PY) -m pytest -q -rP -n 2 --dist load tests/cli/test_fuzz_runs.py
+	AFTIR_SIGINT_MOMENTS=$(SIGINT_MOMENTS) OMP_NUM_THREADS=1 $(PY) -m pytest -q -rP tests/cli/test_sigint_moments.py
 
 lint: $(STAMP)
 	$(PY) -m ruff check aftir_launch.py aftir_rl tests benchmarks scripts docs/_ext docs/conf.py

@@ -4,8 +4,8 @@
 case, applies one to three random mutations (JSON fields and keys, file types, sizes, symlinks,
 bytes, zip and npz members), runs the command line ``CLI`` (view, evaluate, rollout or rank)
 in this process on it with a time limit, and prints one JSON object: every case's exit status,
-stderr, seconds and mutations, and the process's peak memory (``tests/cli/test_fuzz_runs.py``
-asserts on it).
+stderr, seconds, mutations, resident memory before it and peak memory while it ran
+(``tests/cli/test_fuzz_runs.py`` asserts on them).
 """
 
 from __future__ import annotations
@@ -352,16 +352,22 @@ def _commands(cli: str, out: Path) -> Callable[[Path], int]:
     return lambda run: module.main([str(run), "--fresh", "2", "--corners", "1", "--extreme", "1"])
 
 
-def peak_mb() -> float:
-    """This process's peak resident memory [MB] since it started its program.
+def memory_mb(field: str = "VmHWM") -> float:
+    """This process's peak (``VmHWM``, since :func:`reset_peak`) or current (``VmRSS``) memory [MB].
 
-    ``VmHWM`` of ``/proc/self/status``, not ``getrusage``'s ``ru_maxrss``: that one keeps the
-    peak of the process it was forked from (a pytest worker of 1 GB), not only its own.
+    From ``/proc/self/status``, not ``getrusage``'s ``ru_maxrss``: that one keeps the peak of
+    the process it was forked from (a pytest worker of 1 GB), and cannot be reset.
     """
     for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
+        if line.startswith(f"{field}:"):
             return int(line.split()[1]) / 1024
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def reset_peak() -> None:
+    """Restart ``VmHWM`` from the current resident size (Linux's ``clear_refs`` 5)."""
+    with contextlib.suppress(OSError):
+        Path("/proc/self/clear_refs").write_text("5")
 
 
 def _on_alarm(signum: int, frame: Any) -> None:
@@ -400,13 +406,17 @@ def main(argv: list[str]) -> int:
         run = work / f"case{case}" / "run"
         shutil.copytree(rng.choice(sources), run, symlinks=True)
         done = [rng.choice(MUTATIONS)(rng, run) for _ in range(rng.choice([1, 1, 2, 3]))]
+        reset_peak()
+        before = round(memory_mb("VmRSS"))
         code, err, seconds = run_case(command, run)
-        rss = round(peak_mb())
+        rss = round(memory_mb())
         results.append(
             {"case": case, "code": code, "stderr": err, "s": seconds, "mut": done, "rss": rss}
+            | {"before": before}
         )
         shutil.rmtree(run.parent, ignore_errors=True)
-    print(json.dumps({"cli": cli, "peak_mb": peak_mb(), "results": results}))
+    peak = max((case["rss"] for case in results), default=0)
+    print(json.dumps({"cli": cli, "peak_mb": peak, "results": results}))
     return 0
 
 

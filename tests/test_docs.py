@@ -84,7 +84,7 @@ def test_doc_links_resolve(name):
 def test_readme_keeps_the_test_commands():
     """CI runs the README's test commands."""
     text = (ROOT / "README.md").read_text()
-    for command in ("make test", "make test-all", "make lint", "make docs"):
+    for command in ("make test", "make test-all", "make fuzz", "make lint", "make docs"):
         assert re.search(rf"^{command}( |$)", text, re.M), command
 
 
