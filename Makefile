@@ -31,8 +31,8 @@ test-all: $(STAMP)
 
 # Faults: the run-directory fuzzer, FUZZ_CASES mutated run directories for each of view,
 # evaluate, rollout and rank_checkpoints (test-all runs 5 each), then Ctrl-C at SIGINT_MOMENTS
-# random moments of each long command (test-all: 1), one at a time so that no other process
-# slows its exit.
+# random moments of each long command, one at a time so that no other process slows its exit
+# (about 40 minutes on 2 cores).
 FUZZ_CASES ?= 2000
 SIGINT_MOMENTS ?= 20
 fuzz: $(STAMP)
