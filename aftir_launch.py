@@ -35,7 +35,7 @@ def take_signals() -> None:
 def _run(module: str) -> int:
     take_signals()
     code: int = importlib.import_module(module).main()
-    importlib.import_module("aftir_rl.cli.guard").exit_with(code)  # Ctrl-C held off from here
+    importlib.import_module("aftir_rl.cli.guard").exit_with(code)  # Ctrl-C ignored from here
     return code
 
 
