@@ -6,8 +6,9 @@ keys, FIFOs, devices, symlinks out of the run, sparse 5 GB files, truncation, fl
 zip and npz members: dropped, extra, corrupt, deflate bombs, sizes that lie) and each command
 runs on every mutated copy. Every case must end in exit 0 or 2, with one line on stderr for 2,
 no traceback, within :data:`tests.fuzz.CASE_SECONDS`, and each case's peak memory must stay
-under :data:`PEAK_MB`. As a user's command holds one run, one fuzzing process takes the runs of
-one kind (Q-table, ArmReach, ArmFTL); the cases are split between them. ``AFTIR_FUZZ_CASES`` sets
+under :data:`PEAK_MB`. As a user's command holds one run, a fuzzing process takes the runs of
+one kind (Q-table, ArmReach, ArmFTL) and at most :data:`CHUNK` cases; the cases are split
+between the kinds. ``AFTIR_FUZZ_CASES`` sets
 the number of cases per command (5 in ``make test-all``, 2,000 in ``make fuzz`` and CI).
 """
 
@@ -30,8 +31,11 @@ ROOT = Path(__file__).parents[2]
 CASES = int(os.environ.get("AFTIR_FUZZ_CASES", "5"))  # ``make fuzz``: 2,000
 #: The most memory [MB] one case may reach. One command alone peaks at 450-470 MB (evaluate of a
 #: Q-table or ArmReach run, torch loaded); the fuzzing process also keeps what earlier cases of
-#: its kind cached; a bomb that is read reaches gigabytes.
+#: its kind cached (tanks, guide fields: bounded caches; 590 MB after 667 evaluate cases of a
+#: Q-table run); a bomb that is read reaches gigabytes.
 PEAK_MB = 600
+#: Cases per fuzzing process: a long-lived process's caches are not a command's memory.
+CHUNK = 250
 
 PPO_REACH = (
     "env_id: AFTIR-ArmReach-v0\nn_envs: 1\n"  # one env, not the entry's two
@@ -102,7 +106,10 @@ def test_mutated_run_directories(cli, sources, tmp_path):
     results = []
     for i, runs in enumerate(kinds):  # CASES in all, split between the kinds
         cases = CASES // len(kinds) + (i < CASES % len(kinds))
-        got = _fuzz(cli, 7 + i, cases, tmp_path / f"kind{i}", runs)
+        got: list[dict] = []
+        for k, first in enumerate(range(0, cases, CHUNK)):
+            n = min(CHUNK, cases - first)
+            got += _fuzz(cli, 7 + i + 100 * k, n, tmp_path / f"kind{i}_{k}", runs)
         slowest, peak = max(c["s"] for c in got), max(c["rss"] for c in got)
         print(f"{cli} on {Path(runs[0]).parent.name}: {cases} cases, {slowest:.2f} s, {peak} MB")
         results += got
@@ -115,4 +122,5 @@ def test_mutated_run_directories(cli, sources, tmp_path):
     assert not bad, json.dumps(bad[:3], indent=1)[:4000]
     peak = max(results, key=lambda c: c["rss"])
     assert peak["rss"] <= PEAK_MB, peak
-    assert {c["code"] for c in results} == {0, 2}  # both kinds of case happen
+    if CASES >= 50:  # enough cases for both kinds: some refused, some still readable
+        assert {c["code"] for c in results} == {0, 2}
