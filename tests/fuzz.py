@@ -299,7 +299,7 @@ def mutate_zip(rng: random.Random, run: Path) -> str:
         if path.suffix == ".npz" and rng.random() < 0.5:
             return _mutate_npz_metadata(rng, path)
         return _rewrite_zip(rng, path)
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as exc:
+    except (zipfile.BadZipFile, zlib.error, OSError, ValueError, EOFError, KeyError) as exc:
         return f"zip {path.name}: unreadable ({type(exc).__name__})"
 
 
