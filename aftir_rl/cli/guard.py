@@ -99,17 +99,29 @@ def exit_with(code: int) -> NoReturn:
     Once a command has finished and said so, a signal while the interpreter exits (atexit work,
     freeing torch and the other modules: up to a second) would kill it with SIGINT's status and
     no word, as Python puts the default handlers back first; ignored (not blocked: that holds
-    for one thread only), the process exits with the status it reported.
+    for one thread only), the process exits with the status it reported. An interrupted
+    command (130) runs the atexit functions and leaves without the interpreter's teardown: a
+    Ctrl-C that met C code running Python (an import, a compiled library) marks the process
+    to kill itself by SIGINT at the end of that teardown, and Ray's teardown may crash.
     """
+    main_thread = threading.current_thread() is threading.main_thread()
+    if main_thread:
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, signal.SIG_IGN)
+    if code == 130 and main_thread:  # interrupted: Python may still die by SIGINT at its exit
+        atexit._run_exitfuncs()  # Ray's shutdown, the loggers' last flush
+        _flush()
+        os._exit(130)
+    _flush()
+    sys.exit(code)
+
+
+def _flush() -> None:
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
         except (OSError, ValueError):
             pass
-    if threading.current_thread() is threading.main_thread():
-        for sig in STOP_SIGNALS:
-            signal.signal(sig, signal.SIG_IGN)
-    sys.exit(code)
 
 
 def _exit_at_once(signum: int, frame: Any) -> None:

@@ -141,9 +141,10 @@ def test_ctrl_c_at_a_random_moment(name, moment, reference, tmp_path):
     took = time.perf_counter() - start
     err = proc.stderr.read()
     print(f"{name} at {at:.2f} s of {seconds:.1f}: exit {code} after {took:.2f} s")
-    if code == 0:  # it had finished
-        return
     lines = err.strip().splitlines()
+    if code == 0:  # it had finished, and says nothing more
+        assert not lines, (at, err)
+        return
     assert code == 130 and took < EXIT_SECONDS and len(lines) == 1, (at, code, took, err)
     assert lines[0].startswith("interrupted") and "Traceback" not in err
     _check_left(name, lines[0], out, tmp_path, ref)

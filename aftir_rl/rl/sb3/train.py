@@ -148,6 +148,7 @@ def _train_run(
     else:
         model = build_model(algo, config, venv, seed=seed)
     start = _run_start(resume_path, int(model.num_timesteps))
+    model.num_timesteps = _learnt_steps(model, start)
     steps = max(0, config.total_timesteps - (int(model.num_timesteps) - start))
     run_dir = logdir / run_name(algo, bare, "random", seed)
     # a partial run that holds a checkpoint is kept on failure (resumable)
@@ -176,6 +177,22 @@ def _train_run(
         }
         write_json(partial / "summary.json", summary)
     return summary
+
+
+def _learnt_steps(model: Any, start: int) -> int:
+    """The steps a loaded model has learnt from, counted in its run that began at ``start``.
+
+    An on-policy model (PPO, A2C) updates its weights only after a whole rollout: a checkpoint
+    saved inside one (a periodic checkpoint of a run killed before it could tidy up, such as a
+    sweep's trial) holds the weights of the rollout's start, where training must go on from.
+    """
+    from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+
+    steps = int(model.num_timesteps)
+    if not isinstance(model, OnPolicyAlgorithm) or steps <= start:
+        return steps
+    rollout = int(model.n_steps) * int(model.n_envs)
+    return start + (steps - start) // rollout * rollout
 
 
 def _run_start(resume_path: Path | None, steps: int) -> int:
