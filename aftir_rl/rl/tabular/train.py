@@ -125,12 +125,16 @@ def _checkpoint_path(resume: str | Path | None, n_targets: int) -> Path | None:
     """
     if resume is None:
         return None
-    checkpoint = Path(resume)
-    if checkpoint.is_dir():
-        checkpoint = checkpoint / "q_table.npz"
+    checkpoint = _table_path(resume, all_targets=False)
     if n_targets != 1:
         raise CheckpointError("--resume continues one run: give at most one --target")
     return checkpoint
+
+
+def _table_path(resume: str | Path, all_targets: bool) -> Path:
+    """The checkpoint ``resume`` names: itself, or the table file of the run directory it is."""
+    path = Path(resume)
+    return path / (GOAL_TABLE if all_targets else "q_table.npz") if path.is_dir() else path
 
 
 def resumed_target(resume: str | Path) -> list[float]:
@@ -165,9 +169,7 @@ def resumed_config(resume: str | Path, all_targets: bool = False) -> Any | None:
     from aftir_rl.rl.tabular.q_table import QLearning, QLearningConfig
     from aftir_rl.rl.tabular.q_table_goal import GoalQLearning
 
-    path = Path(resume)
-    if path.is_dir():
-        path = path / (GOAL_TABLE if all_targets else "q_table.npz")
+    path = _table_path(resume, all_targets)
     meta = (
         GoalQLearning.read_checkpoint(path)[2]
         if all_targets
@@ -430,7 +432,6 @@ def _goal_agent(config: Any, seed: int, resume: str | Path | None) -> tuple[Goal
     env = TankGoalEnv(tank=config.tank, step_penalty=config.step_penalty)
     if resume is None:
         return GoalQLearning.from_config(env, config, seed=seed), 0
-    checkpoint = Path(resume)
-    checkpoint = checkpoint / GOAL_TABLE if checkpoint.is_dir() else checkpoint
+    checkpoint = _table_path(resume, all_targets=True)
     agent = GoalQLearning.load(checkpoint, env)
     return agent, _run_start(agent, checkpoint)
