@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from numpy.typing import NDArray
 
 from aftir_rl.core.kernel.geometry import fk_row
@@ -19,7 +19,7 @@ from aftir_rl.core.kernel.geometry import fk_row
 __all__ = ["traced_deviation", "fit_shape"]
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def traced_deviation(
     points: NDArray[np.float64],
     tips: NDArray[np.float64],
@@ -33,11 +33,12 @@ def traced_deviation(
     ``points (T', P, 3)`` of the entries from ``first`` on, of a motion whose tips ``(T, 3)`` are
     at arc lengths ``s (T,)``; sample ``p`` lies ``back[p]`` behind the tip. Each is compared
     with the tip's traced polyline near the entry whose tip passed its arc length, or with the
-    panel's axis below the first tip.
+    panel's axis below the first tip. The entries are independent: one thread each.
     """
-    worst, total = 0.0, 0.0
-    for i in range(points.shape[0]):
-        t = first + i
+    entries = points.shape[0]
+    worst_of, total_of = np.zeros(entries), np.zeros(entries)
+    for i in prange(entries):
+        t, worst, total = first + i, 0.0, 0.0
         for p in range(points.shape[1]):
             px, py, pz = points[i, p, 0], points[i, p, 1], points[i, p, 2]
             u = s[t] - back[p]
@@ -57,7 +58,8 @@ def traced_deviation(
                     d = min(d, math.sqrt(qx * qx + qy * qy + qz * qz))
             worst = max(worst, d)
             total += d
-    return worst, total
+        worst_of[i], total_of[i] = worst, total
+    return (worst_of.max() if entries else 0.0), total_of.sum()
 
 
 @njit(cache=True)

@@ -91,7 +91,7 @@ def min_clearance(points: NDArray[np.float64], tank: KernelTank) -> float:
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def postures_min_clearance(
     dis: NDArray[np.float64],
     theta: NDArray[np.float64],
@@ -102,15 +102,17 @@ def postures_min_clearance(
 ) -> float:
     """The exact smallest signed distance [cm] of the backbones of postures ``(T,), (T, N)``.
 
-    Each posture sampled ``samples`` times per section (:func:`~.geometry.fk_row`), one at a time.
+    Each posture sampled ``samples`` times per section (:func:`~.geometry.fk_row`); the postures
+    are independent: one thread each.
     """
-    points = np.empty((theta.shape[1] * samples + 1, 3))
-    rot = np.empty((3, 3))
-    best = math.inf
-    for t in range(theta.shape[0]):
+    entries = theta.shape[0]
+    best = np.full(entries, math.inf)
+    for t in prange(entries):
+        points = np.empty((theta.shape[1] * samples + 1, 3))
+        rot = np.empty((3, 3))
         fk_row(dis[t], theta[t], phi[t], section_length, samples, rot, points)
-        best = min(best, min_clearance(points, tank))
-    return best
+        best[t] = min_clearance(points, tank)
+    return best.min() if entries else math.inf
 
 
 @njit(cache=True, parallel=True)
@@ -268,7 +270,7 @@ def _dls_step(
     return dlead * scale
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def close(
     lead: NDArray[np.float64],
     kappa: NDArray[np.float64],
@@ -286,15 +288,15 @@ def close(
 
     Per route: damped least squares on its lead and last ``free`` bending vectors, the tip's
     Jacobian by forward differences (step 1e-6), until the tip is within 1e-7 cm of ``target``;
-    ``ok`` where it ends within 1e-6 cm.
+    ``ok`` where it ends within 1e-6 cm. The routes are independent: one thread each.
     """
     m = kappa.shape[1]
     j0 = max(0, m - free)
     nk = 2 * (m - j0)
-    jac, err, dk = np.empty((3, nk)), np.empty(3), np.empty(nk)
-    r, r0 = np.empty((3, 3)), np.empty((3, 3))
     lead_weight = 1.0 if free_lead else 0.0
-    for c in range(kappa.shape[0]):
+    for c in prange(kappa.shape[0]):
+        jac, err, dk = np.empty((3, nk)), np.empty(3), np.empty(nk)
+        r, r0 = np.empty((3, 3)), np.empty((3, 3))
         kap = kappa[c]
         lead[c] = min(max(lead[c], lead_lo[c]), lead_hi[c])
         # the fixed sections' end frame, once: each tip below chains only the free ones

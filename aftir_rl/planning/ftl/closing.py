@@ -12,7 +12,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.collision import point_clearance
-from aftir_rl.core.kernel.sections import close
+from aftir_rl.core.kernel.clearance import kernel_grid
+from aftir_rl.core.kernel.sections import close, postures_min_clearance
 from aftir_rl.core.robot import ArmSpec, body_points, tip_position
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.model import Route, clip_kappa, kappa_to_angles
@@ -21,10 +22,14 @@ __all__ = ["route_clearance", "close_batch", "push_away"]
 
 
 def route_clearance(tank: Tank, arm: ArmSpec, route: Route, per_section: int = 20) -> float:
-    """Smallest clearance [cm] of the final body of ``route`` (its surface, radius included)."""
+    """Smallest clearance [cm] of the final body of ``route`` (its surface, radius included).
+
+    Exact, compiled (:func:`~aftir_rl.core.kernel.sections.postures_min_clearance`).
+    """
     theta, phi = kappa_to_angles(route.kappa)
-    pts = body_points(route.lead, theta, phi, route.section_length, per_section)
-    return float(point_clearance(tank, pts).min()) - arm.radius
+    lead = np.array([route.lead], dtype=np.float64)
+    l, grid = route.section_length, kernel_grid(tank)
+    return postures_min_clearance(lead, theta[None], phi[None], l, per_section, grid) - arm.radius
 
 
 def close_batch(

@@ -183,32 +183,45 @@ def route_points(route: Route, u: ArrayLike) -> NDArray[np.float64]:
 #: Weight of the tip against one body sample in the between-stage fit (the tip leads).
 TIP_WEIGHT = 10.0
 
+#: Body samples per section of the between-stage fit.
+FIT_SAMPLES = 5
+
+
+def _fit_goals(route: Route, n: int, s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Route points ``(F, N·per + 1, 3)`` at the arc lengths of the fit's samples, per tip ``s``.
+
+    Sample 0 is the body's base; ``per`` (:data:`FIT_SAMPLES`) follow in each section.
+    """
+    l, per = route.section_length, FIT_SAMPLES
+    along = np.arange(n)[:, None] + (np.arange(1, per + 1) / per)[None, :]
+    u = (s - n * l)[:, None] + np.concatenate([[0.0], along.reshape(-1)])[None, :] * l
+    return route_points(route, u)
+
 
 def _fit_shape(
-    route: Route, n: int, s: float, kappa: NDArray[np.float64], iterations: int = 4
+    route: Route,
+    n: int,
+    s: float,
+    kappa: NDArray[np.float64],
+    goal: NDArray[np.float64],
+    iterations: int = 4,
 ) -> NDArray[np.float64]:
     """Refine the interpolated ``κ`` (N, 2) of the sections above the floor by Gauss-Newton.
 
-    Minimises the distance of the body's samples to the route at the same arc length: the best
-    constant-curvature approximation of the body sliding along the curve (approximate FTL).
-    Compiled (:func:`aftir_rl.core.kernel.sections.fit_shape`).
+    Minimises the distance of the body's samples to the route at the same arc length (``goal``,
+    :func:`_fit_goals`): the best constant-curvature approximation of the body sliding along the
+    curve (approximate FTL). Compiled (:func:`aftir_rl.core.kernel.deployment.fit_shape`).
     """
-    l = route.section_length
+    l, per = route.section_length, FIT_SAMPLES
     dis = s - n * l
-    per = 5
-    frac = np.arange(per + 1) / per
-    u = dis + (np.arange(n)[:, None] + frac[None, :]) * l  # arc position of every sample
-    goal = route_points(route, u.reshape(-1)).reshape(-1)
     free = np.flatnonzero(dis + (np.arange(n) + 1) * l > route.lead + 1e-9)
     if len(free) == 0:
         return kappa
     # the leader: the tip is held on the route far more firmly than the body
     weight = np.ones(n * per + 1)
     weight[-1] = TIP_WEIGHT
-    res = goal.reshape(-1, 3)
-    res = np.concatenate([res[:1], res.reshape(n, per + 1, 3)[:, 1:].reshape(-1, 3)])
     kap = np.array(kappa, dtype=np.float64)
-    fit_shape(float(dis), kap, int(free[0]), res, weight, l, per, iterations)
+    fit_shape(float(dis), kap, int(free[0]), np.ascontiguousarray(goal), weight, l, per, iterations)
     return kap
 
 
@@ -240,12 +253,13 @@ def ftl_motion(
     _, th, ph = ftl_postures(route, n, keys)
     key_kappa = np.stack([th * np.cos(ph), th * np.sin(ph)], axis=-1)  # (K, N, 2)
     if fit:
-        on_stage = np.isclose(((keys - route.lead) / l) % 1.0, 0.0) | np.isclose(
-            ((keys - route.lead) / l) % 1.0, 1.0
+        frac = ((keys - route.lead) / l) % 1.0
+        fitted = np.flatnonzero(
+            (keys > route.lead) & ~(np.isclose(frac, 0.0) | np.isclose(frac, 1.0))
         )
-        for i, sk in enumerate(keys):
-            if sk > route.lead and not on_stage[i]:
-                key_kappa[i] = clip_kappa(_fit_shape(route, n, sk, key_kappa[i]), theta_max)
+        goals = _fit_goals(route, n, keys[fitted])  # one batched route query for every key
+        for i, goal in zip(fitted, goals):
+            key_kappa[i] = clip_kappa(_fit_shape(route, n, keys[i], key_kappa[i], goal), theta_max)
 
     def at(s: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
         flat = key_kappa.reshape(len(keys), -1)
@@ -257,7 +271,9 @@ def ftl_motion(
     s = s[(s >= s0 - 1e-9) & (s <= route.length + 1e-9)]
     for _ in range(12):
         dis, theta, phi = at(s)
-        moves = backbone_moves(body_points(dis, theta, phi, l, SAMPLES_PER_SECTION))
+        points = np.empty((len(s), n * SAMPLES_PER_SECTION + 1, 3))
+        fk_points(dis, theta, phi, l, SAMPLES_PER_SECTION, points)  # compiled body_points
+        moves = backbone_moves(points)
         bad = np.flatnonzero(moves > max_move)
         if len(bad) == 0:
             break
@@ -288,9 +304,10 @@ def ftl_deviation(motion: FTLMotion, half_window: int = 12) -> tuple[float, floa
     k = n * SAMPLES_PER_SECTION
     back = n * l * (1.0 - np.arange(k + 1) / k)
     worst, total = 0.0, 0.0
-    points = np.empty((64, k + 1, 3))
-    for lo in range(0, len(motion), 64):  # memory-bounded: 64 entries' backbones at a time
-        hi = min(lo + 64, len(motion))
+    chunk = 256  # memory-bounded: 256 entries' backbones (0.7 MB at 12 sections) at a time
+    points = np.empty((chunk, k + 1, 3))
+    for lo in range(0, len(motion), chunk):
+        hi = min(lo + chunk, len(motion))
         dis, theta, phi = motion.dis[lo:hi], motion.theta[lo:hi], motion.phi[lo:hi]
         fk_points(dis, theta, phi, l, SAMPLES_PER_SECTION, points[: hi - lo])
         w, t = traced_deviation(points[: hi - lo], tips, motion.s, back, half_window, lo)

@@ -20,12 +20,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from aftir_rl.core.actuation import ActuatorLimits
 from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, PlanningError
 from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.kernel.sections import postures_min_clearance
-from aftir_rl.core.robot import ArmSpec
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.model import (
     SAMPLES_PER_SECTION,
@@ -85,8 +85,32 @@ class MotionPlan:
     tip_path_length_cm: float | None = None
     route_departure_cm: tuple[float, float] | None = None
     corridor: str | None = None
-    timing: TimedMotion | None = None
-    timing_note: str | None = None
+    limits: ActuatorLimits | None = field(default=None, repr=False)
+    _schedule: tuple[TimedMotion | None, str | None] | None = field(
+        default=None, init=False, repr=False, compare=False
+    )
+
+    @property
+    def timing(self) -> TimedMotion | None:
+        """The motion's time-optimal schedule under ``limits``, or None (see ``timing_note``).
+
+        Computed on first use (toppra, about 30 ms on 2 cores) and kept: ``seconds`` is the
+        planning alone.
+        """
+        return self._scheduled()[0]
+
+    @property
+    def timing_note(self) -> str | None:
+        """Why the motion has no :attr:`timing` (None when it has one)."""
+        return self._scheduled()[1]
+
+    def _scheduled(self) -> tuple[TimedMotion | None, str | None]:
+        if self._schedule is None:
+            if self.motion is None or self.limits is None:
+                self._schedule = (None, "no timing: no motion" if self.motion is None else None)
+            else:
+                self._schedule = _timed(self.motion, self.section_length, self.limits)
+        return self._schedule
 
     def to_json(self) -> dict[str, Any]:
         """The ``trajectory.json`` contract of a q_table run directory."""
@@ -139,12 +163,12 @@ def _timing_json(
     return {"duration_s": timing.duration, "timing": timing.to_json()}
 
 
-def _timed(motion: FTLMotion, arm: ArmSpec) -> tuple[TimedMotion | None, str | None]:
-    """The motion's time-optimal schedule under the arm's limits, or why it has none."""
+def _timed(
+    motion: FTLMotion, section_length: float, limits: ActuatorLimits
+) -> tuple[TimedMotion | None, str | None]:
+    """The motion's time-optimal schedule under ``limits``, or why it has none."""
     try:
-        return time_motion(
-            motion.dis, motion.theta, motion.phi, arm.section_length, arm.limits
-        ), None
+        return time_motion(motion.dis, motion.theta, motion.phi, section_length, limits), None
     except AftirError as exc:  # no robot extra, a cable past its travel, the solver
         return None, f"no timing: {exc}"
 
@@ -213,8 +237,6 @@ def plan_motion(
         if best_deviation <= DEVIATION_GOAL:
             break
     if best is not None:
-        assert best.motion is not None
-        best.timing, best.timing_note = _timed(best.motion, arm)
         best.seconds = time.perf_counter() - start
         return best
     return _unreachable(target, margin, arm.section_length, start, reasons)
@@ -281,6 +303,7 @@ def _deploy(
         tip_error_cm=float(np.linalg.norm(tips[-1] - target)),
         tip_path_length_cm=float(np.linalg.norm(np.diff(tips, axis=0), axis=1).sum()),
         corridor=found.corridor,
+        limits=arm.limits,
     )
     if cells is not None and tank.cell_size is not None:
         plan.waypoint_index, plan.route_departure_cm = _waypoints(tank, cells, tips)
