@@ -61,6 +61,22 @@ def _quiet_disk_errors(args: Any) -> None:
     threading.__excepthook__(args)
 
 
+def _interrupt_again(unraisable: Any) -> None:
+    """``sys.unraisablehook``: a Ctrl-C that met a callback is raised again, not printed and lost.
+
+    Any other exception Python cannot raise is printed as usual.
+    """
+    if isinstance(unraisable.exc_value, KeyboardInterrupt):
+        for _ in range(3):  # (should the signal sent again arrive before this hook returns)
+            try:
+                interrupts.raise_again()
+                return
+            except KeyboardInterrupt:
+                continue
+        return
+    sys.__unraisablehook__(unraisable)
+
+
 @contextmanager
 def _stop_signals() -> Iterator[None]:
     """Route SIGINT and SIGTERM to :func:`aftir_rl.core.interrupts.on_signal` (main thread)."""
@@ -70,10 +86,12 @@ def _stop_signals() -> Iterator[None]:
         return
     previous = {sig: signal.signal(sig, interrupts.on_signal) for sig in STOP_SIGNALS}
     hook, threading.excepthook = threading.excepthook, _quiet_disk_errors
+    unraisable, sys.unraisablehook = sys.unraisablehook, _interrupt_again
     try:
         yield
     finally:
         threading.excepthook = hook
+        sys.unraisablehook = unraisable
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         if interrupts.requested():  # the process ends soon: a second Ctrl-C then ends it at once

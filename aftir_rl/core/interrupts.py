@@ -11,12 +11,14 @@ Without the command lines' handler (a library call) the flag is never set.
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
 
-__all__ = ["deferred", "held", "on_signal", "request", "requested", "reset"]
+__all__ = ["deferred", "held", "on_signal", "raise_again", "request", "requested", "reset"]
 
 #: The line printed when a second signal ends the process at once.
 AT_ONCE = "interrupted twice: stopped at once; an unfinished run stays in its .NAME.partial folder"
@@ -79,3 +81,22 @@ def on_signal(signum: int, frame: FrameType | None) -> None:
     _State.requested = True
     if not _State.deferring:
         raise KeyboardInterrupt
+
+
+def raise_again() -> None:
+    """Raise a first stop again in the main thread, at its next step (never raises here).
+
+    For a ``KeyboardInterrupt`` that :func:`on_signal` raised where Python cannot raise (a weakref
+    callback, a ``__del__``, a finaliser): Python prints and drops it there, and the command would
+    go on and end as if never stopped. Inside a :func:`deferred` block nothing is raised, so the
+    flag the loop polls is all there is.
+    """
+    if not _State.requested or _State.deferring:
+        return
+    _State.requested = False  # on_signal, run again, takes it as the first signal it is
+    # sent from another thread a moment later: a signal pending now would be raised here again
+    main = threading.main_thread().ident
+    assert main is not None
+    later = threading.Timer(0.02, signal.pthread_kill, (main, signal.SIGINT))
+    later.daemon = True
+    later.start()

@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+import weakref
 from pathlib import Path
 
 import gymnasium as gym
@@ -106,6 +107,27 @@ def test_cli_turns_sigint_and_sigterm_into_one_line_and_130(sig, capsys):
     assert saves() == 130
     assert _one_line(capsys.readouterr().err).endswith("continue with --resume X")
     assert signal.getsignal(sig) is before and not interrupts.requested()
+
+
+def test_a_signal_that_lands_in_a_callback_is_raised_again(capsys):
+    """Python drops a KeyboardInterrupt raised in a weakref callback; the command still stops."""
+
+    class Held:
+        pass
+
+    @cli
+    def main() -> int:
+        held = Held()
+        ref = weakref.ref(held, lambda _: os.kill(os.getpid(), signal.SIGINT))  # noqa: F841
+        del held  # the signal's handler runs inside the callback, which cannot raise
+        time.sleep(5)  # the command would go on
+        return 0
+
+    start = time.perf_counter()
+    assert main() == 130 and time.perf_counter() - start < 1
+    err = capsys.readouterr().err
+    assert _one_line(err) == "interrupted" and "Exception ignored" not in err
+    assert not interrupts.requested()
 
 
 def test_a_second_signal_exits_at_once():
