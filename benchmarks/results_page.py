@@ -178,7 +178,7 @@ def suite_section(data: dict) -> str:
         "## Scene suite",
         "",
         f"`aftir bench --suite DIR --suite-targets 100` ({m['cpu']}, {m['cores']} cores, "
-        f"{data['seconds'] / 60:.0f} minutes in all): the follow-the-leader planner with the 1 cm "
+        f"{data['seconds']:.0f} s in all): the follow-the-leader planner with the 1 cm "
         "margin on each scene's fixed targets (seed = the scene's index; [tanks](tanks.md)). "
         "One run; every failure with its reason is in `benchmarks/results/suite/suite.json`.",
         "",
@@ -200,6 +200,12 @@ def suite_section(data: dict) -> str:
         "",
         f"In all {total} of {len(rows)} motions complete ({100 * total / len(rows):.1f}%).",
     ]
+    missed = [r for r in rows if not r["complete"]]
+    if missed:
+        lines += ["", "The failures:", ""]
+        for r in missed:
+            where = ", ".join(f"{v:.1f}" for v in r["target"])
+            lines.append(f"- {r['scene']} ({where}): {r['reason']}")
     return "\n".join(lines)
 
 
