@@ -20,6 +20,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from aftir_rl.core.kernel.planar import planar_tips, planar_tips_serial
+
 __all__ = ["planar_points", "planar_tip", "distance_sum", "to_frame"]
 
 
@@ -65,12 +67,14 @@ def planar_points(
 def planar_tip(
     theta: NDArray[np.float64], section_length: float
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Tip ``(ρ, z)`` of planar arms with base at the origin, each of shape ``(B,)``."""
-    theta = np.asarray(theta, dtype=np.float64)
-    heading = np.concatenate([np.zeros((len(theta), 1)), np.cumsum(theta, axis=1)[:, :-1]], axis=1)
-    step = section_length * _half_sinc(theta)
-    mid = heading + theta / 2
-    return np.sum(step * np.sin(mid), axis=1), np.sum(step * np.cos(mid), axis=1)
+    """Tip ``(ρ, z)`` of planar arms with base at the origin, each of shape ``(B,)``.
+
+    Compiled (:func:`aftir_rl.core.kernel.planar.planar_tips`).
+    """
+    theta = np.ascontiguousarray(theta, dtype=np.float64)
+    rho, z = np.empty(len(theta)), np.empty(len(theta))
+    (planar_tips if len(theta) > 256 else planar_tips_serial)(theta, float(section_length), rho, z)
+    return rho, z
 
 
 def _length(components: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:

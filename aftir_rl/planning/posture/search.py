@@ -22,8 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from aftir_rl.core.kernel.planar import planar_mds
 from aftir_rl.planning.posture.clipping import clip_regions, gauss_newton, reach, zone_bound
-from aftir_rl.planning.posture.planar import distance_sum, planar_points, planar_tip
+from aftir_rl.planning.posture.planar import planar_tip
 
 __all__ = [
     "BLIND_LIMIT",
@@ -140,12 +141,15 @@ class PlanarProblem:
         return idx, dis[idx], mds
 
     def mds(self, theta: NDArray[np.float64], dis: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Distance summation of the body points to the reference segment, shape ``(B,)``."""
+        """Distance summation of the body points to the reference segment, shape ``(B,)``.
+
+        :func:`~aftir_rl.planning.posture.planar.distance_sum` of the
+        :func:`~aftir_rl.planning.posture.planar.planar_points`, compiled
+        (:func:`aftir_rl.core.kernel.planar.planar_mds`).
+        """
         out = np.empty(len(theta))
-        for begin in range(0, len(theta), 1 << 15):
-            part = slice(begin, begin + (1 << 15))
-            rho, z = planar_points(theta[part], self.section_length, self.mds_points)
-            out[part] = distance_sum((rho, z + dis[part, None]), (self.rho, self.z))
+        theta, dis = np.ascontiguousarray(theta), np.ascontiguousarray(dis, dtype=np.float64)
+        planar_mds(theta, dis, self.section_length, self.mds_points, (self.rho, self.z), out)
         return out
 
     def zone_for_step(self, step: NDArray[np.float64]) -> float:

@@ -21,11 +21,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.core.collision import panel_violation, points_clear
 from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.kernel.clearance import kernel_grid
+from aftir_rl.core.kernel.planar import planar_clear
 from aftir_rl.core.robot import Posture
 from aftir_rl.planning.posture.context import Method, PlannedPosture, PlanningContext, fmt_point
-from aftir_rl.planning.posture.planar import planar_points, to_frame
 from aftir_rl.planning.posture.search import (
     BLIND_LIMIT,
     Feasible,
@@ -64,14 +64,20 @@ def prefilter(context: PlanningContext, frame: Frame) -> Feasible:
     """
     l, k, tank = context.arm.section_length, context.check_points, context.tank
     limit = context.arm.radius + context.margin
+    grid = kernel_grid(tank)
+    rotation = np.eye(3) if frame.rotation is None else np.asarray(frame.rotation, dtype=float)
+    origin = np.zeros(3) if frame.origin is None else np.asarray(frame.origin, dtype=float)
+    centre, radius = tank.panel.center, float(tank.panel.radius) if frame.panel else -1.0
+    panel = (float(centre[0]), float(centre[1]), float(centre[2]), radius)
+    where = (float(frame.psi), np.ascontiguousarray(rotation), np.ascontiguousarray(origin))
 
     def check(
         th: NDArray[np.float64], d: NDArray[np.float64], points: int, clear: float
     ) -> NDArray[np.bool_]:
-        rho, z = planar_points(th, l, points)
-        pts = to_frame(rho, z + d[:, None], frame.psi, frame.rotation, frame.origin)
-        ok = ~panel_violation(tank, pts) if frame.panel else np.ones(len(th), dtype=bool)
-        ok[ok] = points_clear(tank, pts[ok], clear)
+        # compiled: the planar points in the frame, the panel rule, the exact clearance
+        ok = np.empty(len(th), dtype=bool)
+        th, d = np.ascontiguousarray(th), np.ascontiguousarray(d, dtype=np.float64)
+        planar_clear(th, d, l, points, where, panel, grid, float(clear), ok)
         return ok
 
     def feasible(theta: NDArray[np.float64], dis: NDArray[np.float64]) -> NDArray[np.bool_]:
