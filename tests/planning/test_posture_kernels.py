@@ -26,7 +26,9 @@ def test_planar_tips_equal_forward_kinematics():
     tip = forward_kinematics(np.zeros(500), np.abs(theta), np.where(theta < 0, np.pi, 0.0), 50.0)
     np.testing.assert_allclose(rho, tip[:, -1, 0, 3], atol=1e-9)
     np.testing.assert_allclose(z, tip[:, -1, 2, 3], atol=1e-9)
-    np.testing.assert_allclose(np.stack([rho, z]), np.stack(planar_points(theta, 50.0, 3))[:, :, -1])
+    np.testing.assert_allclose(
+        np.stack([rho, z]), np.stack(planar_points(theta, 50.0, 3))[:, :, -1]
+    )
 
 
 @pytest.mark.parametrize("end", [(60.0, 120.0), (0.0, 0.0), (-30.0, 10.0)])
@@ -60,7 +62,7 @@ def test_planar_clear_equals_the_panel_rule_and_points_clear(tank, framed):
         centre = tank.panel.center
         panel = (float(centre[0]), float(centre[1]), float(centre[2]), radius)
         grid = kernel_grid(tank)
-        planar_clear(theta, dis, 50.0, points, (psi, rotation, origin), panel, grid, limit, got)
+        planar_clear(theta, dis, (50.0, points), (psi, rotation, origin), panel, grid, limit, got)
         rho, z = planar_points(theta, 50.0, points)
         pts = to_frame(rho, z + dis[:, None], psi, rotation, origin)
         want = points_clear(tank, pts, limit)

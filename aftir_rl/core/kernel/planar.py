@@ -31,17 +31,34 @@ def _half_sinc(b: float) -> float:
 
 
 @njit(cache=True, inline="always")
+def _sample(
+    th: float, frac: float, l: float, start: tuple[float, float, float]
+) -> tuple[float, float]:
+    """The point ``frac`` of the way along a section bending by ``th`` from ``start``.
+
+    ``start`` is the section's base: ``(heading, ρ, z)``.
+    """
+    heading, r0, z0 = start
+    bend = th * frac
+    step = l * frac * _half_sinc(bend)
+    mid = heading + 0.5 * bend
+    return r0 + step * math.sin(mid), z0 + step * math.cos(mid)
+
+
+@njit(cache=True, inline="always")
+def _advance(th: float, l: float, start: tuple[float, float, float]) -> tuple[float, float, float]:
+    """The next section's base ``(heading, ρ, z)`` after one bending by ``th`` from ``start``."""
+    r, h = _sample(th, 1.0, l, start)
+    return start[0] + th, r, h
+
+
+@njit(cache=True, inline="always")
 def _tip(theta: NDArray[np.float64], b: int, l: float) -> tuple[float, float]:
     """Tip ``(ρ, z)`` of the planar arm ``theta[b]`` based at the origin."""
-    heading, r, h = 0.0, 0.0, 0.0
+    base = (0.0, 0.0, 0.0)
     for i in range(theta.shape[1]):
-        th = theta[b, i]
-        step = l * _half_sinc(th)
-        mid = heading + 0.5 * th
-        r += step * math.sin(mid)
-        h += step * math.cos(mid)
-        heading += th
-    return r, h
+        base = _advance(theta[b, i], l, base)
+    return base[1], base[2]
 
 
 @njit(cache=True, parallel=True)
@@ -82,20 +99,12 @@ def planar_mds(
     length2 = ex * ex + ez * ez
     for b in prange(theta.shape[0]):
         total = _segment_distance(0.0, dis[b], ex, ez, length2)
-        heading, r0, z0 = 0.0, 0.0, dis[b]
+        base = (0.0, 0.0, dis[b])
         for i in range(theta.shape[1]):
-            th = theta[b, i]
             for j in range(1, k + 1):
-                bend = th * (j / k)
-                step = l * (j / k) * _half_sinc(bend)
-                mid = heading + 0.5 * bend
-                total += _segment_distance(
-                    r0 + step * math.sin(mid), z0 + step * math.cos(mid), ex, ez, length2
-                )
-            step = l * _half_sinc(th)
-            r0 += step * math.sin(heading + 0.5 * th)
-            z0 += step * math.cos(heading + 0.5 * th)
-            heading += th
+                r, h = _sample(theta[b, i], j / k, l, base)
+                total += _segment_distance(r, h, ex, ez, length2)
+            base = _advance(theta[b, i], l, base)
         out[b] = total
 
 
@@ -112,8 +121,7 @@ def _segment_distance(px: float, pz: float, ex: float, ez: float, length2: float
 def planar_clear(
     theta: NDArray[np.float64],
     dis: NDArray[np.float64],
-    l: float,
-    k: int,
+    shape: tuple[float, int],
     frame: tuple[float, NDArray[np.float64], NDArray[np.float64]],
     panel: tuple[float, float, float, float],
     tank: KernelTank,
@@ -122,34 +130,27 @@ def planar_clear(
 ) -> None:
     """Whether each planar arm, put in 3D, keeps every point farther than ``limit`` [cm].
 
-    Arm ``b`` (``theta[b]``, based at ``(0, dis[b])`` in its plane, ``k`` points a section and
-    the base) lies in the plane of bearing ``ψ``; ``frame`` is ``(ψ, R, o)``: a point is
-    ``R (ρ cos ψ, ρ sin ψ, z) + o``. ``panel`` is the panel's centre and radius (a negative
-    radius: no panel rule): no point below the panel outside that radius.
+    Arm ``b`` (``theta[b]``, based at ``(0, dis[b])`` in its plane; ``shape``: the section
+    length ``l`` and ``k`` points a section, and the base) lies in the plane of bearing ``ψ``;
+    ``frame`` is ``(ψ, R, o)``: a point is ``R (ρ cos ψ, ρ sin ψ, z) + o``. ``panel`` is the
+    panel's centre and radius (a negative radius: no panel rule): no point below the panel
+    outside that radius.
     """
+    l, k = shape
     psi, rot, origin = frame
-    cx, cy, cz, radius = panel
     cp, sp = math.cos(psi), math.sin(psi)
     exact_below = limit + 1e-6  # the grid's value is returned only where it is above this
     for b in prange(theta.shape[0]):
-        heading, r0, z0 = 0.0, 0.0, dis[b]
-        ok = _point_clear(0.0, z0, (cp, sp), rot, origin, panel, tank, limit, exact_below)
+        base = (0.0, 0.0, dis[b])
+        ok = _point_clear(0.0, dis[b], (cp, sp), rot, origin, panel, tank, limit, exact_below)
         for i in range(theta.shape[1]):
+            for j in range(1, k + 1):
+                if ok:
+                    r, h = _sample(theta[b, i], j / k, l, base)
+                    ok = _point_clear(r, h, (cp, sp), rot, origin, panel, tank, limit, exact_below)
             if not ok:
                 break
-            th = theta[b, i]
-            for j in range(1, k + 1):
-                bend = th * (j / k)
-                step = l * (j / k) * _half_sinc(bend)
-                mid = heading + 0.5 * bend
-                r, h = r0 + step * math.sin(mid), z0 + step * math.cos(mid)
-                if not _point_clear(r, h, (cp, sp), rot, origin, panel, tank, limit, exact_below):
-                    ok = False
-                    break
-            step = l * _half_sinc(th)
-            r0 += step * math.sin(heading + 0.5 * th)
-            z0 += step * math.cos(heading + 0.5 * th)
-            heading += th
+            base = _advance(theta[b, i], l, base)
         out[b] = ok
 
 

@@ -77,7 +77,7 @@ def prefilter(context: PlanningContext, frame: Frame) -> Feasible:
         # compiled: the planar points in the frame, the panel rule, the exact clearance
         ok = np.empty(len(th), dtype=bool)
         th, d = np.ascontiguousarray(th), np.ascontiguousarray(d, dtype=np.float64)
-        planar_clear(th, d, l, points, where, panel, grid, float(clear), ok)
+        planar_clear(th, d, (l, points), where, panel, grid, float(clear), ok)
         return ok
 
     def feasible(theta: NDArray[np.float64], dis: NDArray[np.float64]) -> NDArray[np.bool_]:
