@@ -40,8 +40,12 @@ _EXPERT: Any = None  # a worker's expert (made once per process)
 
 def _init_worker(env_kwargs: dict[str, Any], max_seconds: float) -> None:
     global _EXPERT  # the expert plans in numpy and numba: no torch in the workers
+    import numba
+
     from aftir_rl.rl.expert import FTLExpert
 
+    if multiprocessing.parent_process() is not None:  # the processes share the cores
+        numba.set_num_threads(1)
     _EXPERT = FTLExpert(max_seconds=max_seconds, **env_kwargs)
 
 

@@ -5,7 +5,7 @@ The env's arm traces a route of constant-curvature sections that start at the fl
 while the tip is in it. :func:`route_actions` turns such a route into the env's actions: pull
 back to the floor, then for each route section steer at its start, where none of it is part of
 the body yet, and push through it. :class:`FTLExpert` plans the route
-(:func:`~aftir_rl.planning.ftl.route.plan_route`, lead 0, the search variants of
+(:func:`~aftir_rl.planning.ftl.route.plan_route`, lead 0, the main search variants of
 :func:`~aftir_rl.planning.ftl.plan.plan_motion`) and replays the actions in a copy of the env:
 between stages the env's body interpolates its sections, which can graze what the planned route
 clears, so the route's slack is raised until the env itself ends the episode in success and
@@ -26,7 +26,7 @@ from aftir_rl.core.collision import CollisionScene
 from aftir_rl.core.errors import ConfigError, PlanningError
 from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.envs.ftl.spec import TRAINING_ONLY_KWARGS
-from aftir_rl.planning.ftl.plan import SEARCH_VARIANTS, warm_up
+from aftir_rl.planning.ftl.plan import MAIN_VARIANTS, warm_up
 from aftir_rl.planning.ftl.route import plan_route
 
 __all__ = ["ExpertPlan", "FTLExpert", "SLACKS", "route_actions"]
@@ -156,8 +156,9 @@ class FTLExpert:
         start = time.perf_counter()
         target = np.asarray(target, dtype=np.float64)
         tries = 0
-        # each setting once whatever its slack (the slacks below replace it)
-        for settings in dict.fromkeys(replace(v, slack=0.0) for v in SEARCH_VARIANTS):
+        # each setting once whatever its slack (the slacks below replace it); not the last
+        # resorts: their deep leads are not the env's, and their wide beams cost a miss minutes
+        for settings in dict.fromkeys(replace(v, slack=0.0) for v in MAIN_VARIANTS):
             for slack in SLACKS:  # more slack while the env's deployment grazes
                 left = self.max_seconds - (time.perf_counter() - start)
                 if left <= 0:

@@ -44,6 +44,8 @@ __all__ = [
     "warm_up",
     "DEFAULT_MARGIN",
     "SEARCH_VARIANTS",
+    "MAIN_VARIANTS",
+    "LAST_RESORTS",
 ]
 
 _FINE = RouteSettings(beam_width=800, bin_cm=4.0, bin_heading=0.2, slack=0.5, change_weight=5.0)
@@ -51,7 +53,8 @@ _DEEP_LEADS = (-40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0)
 
 #: Route-search settings tried in turn (the margin is set per call): the first whose motion
 #: keeps the margin and the deviation goal wins; otherwise the complete one of least deviation.
-SEARCH_VARIANTS: tuple[RouteSettings, ...] = (
+#: :data:`LAST_RESORTS` follow them.
+MAIN_VARIANTS: tuple[RouteSettings, ...] = (
     RouteSettings(clearance_weight=1.0, change_weight=20.0),
     RouteSettings(clearance_weight=1.0, change_weight=40.0, max_change=0.5),
     RouteSettings(clearance_weight=1.0, change_weight=5.0),
@@ -62,13 +65,19 @@ SEARCH_VARIANTS: tuple[RouteSettings, ...] = (
     # more room for the deviation between stages, for routes whose deployment grazes
     RouteSettings(clearance_weight=1.0, change_weight=20.0, slack=3.0),
     RouteSettings(clearance_weight=2.0, change_weight=40.0, slack=3.0, max_change=0.5),
-    # the last resorts: a wider, finer beam with sharper turns, tight spots' routes; the first
-    # and last also bend deeper in the panel's guide (the arm leaves the panel at a slant, for
-    # targets low and beside it), the second moves the lead when closing
+)
+
+#: The last resorts: a wider, finer beam with sharper turns for tight spots' routes; the first
+#: and last also bend deeper in the panel's guide (the arm leaves the panel at a slant, for
+#: targets low and beside it), the second moves the lead when closing.
+LAST_RESORTS: tuple[RouteSettings, ...] = (
     replace(_FINE, max_change=1.2, leads=_DEEP_LEADS),
     replace(_FINE, max_change=1.2, lead_shift=15.0, closings=30),
     replace(_FINE, max_change=1.5, leads=_DEEP_LEADS),
 )
+
+#: Every setting :func:`plan_motion` tries by default.
+SEARCH_VARIANTS = MAIN_VARIANTS + LAST_RESORTS
 
 #: Largest follow-the-leader deviation [cm] a motion should keep (the published FTL anchors:
 #: about 2% of the shape); a motion above it is kept only when no search setting does better.
