@@ -95,8 +95,12 @@ def raise_again() -> None:
         return
     _State.requested = False  # on_signal, run again, takes it as the first signal it is
     # sent from another thread a moment later: a signal pending now would be raised here again
-    main = threading.main_thread().ident
-    assert main is not None
-    later = threading.Timer(0.02, signal.pthread_kill, (main, signal.SIGINT))
+    later = threading.Timer(0.02, _send_again, (threading.main_thread().ident,))
     later.daemon = True
     later.start()
+
+
+def _send_again(main: int) -> None:
+    """SIGINT to the main thread, while the command's handler still takes it."""
+    if signal.getsignal(signal.SIGINT) is on_signal:
+        signal.pthread_kill(main, signal.SIGINT)
