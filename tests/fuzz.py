@@ -401,7 +401,20 @@ def run_case(command: Callable[[Path], int], run: Path) -> tuple[Any, str, float
     return code, err.getvalue(), time.perf_counter() - start
 
 
+def warm(cli: str, workdir: str, sources: list[str]) -> int:
+    """Run ``cli`` once on every source run as it is, unmeasured: numba compiles the kernels the
+    command needs and caches them on disk, as a user's first command after installing does."""
+    out = Path(workdir) / "out"
+    out.mkdir(parents=True, exist_ok=True)
+    command = _commands(cli, out)
+    codes = [run_case(command, Path(source))[0] for source in sources]
+    print(json.dumps({"cli": cli, "warm": codes}))
+    return 0 if all(code == 0 for code in codes) else 1
+
+
 def main(argv: list[str]) -> int:
+    if argv[:1] == ["warm"]:  # ``python -m tests.fuzz warm CLI WORKDIR RUN_DIR...``
+        return warm(argv[1], argv[2], argv[3:])
     cli, seed, cases, workdir, *sources = argv
     rng = random.Random(int(seed))
     work = Path(workdir)
