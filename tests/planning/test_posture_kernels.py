@@ -7,9 +7,10 @@ import pytest
 
 from aftir_rl.core.collision import panel_violation, points_clear
 from aftir_rl.core.kernel.clearance import kernel_grid
-from aftir_rl.core.kernel.planar import planar_clear, planar_mds
+from aftir_rl.core.kernel.planar import planar_clear, planar_grid, planar_mds, planar_refine
 from aftir_rl.core.robot import forward_kinematics
 from aftir_rl.core.tank import load_tank
+from aftir_rl.planning.posture.clipping import gauss_newton
 from aftir_rl.planning.posture.planar import distance_sum, planar_points, planar_tip, to_frame
 
 
@@ -70,3 +71,52 @@ def test_planar_clear_equals_the_panel_rule_and_points_clear(tank, framed):
             want &= ~panel_violation(tank, pts)
         assert 40 < want.sum() < len(want) - 40  # both verdicts are tried
         np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("heading", [None, 0.8])
+def test_planar_refine_takes_the_numpy_gauss_newton_steps(heading):
+    """The same refined angles as the numpy Gauss–Newton on the planar tip, or the same refusal."""
+    rng = np.random.default_rng(6)
+    tmax, l, agree = 1.2, 50.0, 0
+    for _ in range(200):
+        m = int(rng.integers(1, 5))
+        x0 = rng.uniform(-tmax, tmax, m)
+        goal_rho = float(rng.uniform(-40.0, 120.0))
+
+        def rho(probe, m=m):
+            full = probe if heading is None else np.column_stack([probe, heading - probe.sum(1)])
+            return planar_tip(full, l)[0][:, None]
+
+        limits = (np.full(m, -tmax), np.full(m, tmax))
+        want = gauss_newton(rho, (goal_rho,), x0.copy(), limits, 1e-9, 60)
+        got = x0.copy()
+        ok = planar_refine(got, (goal_rho, np.nan if heading is None else heading), l, tmax,
+                           1e-9, 60, 1e-7)  # fmt: skip
+        assert ok == (want is not None)
+        if ok:
+            np.testing.assert_allclose(got, want, atol=1e-9)
+            agree += abs(rho(got[None])[0, 0] - goal_rho) < 1e-9
+    assert agree > 50  # many of the draws converge
+
+
+@pytest.mark.parametrize("heading", [None, 0.6])
+def test_planar_grid_keeps_the_grid_postures_numpy_keeps(heading):
+    """Each grid combination's tip, ``dis`` and last angle as numpy computes them, in order."""
+    rng = np.random.default_rng(7)
+    for m in (1, 2, 3, 4):
+        values = [np.sort(rng.uniform(-1.2, 1.2, 7)) for _ in range(m)]
+        free = np.stack(np.meshgrid(*values, indexing="ij"), axis=-1).reshape(-1, m)
+        full = free if heading is None else np.column_stack([free, heading - free.sum(axis=1)])
+        rho, z = planar_tip(full, 50.0)
+        n = full.shape[1]
+        target, radius, dis_range = (20.0 * n, 40.0 * n), 10.0 * n, (-20.0, 10.0)
+        dis = target[1] - z
+        keep = (np.abs(rho - target[0]) <= radius) & (dis >= dis_range[0]) & (dis <= dis_range[1])
+        if heading is not None:
+            keep &= np.abs(full[:, -1]) <= 1.2 + 1e-12
+        goal = (*target, np.nan if heading is None else heading, 1.2)
+        theta, got_dis, gap = planar_grid(np.array(values), goal, 50.0, dis_range, radius)
+        assert 0 < keep.sum() < len(keep)
+        np.testing.assert_allclose(theta, full[keep], atol=1e-12)
+        np.testing.assert_allclose(got_dis, dis[keep], atol=1e-9)
+        np.testing.assert_allclose(gap, np.abs(rho - target[0])[keep], atol=1e-9)

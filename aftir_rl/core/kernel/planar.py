@@ -1,10 +1,12 @@
 """Compiled kernels of the posture search in the bending plane: tips, MDS and clearance.
 
 What :mod:`aftir_rl.planning.posture.planar` defines in numpy (the arm with every ``φ_i`` equal,
-a point ``(ρ, z)`` in its plane), one loop per candidate posture: the tips (:func:`planar_tips`),
-the distance summation to the reference segment (:func:`planar_mds`) and the search's
+a point ``(ρ, z)`` in its plane), one loop per candidate posture: the tips (:func:`planar_tips`;
+over a search grid, :func:`planar_grid`),
+the distance summation to the reference segment (:func:`planar_mds`), the search's
 feasibility check in a frame of the tank (:func:`planar_clear`, the panel rule and the exact
-clearance, pruned by the clearance grid). Tested equal to numpy in
+clearance, pruned by the clearance grid) and the Gauss–Newton refinement of a tip's ``ρ``
+(:func:`planar_refine`). Tested equal to numpy in
 ``tests/planning/test_posture_kernels.py``.
 """
 
@@ -19,7 +21,14 @@ from numpy.typing import NDArray
 from aftir_rl.core.kernel.arrays import KernelTank
 from aftir_rl.core.kernel.sections import clearance_at
 
-__all__ = ["planar_tips", "planar_tips_serial", "planar_mds", "planar_clear"]
+__all__ = [
+    "planar_tips",
+    "planar_tips_serial",
+    "planar_grid",
+    "planar_mds",
+    "planar_clear",
+    "planar_refine",
+]
 
 
 @njit(cache=True, inline="always")
@@ -80,6 +89,67 @@ def planar_tips_serial(
     """:func:`planar_tips` in one thread (starting threads costs more for a few arms)."""
     for b in range(theta.shape[0]):
         rho[b], z[b] = _tip(theta, b, l)
+
+
+@njit(cache=True)
+def planar_grid(
+    values: NDArray[np.float64],
+    goal: tuple[float, float, float, float],
+    l: float,
+    dis_range: tuple[float, float],
+    radius: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The postures of a search grid whose tip lies within ``radius`` of the target's ``ρ``.
+
+    The grid is every combination of ``values (m, V)`` (angle ``i`` takes ``values[i]``), in
+    the order of ``numpy.meshgrid(..., indexing="ij")`` flattened; ``goal`` is ``(ρ, z)`` of the
+    target, the end heading (NaN: none) and ``θ_max``. With an end heading the last angle is
+    ``heading − Σ`` and must lie within ``±θ_max``. A posture's base rises by ``dis = z − z_tip``,
+    which must lie in ``dis_range``. The grid shares its prefixes: a section's end is computed
+    once for all the combinations that share the angles before it.
+
+    Returns:
+        The kept postures' angles ``(K, N)``, ``dis (K,)`` and ``|ρ_tip − ρ| (K,)``, in grid
+        order (``m ≥ 1``).
+
+    """
+    rho_t, z_t, heading, tmax = goal
+    m, v = values.shape
+    has = not math.isnan(heading)
+    n = m + 1 if has else m
+    total = v**m
+    theta = np.empty((total, n))
+    dis, gap = np.empty(total), np.empty(total)
+    states = np.zeros((m + 1, 3))  # the base (heading, ρ, z) of each section
+    digits = np.zeros(m, dtype=np.int64)
+    count, changed = 0, 0
+    for _ in range(total):
+        for d in range(changed, m):
+            start = (states[d, 0], states[d, 1], states[d, 2])
+            states[d + 1, 0], states[d + 1, 1], states[d + 1, 2] = _advance(
+                values[d, digits[d]], l, start
+            )
+        end = (states[m, 0], states[m, 1], states[m, 2])
+        last = 0.0
+        if has:
+            last = heading - end[0]
+            end = _advance(last, l, end)
+        rise = z_t - end[2]
+        off = abs(end[1] - rho_t)
+        keep = dis_range[0] <= rise <= dis_range[1] and off <= radius
+        if keep and (not has or abs(last) <= tmax + 1e-12):
+            for d in range(m):
+                theta[count, d] = values[d, digits[d]]
+            if has:
+                theta[count, m] = last
+            dis[count], gap[count] = rise, off
+            count += 1
+        changed = m - 1
+        while changed > 0 and digits[changed] == v - 1:
+            digits[changed] = 0
+            changed -= 1
+        digits[changed] += 1
+    return theta[:count], dis[:count], gap[:count]
 
 
 @njit(cache=True, parallel=True)
@@ -175,3 +245,58 @@ def _point_clear(
     if radius >= 0.0 and z < cz and math.hypot(x - cx, y - cy) > radius + 1e-9:
         return False
     return clearance_at(x, y, z, tank, exact_below) > limit
+
+
+@njit(cache=True)
+def _free_rho(x: NDArray[np.float64], heading: float, l: float) -> float:
+    """Tip ``ρ`` of the planar arm of angles ``x`` and, unless NaN, a last ``heading − Σx``."""
+    base = (0.0, 0.0, 0.0)
+    for i in range(x.shape[0]):
+        base = _advance(x[i], l, base)
+    if not math.isnan(heading):
+        base = _advance(heading - base[0], l, base)
+    return base[1]
+
+
+@njit(cache=True)
+def planar_refine(
+    x: NDArray[np.float64],
+    goal: tuple[float, float],
+    l: float,
+    tmax: float,
+    tol: float,
+    iterations: int,
+    h: float,
+) -> bool:
+    """:func:`aftir_rl.planning.posture.clipping.gauss_newton` on the tip's ``ρ``, in place.
+
+    ``x``: the searched angles, clipped to ``±tmax`` after each step; ``goal``: ``(ρ wanted,
+    end heading or NaN)``; ``h`` the central-difference step. The same steps and stops
+    as the numpy version (minimum-norm step, three steps that do not cut the gap by a tenth);
+    False where the gradient vanishes.
+    """
+    rho_goal, heading = goal[0], goal[1]
+    m = x.shape[0]
+    grad, probe = np.empty(m), x.copy()
+    gaps = np.empty(iterations)
+    for it in range(iterations):
+        error = _free_rho(x, heading, l) - rho_goal
+        for j in range(m):
+            probe[j] = x[j] + h
+            up = _free_rho(probe, heading, l)
+            probe[j] = x[j] - h
+            grad[j] = (up - _free_rho(probe, heading, l)) / (2 * h)
+            probe[j] = x[j]
+        gap = abs(error)
+        if gap < tol or it >= 3 and gap > 0.9 * gaps[: it - 2].min():
+            break
+        gaps[it] = gap
+        norm2 = 0.0
+        for j in range(m):
+            norm2 += grad[j] * grad[j]
+        if norm2 < 1e-12:
+            return False
+        for j in range(m):
+            x[j] = min(max(x[j] - error * grad[j] / norm2, -tmax), tmax)
+            probe[j] = x[j]
+    return True

@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.core.kernel.planar import planar_mds
-from aftir_rl.planning.posture.clipping import clip_regions, gauss_newton, reach, zone_bound
+from aftir_rl.core.kernel.planar import planar_grid, planar_mds, planar_refine
+from aftir_rl.planning.posture.clipping import clip_regions, reach, zone_bound
 from aftir_rl.planning.posture.planar import planar_tip
 
 __all__ = [
@@ -111,34 +111,87 @@ class PlanarProblem:
         theta, ok = self.full_theta(free)
         rho, z = planar_tip(theta, self.section_length)
         dis = self.z - z
-        gap = np.abs(rho - self.rho)
         ok &= (dis >= self.dis_range[0]) & (dis <= self.dis_range[1])
-        zones = [zone] if tight_zone is None or tight_zone >= zone else [tight_zone, zone]
-        done = np.zeros(len(free), dtype=bool)
-        for radius in zones:
+        gap = np.abs(rho - self.rho)
+        idx, mds = self._select(theta, dis, gap, ok, (zone, tight_zone), want, max_checks)
+        return idx, dis[idx], mds
+
+    def evaluate_grid(
+        self,
+        values: list[NDArray[np.float64]],
+        zone: float,
+        tight_zone: float | None = None,
+        want: int | None = None,
+        max_checks: int = 1 << 62,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`evaluate` over the grid of every combination of ``values``, compiled.
+
+        ``values`` has one array per searched angle; the grid's tips come from
+        :func:`aftir_rl.core.kernel.planar.planar_grid`.
+
+        Returns:
+            The chosen combinations' full angles ``(K, N)``, their ``dis`` and MDS.
+
+        """
+        heading = math.nan if self.end_heading is None else float(self.end_heading)
+        goal = (float(self.rho), float(self.z), heading, float(self.theta_max))
+        radius = zone if tight_zone is None else max(zone, tight_zone)
+        grid = np.array(values, dtype=np.float64)
+        theta, dis, gap = planar_grid(grid, goal, self.section_length, self.dis_range, radius)
+        ok = np.ones(len(theta), dtype=bool)
+        idx, mds = self._select(theta, dis, gap, ok, (zone, tight_zone), want, max_checks)
+        return theta[idx], dis[idx], mds
+
+    def _select(
+        self,
+        theta: NDArray[np.float64],
+        dis: NDArray[np.float64],
+        gap: NDArray[np.float64],
+        ok: NDArray[np.bool_],
+        zones: tuple[float, float | None],
+        want: int | None,
+        max_checks: int = 1 << 62,
+    ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+        """Indices and MDS of the reaching, feasible postures in increasing MDS (:meth:`evaluate`).
+
+        Reaching: ``ok`` and ``gap`` within the tight zone, else within the whole zone.
+        """
+        zone, tight_zone = zones
+        radii = [zone] if tight_zone is None or tight_zone >= zone else [tight_zone, zone]
+        done = np.zeros(len(theta), dtype=bool)
+        for radius in radii:
             idx = np.flatnonzero(ok & (gap <= radius) & ~done)
             done[idx] = True
             mds = self.mds(theta[idx], dis[idx])
             order = np.argsort(mds, kind="stable")
             idx, mds = idx[order], mds[order]
             if self.feasible is not None:
-                keep: list[NDArray[np.intp]] = []
-                found, step = 0, 256
-                for begin in range(0, len(idx), step):
-                    part = np.arange(begin, min(begin + step, len(idx)))
-                    part = part[self.feasible(theta[idx[part]], dis[idx[part]])]
-                    keep.append(part)
-                    found += len(part)
-                    if want is not None and found >= want:
-                        break
-                    if begin + step >= max_checks:
-                        break
-                    step = min(step * 2, 8192)
-                sel = np.concatenate(keep) if keep else np.zeros(0, dtype=np.intp)
-                idx, mds = idx[sel], mds[sel]
+                keep = self._feasible_first(theta[idx], dis[idx], want, max_checks)
+                idx, mds = idx[keep], mds[keep]
             if len(idx):
                 break
-        return idx, dis[idx], mds
+        return idx, mds
+
+    def _feasible_first(
+        self, theta: NDArray[np.float64], dis: NDArray[np.float64], want: int | None, limit: int
+    ) -> NDArray[np.intp]:
+        """Indices of the feasible rows, checked in order in growing chunks.
+
+        The checks stop once ``want`` are found or about ``limit`` rows are checked.
+        """
+        assert self.feasible is not None
+        keep: list[NDArray[np.intp]] = []
+        found, begin, step = 0, 0, 256
+        while begin < len(theta):
+            part = np.arange(begin, min(begin + step, len(theta)))
+            part = part[self.feasible(theta[part], dis[part])]
+            keep.append(part)
+            found += len(part)
+            begin += step
+            if want is not None and found >= want or begin >= limit:
+                break
+            step = min(step * 2, 8192)
+        return np.concatenate(keep) if keep else np.zeros(0, dtype=np.intp)
 
     def mds(self, theta: NDArray[np.float64], dis: NDArray[np.float64]) -> NDArray[np.float64]:
         """Distance summation of the body points to the reference segment, shape ``(B,)``.
@@ -188,10 +241,6 @@ class SearchResult:
     grid_size: int = 0
 
 
-def _product(grids: list[NDArray[np.float64]]) -> NDArray[np.float64]:
-    return np.stack(np.meshgrid(*grids, indexing="ij"), axis=-1).reshape(-1, len(grids))
-
-
 def region_clipping(
     problem: PlanarProblem,
     num: int = 9,
@@ -221,14 +270,12 @@ def region_clipping(
     def evaluate(
         values: list[NDArray[np.float64]], radius: float, tight: float, loop: int, count: int
     ) -> tuple[SearchResult, NDArray[np.float64], float] | None:
-        free = _product(values)
-        idx, dis, mds = problem.evaluate(free, radius, tight, n_candidates, max_checks)
-        if len(idx) == 0:
+        theta, dis, mds = problem.evaluate_grid(values, radius, tight, n_candidates, max_checks)
+        if len(theta) == 0:
             return None
-        theta, _ = problem.full_theta(free[idx[:n_candidates]])
         best = SearchResult(theta[0], float(dis[0]), float(mds[0]), loop, count, 0.0)
-        best.candidates = list(theta[1:])
-        return best, free[idx[0]], best.mds
+        best.candidates = list(theta[1:n_candidates])
+        return best, theta[0, :m], best.mds
 
     limits = (np.full(m, -tmax), np.full(m, tmax))
     clipped = clip_regions(
@@ -318,7 +365,8 @@ def refine(
 
     The planar tip matches the target's ``ρ`` (the only equation; ``dis`` sets the height and the
     end heading, if any, holds by construction). Minimum-norm steps keep the posture next to the
-    search's answer.
+    search's answer: :func:`~aftir_rl.planning.posture.clipping.gauss_newton`'s steps, compiled
+    (:func:`aftir_rl.core.kernel.planar.planar_refine`).
 
     Returns:
         ``(theta, dis)`` with ``|ρ_tip − ρ_t| < tol`` and every angle in bounds, or None.
@@ -327,15 +375,10 @@ def refine(
     m, tmax = problem.n_free, problem.theta_max
     free = np.array(theta[:m], dtype=np.float64)
     if m:
-
-        def rho(probe: NDArray[np.float64]) -> NDArray[np.float64]:
-            return planar_tip(problem.full_theta(probe)[0], problem.section_length)[0][:, None]
-
-        limits = (np.full(m, -tmax), np.full(m, tmax))
-        refined = gauss_newton(rho, (problem.rho,), free, limits, tol, iterations)
-        if refined is None:
+        heading = math.nan if problem.end_heading is None else float(problem.end_heading)
+        goal = (float(problem.rho), heading)
+        if not planar_refine(free, goal, problem.section_length, tmax, tol, iterations, 1e-7):
             return None
-        free = refined
     full, ok = problem.full_theta(free[None])
     rho_tip, z = planar_tip(full, problem.section_length)
     if not ok[0] or abs(rho_tip[0] - problem.rho) >= tol:
