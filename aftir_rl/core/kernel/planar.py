@@ -40,25 +40,34 @@ def _half_sinc(b: float) -> float:
 
 
 @njit(cache=True, inline="always")
-def _sample(
-    th: float, frac: float, l: float, start: tuple[float, float, float]
-) -> tuple[float, float]:
-    """The point ``frac`` of the way along a section bending by ``th`` from ``start``.
-
-    ``start`` is the section's base: ``(heading, ρ, z)``.
-    """
+def _advance(th: float, l: float, start: tuple[float, float, float]) -> tuple[float, float, float]:
+    """The next section's base ``(heading, ρ, z)`` after one bending by ``th`` from ``start``."""
     heading, r0, z0 = start
-    bend = th * frac
-    step = l * frac * _half_sinc(bend)
-    mid = heading + 0.5 * bend
-    return r0 + step * math.sin(mid), z0 + step * math.cos(mid)
+    step = l * _half_sinc(th)
+    mid = heading + 0.5 * th
+    return heading + th, r0 + step * math.sin(mid), z0 + step * math.cos(mid)
 
 
 @njit(cache=True, inline="always")
-def _advance(th: float, l: float, start: tuple[float, float, float]) -> tuple[float, float, float]:
-    """The next section's base ``(heading, ρ, z)`` after one bending by ``th`` from ``start``."""
-    r, h = _sample(th, 1.0, l, start)
-    return start[0] + th, r, h
+def _chords(
+    th: float, k: int, l: float, heading: float
+) -> tuple[float, float, float, float, float]:
+    """A section bending by ``th`` from ``heading`` as ``k`` equal chords.
+
+    Returns the chord's length, the ``(cos, sin)`` of the turn between chords and the
+    ``(sin, cos)`` of the first chord's direction. The points follow each other by
+    ``ρ += length · sin``, ``z += length · cos`` and a turn of the direction (:func:`_turn`):
+    one sine and cosine a section, not one a point.
+    """
+    turn = th / k
+    mid = heading + 0.5 * turn
+    return l / k * _half_sinc(turn), math.cos(turn), math.sin(turn), math.sin(mid), math.cos(mid)
+
+
+@njit(cache=True, inline="always")
+def _turn(s: float, c: float, c_turn: float, s_turn: float) -> tuple[float, float]:
+    """``(sin, cos)`` of a direction turned by the angle of ``(c_turn, s_turn)``."""
+    return s * c_turn + c * s_turn, c * c_turn - s * s_turn
 
 
 @njit(cache=True, inline="always")
@@ -163,7 +172,7 @@ def planar_mds(
 ) -> None:
     """Distance summation of planar arms' ``k`` points a section (and base) to ``0 → end``.
 
-    Arm ``b`` is based at ``(0, dis[b])``; ``out (B,)``.
+    Arm ``b`` is based at ``(0, dis[b])``; ``out (B,)``; the points by :func:`_chords`.
     """
     ex, ez = end
     length2 = ex * ex + ez * ez
@@ -171,9 +180,13 @@ def planar_mds(
         total = _segment_distance(0.0, dis[b], ex, ez, length2)
         base = (0.0, 0.0, dis[b])
         for i in range(theta.shape[1]):
-            for j in range(1, k + 1):
-                r, h = _sample(theta[b, i], j / k, l, base)
+            chord, c_turn, s_turn, s_mid, c_mid = _chords(theta[b, i], k, l, base[0])
+            r, h = base[1], base[2]
+            for _ in range(k):
+                r += chord * s_mid
+                h += chord * c_mid
                 total += _segment_distance(r, h, ex, ez, length2)
+                s_mid, c_mid = _turn(s_mid, c_mid, c_turn, s_turn)
             base = _advance(theta[b, i], l, base)
         out[b] = total
 
@@ -204,7 +217,7 @@ def planar_clear(
     length ``l`` and ``k`` points a section, and the base) lies in the plane of bearing ``ψ``;
     ``frame`` is ``(ψ, R, o)``: a point is ``R (ρ cos ψ, ρ sin ψ, z) + o``. ``panel`` is the
     panel's centre and radius (a negative radius: no panel rule): no point below the panel
-    outside that radius.
+    outside that radius. The points by :func:`_chords`.
     """
     l, k = shape
     psi, rot, origin = frame
@@ -214,10 +227,15 @@ def planar_clear(
         base = (0.0, 0.0, dis[b])
         ok = _point_clear(0.0, dis[b], (cp, sp), rot, origin, panel, tank, limit, exact_below)
         for i in range(theta.shape[1]):
-            for j in range(1, k + 1):
-                if ok:
-                    r, h = _sample(theta[b, i], j / k, l, base)
-                    ok = _point_clear(r, h, (cp, sp), rot, origin, panel, tank, limit, exact_below)
+            chord, c_turn, s_turn, s_mid, c_mid = _chords(theta[b, i], k, l, base[0])
+            r, h = base[1], base[2]
+            for _ in range(k):
+                r += chord * s_mid
+                h += chord * c_mid
+                ok = _point_clear(r, h, (cp, sp), rot, origin, panel, tank, limit, exact_below)
+                if not ok:
+                    break
+                s_mid, c_mid = _turn(s_mid, c_mid, c_turn, s_turn)
             if not ok:
                 break
             base = _advance(theta[b, i], l, base)

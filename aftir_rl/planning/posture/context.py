@@ -25,7 +25,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.core.collision import CollisionScene, point_clearance
+from aftir_rl.core.collision import CollisionReport, CollisionScene, point_clearance
 from aftir_rl.core.errors import ConfigError, PlanningError
 from aftir_rl.core.robot import Posture
 from aftir_rl.core.tank import Tank, load_tank
@@ -170,6 +170,7 @@ class PlanningContext:
         tolerance: float | None = None,
         details: dict[str, Any] | None = None,
         started: float | None = None,
+        report: CollisionReport | None = None,
     ) -> PlannedPosture:
         """Check a posture by forward kinematics and collision, or raise PlanningError.
 
@@ -180,6 +181,7 @@ class PlanningContext:
             tolerance: largest tip error [cm] (default: the context's).
             details: recorded in the result.
             started: ``time.perf_counter()`` when planning began (the result's ``seconds``).
+            report: the scene's check of this very posture, where the caller has it already.
 
         Raises:
             PlanningError: a bending angle beyond the joint limit, the tip farther than the
@@ -199,7 +201,7 @@ class PlanningContext:
                 f"Cannot reach the target: the tip ends {error:.3f} cm from it (tolerance "
                 f"{tolerance:g} cm)"
             )
-        report = self.scene.check(posture)
+        report = self.scene.check(posture) if report is None else report
         if report.collides:
             why = "breaks the panel rule" if not report.panel_ok else f"touches {report.hit}"
             raise PlanningError(f"Cannot reach the target: the posture {why}")

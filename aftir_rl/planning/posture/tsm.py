@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.core.collision import point_clearance
+from aftir_rl.core.collision import CollisionReport, point_clearance
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.robot import Posture, forward_kinematics, section_transforms
 from aftir_rl.planning.posture.context import Method, PlannedPosture, PlanningContext, fmt_point
@@ -54,7 +54,7 @@ def tsm(context: PlanningContext, target: ArrayLike) -> PlannedPosture:
     psi_m = math.atan2(g_m[1], g_m[0])
     frame_m = Frame(psi_m, rot_m, o_m, panel=False)
     reasons: list[str] = []
-    best: tuple[Posture, dict[str, Any]] | None = None
+    best: tuple[Posture, dict[str, Any], CollisionReport] | None = None
     n3_min = max(1, context.min_sections(float(np.linalg.norm(g_m))) - 1)
     rho_m = math.hypot(g_m[0], g_m[1])
     for n3 in range(n3_min, min(n3_min + context.extra_sections, context.arm.max_sections - 2) + 1):
@@ -71,7 +71,8 @@ def tsm(context: PlanningContext, target: ArrayLike) -> PlannedPosture:
         raise PlanningError(
             f"Cannot reach the target: TSM found no posture to {fmt_point(target)} cm ({why})"
         )
-    return context.checked(best[0], target, "tsm", context.tolerance, best[1], start)
+    posture, details, report = best
+    return context.checked(posture, target, "tsm", context.tolerance, details, start, report)
 
 
 def _check_tsm_target(context: PlanningContext, target: NDArray[np.float64]) -> None:
@@ -121,11 +122,12 @@ def _through_hatch(
     rot_m: NDArray[np.float64],
     psi_m: float,
     reasons: list[str],
-) -> tuple[Posture, dict[str, Any]] | None:
+) -> tuple[Posture, dict[str, Any], CollisionReport] | None:
     """P1 and P2 in front of a P3: the first guided angle that gives a checked posture.
 
     Guided angles nearest the straight line from the panel to A are tried first; the reasons
-    the others fail are appended to ``reasons``.
+    the others fail are appended to ``reasons``. Returns the posture, its details and the
+    scene's check of it.
     """
     theta3, dis3, res3 = p3
     n = rot_m[:, 2]
@@ -137,9 +139,8 @@ def _through_hatch(
         if isinstance(out, str):
             reasons.append(out)
             continue
-        posture, details = out
-        details.update(loops_p3=res3.loops, evaluations_p3=res3.evaluations)
-        return posture, details
+        out[1].update(loops_p3=res3.loops, evaluations_p3=res3.evaluations)
+        return out
     return None
 
 
@@ -151,8 +152,8 @@ def _p1(
     theta3: NDArray[np.float64],
     psi_m: float,
     rot_m: NDArray[np.float64],
-) -> tuple[Posture, dict[str, Any]] | str:
-    """P1 and P2 for one guided angle ``alpha``; a reason string when impossible."""
+) -> tuple[Posture, dict[str, Any], CollisionReport] | str:
+    """P1 and P2 for one guided angle ``alpha`` and the scene's check; why not, if impossible."""
     l, n3 = context.arm.section_length, len(theta3)
     d, delta, u3, theta_m = _corner(a_point, n, alpha, l)
     if theta_m > context.arm.theta_max:
@@ -193,7 +194,7 @@ def _p1(
         "loops_p1": res1.loops,
         "evaluations_p1": res1.evaluations,
     }
-    return posture, details
+    return posture, details, report
 
 
 def _corner(
