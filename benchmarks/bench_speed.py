@@ -13,7 +13,9 @@ FTL deviation of both. Then :func:`aftir_rl.planning.ftl.batch.plan_motions` ove
 target (or ``B`` random bay-2 targets of seed ``S + 1``) with one process per core.
 ``--baseline none`` skips the comparison. ``--tsm REV`` adds TSM (the three-segment posture
 method, 1 cm margin) on the reference targets and the bay-2 ones, best of three runs per target,
-side by side with revision ``REV``.
+side by side with revision ``REV``. ``--learned N`` plans N random bay-2 targets (seed ``S + 2``)
+and N drawn within 30 cm behind the baffle (seed ``S + 3``) along goal-conditioned Q-learning's
+greedy cells, as ``q_table+ftl`` does, and prints how many are complete.
 """
 
 from __future__ import annotations
@@ -161,6 +163,10 @@ def main() -> None:
     )  # fmt: skip
     parser.add_argument("--out", type=Path, help="write the rows and the table's numbers here")
     parser.add_argument("--tsm", metavar="REV", help="also TSM's time, against revision REV")
+    parser.add_argument(
+        "--learned", type=int, default=0, metavar="N",
+        help="also N bay-2 targets and N behind the baffle along Q-learning's cells",
+    )  # fmt: skip
     args = parser.parse_args()
     sets = _targets(args.n, args.seed)
     print(
@@ -200,6 +206,8 @@ def main() -> None:
     out = {"runs": runs, "table": table, "batch": batch}
     if args.tsm:
         out["tsm"] = _tsm(sets, args.tsm)
+    if args.learned:
+        out["learned"] = _learned(args.learned, args.seed)
     if args.out:
         args.out.write_text(json.dumps(out, indent=1))
 
@@ -227,6 +235,54 @@ def _tsm(sets: dict[str, list[list[float]]], rev: str) -> dict[str, dict[str, di
             f"{old['max'] / new['max']:.1f}× | | |"
         )
     return table
+
+
+def _learned(n: int, seed: int) -> dict[str, dict[str, float]]:
+    """Motions along goal-conditioned Q-learning's greedy cells: bay 2 and behind the baffle."""
+    from aftir_rl.core.errors import TargetError
+    from aftir_rl.core.tank import load_tank
+    from aftir_rl.experiments.suite import suite_targets
+    from aftir_rl.planning.ftl.plan import plan_motion
+    from aftir_rl.rl.tabular.q_table_goal import train_all_targets
+
+    tank = load_tank("b737_center")
+    agent, summary = train_all_targets(tank, seed=0)
+    baffle = tank.baffle
+    assert baffle is not None
+    lo, hi = np.array(tank.box_min, dtype=float), np.array(tank.box_max, dtype=float)
+    lo[baffle.index], hi[baffle.index] = baffle.position, baffle.position + 30.0
+    drawn = {
+        "bay2": np.array(_targets(n, seed + 2)["bay2"]),
+        "behind the baffle": suite_targets(tank, n, seed=seed + 3, region=(lo, hi)),
+    }
+    print(f"\nAlong Q-learning's greedy cells ({summary['n_optimal']}/{summary['n_goals']} goals "
+          "BFS-optimal):\n")  # fmt: skip
+    print("| set | complete | with cells | whole-tank corridor | median s | p90 s | max s |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    out = {}
+    for name, targets in drawn.items():
+        secs, done, with_cells, whole = [], 0, 0, 0
+        for t in targets:
+            try:  # an obstructed raster cell is no goal: planned without cells
+                cells, reached = agent.greedy_path(agent.raster.point_to_cell(t))
+            except TargetError:
+                cells, reached = [], False
+            plan = plan_motion(tank, t, cells if reached else None)
+            secs.append(plan.seconds)
+            done += plan.complete
+            with_cells += reached
+            whole += reached and plan.complete and plan.corridor != "learned path"
+            if not plan.complete:
+                print(f"  {name}: no motion to {np.round(t, 2).tolist()}: {plan.reason}")
+        row = {"n": len(targets), "complete": done, "with_cells": with_cells, "whole": whole}
+        row |= {k: float(f(secs)) for k, f in _PERCENTILES.items()}
+        out[name] = row
+        print(f"| {name} | {done}/{len(targets)} | {with_cells} | {whole} | {row['median']:.3f} "
+              f"| {row['p90']:.3f} | {row['max']:.2f} |")  # fmt: skip
+    return out
+
+
+_PERCENTILES = {"median": np.median, "p90": lambda x: np.percentile(x, 90), "max": np.max}
 
 
 def _batch(sets: dict[str, list[list[float]]], n: int, seed: int) -> dict[str, float]:
