@@ -100,7 +100,7 @@ def planar_tips_serial(
         rho[b], z[b] = _tip(theta, b, l)
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def planar_grid(
     values: NDArray[np.float64],
     goal: tuple[float, float, float, float],
@@ -115,24 +115,56 @@ def planar_grid(
     target, the end heading (NaN: none) and ``θ_max``. With an end heading the last angle is
     ``heading − Σ`` and must lie within ``±θ_max``. A posture's base rises by ``dis = z − z_tip``,
     which must lie in ``dis_range``. The grid shares its prefixes: a section's end is computed
-    once for all the combinations that share the angles before it.
+    once for all the combinations that share the angles before it. The first angle's values
+    spread over the cores.
 
     Returns:
         The kept postures' angles ``(K, N)``, ``dis (K,)`` and ``|ρ_tip − ρ| (K,)``, in grid
         order (``m ≥ 1``).
 
     """
+    m, v = values.shape
+    n = m if math.isnan(goal[2]) else m + 1
+    block = v ** (m - 1)
+    theta = np.empty((v * block, n))
+    dis, gap = np.empty(v * block), np.empty(v * block)
+    counts = np.zeros(v, dtype=np.int64)
+    for first in prange(v):
+        out = (theta, dis, gap)
+        counts[first] = _grid_block(values, first, goal, l, (dis_range, radius), out)
+    count = 0
+    for first in range(v):  # close the blocks' gaps, in order
+        for r in range(first * block, first * block + counts[first]):
+            theta[count], dis[count], gap[count] = theta[r], dis[r], gap[r]
+            count += 1
+    return theta[:count], dis[:count], gap[:count]
+
+
+@njit(cache=True)
+def _grid_block(
+    values: NDArray[np.float64],
+    first: int,
+    goal: tuple[float, float, float, float],
+    l: float,
+    bounds: tuple[tuple[float, float], float],
+    out: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+) -> int:
+    """:func:`planar_grid` of the combinations whose first angle is ``values[0, first]``.
+
+    They are written from row ``first · V^(m−1)`` of ``out``; returns how many are kept.
+    """
     rho_t, z_t, heading, tmax = goal
+    (dis_lo, dis_hi), radius = bounds
+    theta, dis, gap = out
     m, v = values.shape
     has = not math.isnan(heading)
-    n = m + 1 if has else m
-    total = v**m
-    theta = np.empty((total, n))
-    dis, gap = np.empty(total), np.empty(total)
+    block = v ** (m - 1)
+    count = first * block
     states = np.zeros((m + 1, 3))  # the base (heading, ρ, z) of each section
     digits = np.zeros(m, dtype=np.int64)
-    count, changed = 0, 0
-    for _ in range(total):
+    digits[0] = first
+    changed = 0
+    for _ in range(block):
         for d in range(changed, m):
             start = (states[d, 0], states[d, 1], states[d, 2])
             states[d + 1, 0], states[d + 1, 1], states[d + 1, 2] = _advance(
@@ -145,7 +177,7 @@ def planar_grid(
             end = _advance(last, l, end)
         rise = z_t - end[2]
         off = abs(end[1] - rho_t)
-        keep = dis_range[0] <= rise <= dis_range[1] and off <= radius
+        keep = dis_lo <= rise <= dis_hi and off <= radius
         if keep and (not has or abs(last) <= tmax + 1e-12):
             for d in range(m):
                 theta[count, d] = values[d, digits[d]]
@@ -157,8 +189,9 @@ def planar_grid(
         while changed > 0 and digits[changed] == v - 1:
             digits[changed] = 0
             changed -= 1
-        digits[changed] += 1
-    return theta[:count], dis[:count], gap[:count]
+        if changed > 0:
+            digits[changed] += 1
+    return count - first * block
 
 
 @njit(cache=True, parallel=True)

@@ -177,20 +177,26 @@ class PlanarProblem:
     ) -> NDArray[np.intp]:
         """Indices of the feasible rows, checked in order in growing chunks.
 
-        The checks stop once ``want`` are found or about ``limit`` rows are checked.
+        The checks stop once ``want`` are found or about ``limit`` rows are checked. The first
+        chunk is ``4 want`` rows (the best are often feasible), then the rows up to 256, then
+        chunks doubling from 512.
         """
         assert self.feasible is not None
         keep: list[NDArray[np.intp]] = []
-        found, begin, step = 0, 0, 256
+        first = 256 if want is None else min(4 * want, 256)
+        found, begin, end, step = 0, 0, first, 256
         while begin < len(theta):
-            part = np.arange(begin, min(begin + step, len(theta)))
+            part = np.arange(begin, min(end, len(theta)))
             part = part[self.feasible(theta[part], dis[part])]
             keep.append(part)
             found += len(part)
-            begin += step
-            if want is not None and found >= want or begin >= limit:
+            if want is not None and found >= want or end >= limit:
                 break
-            step = min(step * 2, 8192)
+            if end < 256:
+                begin, end = end, 256
+            else:
+                step = min(step * 2, 8192)
+                begin, end = end, end + step
         return np.concatenate(keep) if keep else np.zeros(0, dtype=np.intp)
 
     def mds(self, theta: NDArray[np.float64], dis: NDArray[np.float64]) -> NDArray[np.float64]:
