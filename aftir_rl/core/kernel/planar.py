@@ -228,9 +228,10 @@ def planar_mds(
 def _segment_distance(px: float, pz: float, ex: float, ez: float, length2: float) -> float:
     """Distance of ``(px, pz)`` to the segment from the origin to ``(ex, ez)``."""
     if length2 == 0.0:
-        return math.hypot(px, pz)
+        return math.sqrt(px * px + pz * pz)
     t = min(max((px * ex + pz * ez) / length2, 0.0), 1.0)
-    return math.hypot(px - t * ex, pz - t * ez)
+    dx, dz = px - t * ex, pz - t * ez
+    return math.sqrt(dx * dx + dz * dz)  # not hypot: twice as fast, the same to 1 ulp here
 
 
 @njit(cache=True, parallel=True)
