@@ -75,6 +75,11 @@ class PlanarProblem:
     mds_points: int = 8
 
     @property
+    def heading(self) -> float:
+        """The end heading as the compiled kernels take it: NaN for none."""
+        return math.nan if self.end_heading is None else float(self.end_heading)
+
+    @property
     def n_free(self) -> int:
         """Number of searched angles."""
         return self.n_sections - (self.end_heading is not None)
@@ -133,13 +138,11 @@ class PlanarProblem:
             The chosen combinations' full angles ``(K, N)``, their ``dis`` and MDS.
 
         """
-        heading = math.nan if self.end_heading is None else float(self.end_heading)
-        goal = (float(self.rho), float(self.z), heading, float(self.theta_max))
+        goal = (float(self.rho), float(self.z), self.heading, float(self.theta_max))
         radius = zone if tight_zone is None else max(zone, tight_zone)
         grid = np.array(values, dtype=np.float64)
         theta, dis, gap = planar_grid(grid, goal, self.section_length, self.dis_range, radius)
-        ok = np.ones(len(theta), dtype=bool)
-        idx, mds = self._select(theta, dis, gap, ok, (zone, tight_zone), want, max_checks)
+        idx, mds = self._select(theta, dis, gap, None, (zone, tight_zone), want, max_checks)
         return theta[idx], dis[idx], mds
 
     def _select(
@@ -147,20 +150,22 @@ class PlanarProblem:
         theta: NDArray[np.float64],
         dis: NDArray[np.float64],
         gap: NDArray[np.float64],
-        ok: NDArray[np.bool_],
+        ok: NDArray[np.bool_] | None,
         zones: tuple[float, float | None],
         want: int | None,
         max_checks: int = 1 << 62,
     ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
         """Indices and MDS of the reaching, feasible postures in increasing MDS (:meth:`evaluate`).
 
-        Reaching: ``ok`` and ``gap`` within the tight zone, else within the whole zone.
+        Reaching: ``ok`` (None: every row) and ``gap`` within the tight zone, else within the
+        whole zone.
         """
         zone, tight_zone = zones
         radii = [zone] if tight_zone is None or tight_zone >= zone else [tight_zone, zone]
         done = np.zeros(len(theta), dtype=bool)
         for radius in radii:
-            idx = np.flatnonzero(ok & (gap <= radius) & ~done)
+            near = gap <= radius if ok is None else ok & (gap <= radius)
+            idx = np.flatnonzero(near & ~done)
             done[idx] = True
             mds = self.mds(theta[idx], dis[idx])
             order = np.argsort(mds, kind="stable")
@@ -381,8 +386,7 @@ def refine(
     m, tmax = problem.n_free, problem.theta_max
     free = np.array(theta[:m], dtype=np.float64)
     if m:
-        heading = math.nan if problem.end_heading is None else float(problem.end_heading)
-        goal = (float(problem.rho), heading)
+        goal = (float(problem.rho), problem.heading)
         if not planar_refine(free, goal, problem.section_length, tmax, tol, iterations, 1e-7):
             return None
     full, ok = problem.full_theta(free[None])
