@@ -114,7 +114,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     _write(Path(args.output), args.tank, tour)
     reached = len(tour.order)
     print(
-        f"tour of {reached} targets ({len(tour.failures)} unreachable): {tour.duration:.1f} s, "
+        f"tour of {reached} targets ({len(tour.failures)} unreachable, "
+        f"{len(tour.side_trips)} by side trips): {tour.duration:.1f} s, "
         f"{100 * tour.duration / tour.separate_s:.0f}% of {tour.separate_s:.1f} s for one "
         f"deployment each; planned in {tour.seconds:.1f} s; {args.output}"
     )

@@ -213,7 +213,7 @@ def plan_coverage(
         own={k: tree.own[j] for k, (j, _) in enumerate(chosen) if j in tree.own},
         branches={k: _most_shared(routes, k) for k in routes},
     )
-    tour = tour_of_tree(tank, sub, margin, solver_seconds)
+    tour = tour_of_tree(tank, sub, margin, solver_seconds, trips=False)
     seconds = time.perf_counter() - start
     tour.seconds = seconds
     return CoveragePlan(

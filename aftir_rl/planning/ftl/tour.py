@@ -6,7 +6,9 @@ only to where the next target's route departs from its own. The
 cost of going from target ``i`` to ``j`` is the time-optimal duration of retracting ``i`` to
 their common prefix plus deploying ``j`` from it (:mod:`aftir_rl.planning.timing`, each leg from
 rest to rest); the visiting order is a travelling-salesman tour over those costs from the panel
-and back, solved by OR-Tools (the ``robot`` extra). docs/robot.md has the details and measurements.
+and back, solved by OR-Tools (the ``robot`` extra). A target near another may instead be visited
+by a side trip from it (:mod:`~aftir_rl.planning.ftl.side_trip`: the last sections bend there and
+back). docs/robot.md has the details and measurements.
 """
 
 from __future__ import annotations
@@ -25,6 +27,13 @@ from aftir_rl.core.extras import require
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.model import FTLMotion, Route, ftl_motion, kappa_to_angles
 from aftir_rl.planning.ftl.plan import motion_clearance
+from aftir_rl.planning.ftl.side_trip import (
+    SideTrip,
+    choose_side_trips,
+    host_postures,
+    side_trips,
+    straight_move,
+)
 from aftir_rl.planning.ftl.tree import RouteTree, grow_tree, shared
 from aftir_rl.planning.timing import TimedMotion, joint_positions, time_motion
 
@@ -51,6 +60,7 @@ class Tour:
         section_length: ``l`` [cm].
         margin_cm: the margin the motion keeps.
         seconds: planning time [s].
+        side_trips: the targets visited by a side trip, each with the target it is made from.
 
     """
 
@@ -67,6 +77,7 @@ class Tour:
     section_length: float
     margin_cm: float
     seconds: float = 0.0
+    side_trips: dict[int, int] = field(default_factory=dict)
 
     @property
     def duration(self) -> float:
@@ -104,6 +115,7 @@ class Tour:
                 {"target": j, "continues": i, "sections_shared": d}
                 for j, (i, d) in self.branches.items()
             ],
+            "side_trips": [{"target": j, "from": h} for j, h in self.side_trips.items()],
             "failures": [{"target": i, "reason": r} for i, r in self.failures],
             "duration_s": self.duration,
             "separate_deployments_s": self.separate_s,
@@ -180,10 +192,12 @@ def plan_tour(
     margin: float = DEFAULT_MARGIN,
     solver_seconds: float = 2.0,
     progress: Callable[[str], None] | None = None,
+    trips: bool = True,
 ) -> Tour:
     """One follow-the-leader deployment that visits every reachable target and comes back.
 
-    Targets no motion reaches are left out and listed in ``failures``; raises
+    With ``trips``, targets near another one are visited by side trips from it where that is
+    quicker. Targets no motion reaches are left out and listed in ``failures``; raises
     :class:`~aftir_rl.core.errors.PlanningError` when none is reached.
     """
     start, say = time.perf_counter(), progress or (lambda text: None)
@@ -193,15 +207,23 @@ def plan_tour(
         raise PlanningError("no target of the tour has a motion: " + failures[0][1])
     roots = sum(i is None for i, _ in tree.branches.values())
     say(f"route tree: {len(tree.routes)} routes from {roots} of their own")
-    tour = tour_of_tree(tank, tree, margin, solver_seconds)
+    tour = tour_of_tree(tank, tree, margin, solver_seconds, trips)
     tour.failures, tour.seconds = failures, time.perf_counter() - start
     return tour
 
 
 def tour_of_tree(
-    tank: Tank, tree: RouteTree, margin: float = DEFAULT_MARGIN, solver_seconds: float = 2.0
+    tank: Tank,
+    tree: RouteTree,
+    margin: float = DEFAULT_MARGIN,
+    solver_seconds: float = 2.0,
+    trips: bool = True,
 ) -> Tour:
     """The tour that visits every target of a planned tree (``seconds``: this call's time).
+
+    ``trips``: visit targets by side trips where that is quicker
+    (:mod:`~aftir_rl.planning.ftl.side_trip`; a coverage tour, which sees along its routes,
+    does not).
 
     Raises :class:`~aftir_rl.core.errors.PlanningError` where the joined motion keeps less
     than ``margin``.
@@ -209,8 +231,7 @@ def tour_of_tree(
     start = time.perf_counter()
     n = max(route.min_sections() for route in [*tree.routes.values(), *tree.own.values()])
     motions = _deployments(tank, tree.routes, n)
-    tour = _assemble(tank, tree.targets, tree, motions, solver_seconds)
-    tour.margin_cm = margin
+    tour = _assemble(tank, tree, motions, margin, solver_seconds, trips)
     if tour.min_clearance_cm < margin:  # where two legs meet, a joining move grazes the tank
         raise PlanningError(
             f"the joined tour keeps only {tour.min_clearance_cm:.2f} cm of the margin {margin:g} cm"
@@ -274,8 +295,14 @@ class _Legs:
                     out[a, b] = sum(self.duration_from(k, s0) for k in (i, j) if k is not None)
         return out
 
-    def pieces(self, order: list[int]) -> tuple[list[tuple[Any, ...]], list[dict[str, Any]]]:
-        """The motion's pieces in turn (``(dis, theta, phi, target reached or None)``) and legs."""
+    def pieces(
+        self, order: list[int], trips: dict[int, SideTrip]
+    ) -> tuple[list[tuple[Any, ...]], list[dict[str, Any]]]:
+        """The motion's pieces in turn (``(dis, theta, phi, target reached or None)``) and legs.
+
+        ``order``: the targets visited by their routes; ``trips``: the others, by target, each
+        made (there and back) right after its host is reached.
+        """
         pieces, legs = [], []
         stops: list[int | None] = [None, *order, None]
         for a, b in zip(stops[:-1], stops[1:]):
@@ -290,35 +317,68 @@ class _Legs:
                     timed = self.timed_from(j, s0)
                     pieces.append((*arrays, j if step == 1 else None,
                                    timed if step == 1 else _backwards(timed)))  # fmt: skip
+            for trip in (t for t in trips.values() if t.host == b):
+                dis, theta, phi = trip.path
+                pieces.append((dis, theta, phi, trip.target, trip.timed))
+                pieces.append((dis[::-1], theta[::-1], phi[::-1], None, _backwards(trip.timed)))
+                legs.append({"from": b, "to": trip.target, "depart_cm": None,
+                             "duration_s": 2 * trip.duration, "side_trip": True})  # fmt: skip
         return _bridged(pieces, self.tank), legs
+
+
+def _visits(
+    legs_of: _Legs, margin: float, solver_seconds: float, trips: bool
+) -> tuple[list[int], dict[int, SideTrip]]:
+    """The targets visited by their routes, in order, and those visited by side trips."""
+    index = sorted(legs_of.motions)
+    if len(index) < 2:
+        return index, {}
+    costs = legs_of.costs(index)
+    order = [index[n - 1] for n in _order(costs, solver_seconds)]
+    if not trips:
+        return order, {}
+    hosts = host_postures({j: (m.dis, m.theta, m.phi) for j, m in legs_of.motions.items()})
+    found = side_trips(legs_of.tank, hosts, legs_of.tree.targets, margin)
+    kept, chosen = choose_side_trips(costs, index, order, found)
+    if chosen and len(kept) > 2:  # the order of the targets left, solved again
+        nodes = [0, *(index.index(j) + 1 for j in kept)]
+        again = [kept[n - 1] for n in _order(costs[np.ix_(nodes, nodes)], solver_seconds)]
+        kept = min(kept, again, key=lambda o: _cycle(costs, index, o))
+    return kept, chosen
+
+
+def _cycle(costs: NDArray[np.float64], index: list[int], order: list[int]) -> float:
+    """The legs' duration of visiting ``order`` from the panel and back [s]."""
+    stops = [0, *(index.index(j) + 1 for j in order), 0]
+    return float(sum(costs[a, b] for a, b in zip(stops[:-1], stops[1:])))
 
 
 def _assemble(
     tank: Tank,
-    targets: NDArray[np.float64],
     tree: RouteTree,
     motions: dict[int, FTLMotion],
+    margin: float,
     solver_seconds: float,
+    trips: bool,
 ) -> Tour:
     """Order the targets by the legs' durations and join their motions into one."""
-    legs_of, index = _Legs(tank, tree, motions), sorted(motions)
-    order = index
-    if len(index) > 1:
-        order = [index[n - 1] for n in _order(legs_of.costs(index), solver_seconds)]
-    pieces, legs = legs_of.pieces(order)
-    arrivals, total = [], 0
+    legs_of = _Legs(tank, tree, motions)
+    order, chosen = _visits(legs_of, margin, solver_seconds, trips)
+    pieces, legs = legs_of.pieces(order, chosen)
+    arrivals, total, visited = [], 0, []
     for n, piece in enumerate(pieces):
         total += len(piece[0]) - (1 if n else 0)
         if piece[3] is not None:
             arrivals.append(total - 1)
+            visited.append(piece[3])
     dis, theta, phi = (
         np.concatenate([p[c][1 if n else 0 :] for n, p in enumerate(pieces)]) for c in range(3)
     )
     whole = FTLMotion(tree.routes[order[0]], theta.shape[1], np.zeros(len(dis)), dis, theta,
                       phi, ())  # fmt: skip
     return Tour(
-        targets=targets,
-        order=order,
+        targets=tree.targets,
+        order=visited,
         motion=(dis, theta, phi),
         timing=_joined(pieces, (dis, theta, phi), tank.arm.limits),
         arrivals=arrivals,
@@ -328,7 +388,8 @@ def _assemble(
         failures=[],
         min_clearance_cm=motion_clearance(tank, whole),
         section_length=tank.arm.section_length,
-        margin_cm=DEFAULT_MARGIN,
+        margin_cm=margin,
+        side_trips={j: trip.host for j, trip in chosen.items()},
     )
 
 
@@ -349,7 +410,8 @@ def _bridged(pieces: list[tuple[Any, ...]], tank: Tank) -> list[tuple[Any, ...]]
     """The pieces, with a straight joint-space move where one does not start where the last ends.
 
     (The same prefix deployed to slightly different postures, or a straight arm at two
-    heights.) Dense enough that no backbone point moves 0.5 cm a step; timed like the pieces.
+    heights.) Dense (:func:`~aftir_rl.planning.ftl.side_trip.straight_move`); timed like the
+    pieces.
     """
     arm, out = tank.arm, [pieces[0]]
     for nxt in pieces[1:]:
@@ -357,14 +419,9 @@ def _bridged(pieces: list[tuple[Any, ...]], tank: Tank) -> list[tuple[Any, ...]]
         a = joint_positions(prev[0][-1:], prev[1][-1:], prev[2][-1:])[0]
         b = joint_positions(nxt[0][:1], nxt[1][:1], nxt[2][:1])[0]
         if np.abs(a - b).max() > 1e-9:
-            n = (len(a) - 1) // 2
-            # a joint change δ moves a point at most δ times its arc distance from the joint
-            reach = abs(a[0] - b[0]) + float(np.abs(a[1:] - b[1:]).max()) * n * arm.section_length
-            u = np.linspace(0.0, 1.0, max(2, int(np.ceil(reach / 0.5)) + 1))[:, None]
-            q = (1 - u) * a + u * b
-            theta, phi = kappa_to_angles(q[:, 1:].reshape(len(q), n, 2))
-            timed = time_motion(q[:, 0], theta, phi, arm.section_length, arm.limits)
-            out.append((q[:, 0], theta, phi, None, timed))
+            dis, theta, phi = straight_move(a, b, arm)
+            timed = time_motion(dis, theta, phi, arm.section_length, arm.limits)
+            out.append((dis, theta, phi, None, timed))
         out.append(nxt)
     return out
 
