@@ -1,11 +1,13 @@
 """Success against wall time of training runs, one plot: the RL recipes side by side.
 
-Run: ``python benchmarks/plot_curves.py LABEL=OFFSET_S=RUN_DIR [...] -o PNG [--json OUT]``.
+Run: ``python benchmarks/plot_curves.py LABEL=OFFSET_S=RUN_DIR [...] -o PNG [--json OUT]
+[--merge JSON]``.
 Each run directory's ``progress.csv`` gives its periodic evaluations (``eval/success_rate``,
 on the run's fixed evaluation targets) and the training time at each (``time/time_elapsed`` of
 the last training row before it); ``OFFSET_S`` seconds are added to every time (what came before
 the run: the dataset, the cloning, earlier stages). Runs that share a label are one method
-(its seeds). The plot marks the goal of 98% success in 15 minutes.
+(its seeds). ``--merge`` draws the curves of an earlier ``--json`` first (runs no longer on
+this machine). The plot marks the goal of 98% success in 15 minutes.
 """
 
 from __future__ import annotations
@@ -36,18 +38,26 @@ def curve(run: Path, offset: float) -> list[tuple[float, float]]:
 def main() -> None:
     """Read the runs, draw the plot, write the points."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
-    parser.add_argument("runs", nargs="+", help="LABEL=OFFSET_S=RUN_DIR")
+    parser.add_argument("runs", nargs="*", help="LABEL=OFFSET_S=RUN_DIR")
     parser.add_argument("-o", "--output", type=Path, required=True, help="the PNG to write")
     parser.add_argument("--json", type=Path, help="also write the points here")
+    parser.add_argument("--merge", type=Path, help="an earlier --json whose curves come first")
     args = parser.parse_args()
     curves: dict[str, list[list[tuple[float, float]]]] = {}
+    runs = list(args.runs)
+    if args.merge:
+        earlier = json.loads(args.merge.read_text())
+        curves = {
+            label: [[tuple(p) for p in c] for c in cs] for label, cs in earlier["curves"].items()
+        }
+        runs = [*earlier["runs"], *runs]
     for spec in args.runs:
         label, offset, run = spec.split("=", 2)
         curves.setdefault(label, []).append(curve(Path(run), float(offset)))
     fig, ax = plt.subplots(figsize=(8, 4.5), dpi=100)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for (label, runs), color in zip(curves.items(), colors):
-        for k, points in enumerate(runs):
+    for (label, seeds), color in zip(curves.items(), colors):
+        for k, points in enumerate(seeds):
             x, y = zip(*points) if points else ((), ())
             shown = label if k == 0 else None
             ax.plot(x, [100 * v for v in y], color=color, marker=".", label=shown)
@@ -61,7 +71,7 @@ def main() -> None:
     fig.tight_layout()
     fig.savefig(args.output)
     if args.json:
-        args.json.write_text(json.dumps({"curves": curves, "runs": args.runs}, indent=1))
+        args.json.write_text(json.dumps({"curves": curves, "runs": runs}, indent=1))
     print(f"wrote {args.output}")
 
 
