@@ -118,3 +118,23 @@ def test_the_choice_keeps_hosts_and_only_saves_time(seed):
     for j, trip in chosen.items():
         assert trip.target == j and trip.host in kept and (trip.host, j) in trips
     assert cycle(kept) + 2 * sum(t.duration for t in chosen.values()) <= cycle(order) + 1e-9
+
+
+def test_a_trip_past_a_cables_travel_is_left_out(tank, monkeypatch):
+    from aftir_rl.core.errors import PlanningError
+    from aftir_rl.planning.ftl import side_trip
+
+    a = np.array(random_free_targets(Planner(tank), 1, 100, clearance=10.0)["bay2"][0])
+    qa = _host(tank, a)
+    n, l = (len(qa) - 1) // 2, tank.arm.section_length
+    kappa = qa[1:].reshape(n, 2).copy()
+    kappa[-2:] += 0.1
+    theta, phi = kappa_to_angles(kappa[None])
+    b = forward_kinematics(qa[0], theta[0], phi[0], l)[-1, :3, 3]
+    assert (0, 1) in side_trips(tank, {0: qa, 1: qa}, np.array([a, b]), margin=1.0)
+
+    def refuse(*args, **kwargs):
+        raise PlanningError("a cable leaves its travel")
+
+    monkeypatch.setattr(side_trip, "time_motion", refuse)
+    assert side_trips(tank, {0: qa, 1: qa}, np.array([a, b]), margin=1.0) == {}

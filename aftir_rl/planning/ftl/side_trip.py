@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.kernel.sections import postures_min_clearance
 from aftir_rl.core.robot import ArmSpec, angles_to_kappa
@@ -90,7 +91,8 @@ def side_trips(
     ``postures``: each host's joint vector ``(dis, κ...)`` at its target (where it arrives by
     its route). For each target, every host within :data:`REACH` sections bends its last
     :data:`FREE_SECTIONS` by damped least squares from its own posture (the least change); of
-    the moves that keep ``margin`` (checked densely), the one with the least bending is timed.
+    the moves that keep ``margin`` (checked densely), the one with the least bending is timed
+    (none where a cable would leave its travel).
     """
     arm, grid = tank.arm, kernel_grid(tank)
     l, found = arm.section_length, {}
@@ -115,7 +117,10 @@ def side_trips(
                     if clearance >= margin and np.abs(path[1]).max() <= arm.theta_max + 1e-9:
                         best[a] = (bend, path, clearance)
         for a, (_, path, clearance) in best.items():
-            timed = time_motion(*path, arm.section_length, arm.limits)
+            try:
+                timed = time_motion(*path, arm.section_length, arm.limits)
+            except PlanningError:  # a cable would leave its travel: no trip
+                continue
             found[a, b] = SideTrip(a, b, path, timed, clearance)
     return found
 
