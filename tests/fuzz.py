@@ -456,13 +456,13 @@ def main(argv: list[str]) -> int:
         reset_peak()
         before = round(allocated_mb(peak=False))
         code, err, seconds = run_case(command, run)
-        rss, peak = round(allocated_mb()), round(memory_mb())
+        allocated, resident = round(allocated_mb()), round(memory_mb())
         results.append(
-            {"case": case, "code": code, "stderr": err, "s": seconds, "mut": done, "rss": rss}
-            | {"before": before, "resident": peak}
+            {"case": case, "code": code, "stderr": err, "s": seconds, "mut": done}
+            | {"allocated": allocated, "before": before, "resident": resident}
         )
         shutil.rmtree(run.parent, ignore_errors=True)
-    peak = max((case["rss"] for case in results), default=0)
+    peak = max((case["allocated"] for case in results), default=0)
     print(json.dumps({"cli": cli, "peak_mb": peak, "results": results}))
     return 0
 

@@ -53,9 +53,7 @@ def test_a_trip_reaches_the_other_target_and_keeps_the_margin(tank, seed):
     theta, phi = kappa_to_angles(kappa[None])
     b = forward_kinematics(qa[0], theta[0], phi[0], l)[-1, :3, 3]
     trips = side_trips(tank, {0: qa, 1: qa}, np.array([a, b]), margin=1.0)
-    if (0, 1) not in trips:  # that bend grazes the tank: nothing to check
-        pytest.skip("no trip keeps the margin for this draw")
-    trip = trips[0, 1]
+    trip = trips[0, 1]  # these draws' bends keep the margin
     dis, theta, phi = trip.path
     # starts at the host's posture and ends on the target (forward kinematics)
     assert np.allclose(_joints(dis[0], theta[0], phi[0]), qa)

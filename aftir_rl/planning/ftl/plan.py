@@ -39,6 +39,7 @@ from aftir_rl.planning.timing import TimedMotion, time_motion
 
 __all__ = [
     "MotionPlan",
+    "postures_clearance",
     "plan_motion",
     "motion_summary",
     "warm_up",
@@ -192,16 +193,23 @@ def _timed(
 
 
 def motion_clearance(tank: Tank, motion: FTLMotion) -> float:
-    """Smallest clearance [cm] of the arm's surface over every entry of a motion (exact).
+    """Smallest clearance [cm] of the arm's surface over every entry of a motion (exact)."""
+    return postures_clearance(tank, motion.dis, motion.theta, motion.phi)
 
-    Every entry's backbone sampled :data:`~aftir_rl.planning.ftl.model.SAMPLES_PER_SECTION`
+
+def postures_clearance(
+    tank: Tank, dis: NDArray[np.float64], theta: NDArray[np.float64], phi: NDArray[np.float64]
+) -> float:
+    """Smallest clearance [cm] of the arm's surface over postures ``(T,), (T, N)`` (exact).
+
+    Every posture's backbone sampled :data:`~aftir_rl.planning.ftl.model.SAMPLES_PER_SECTION`
     times per section, compiled (:func:`~aftir_rl.core.kernel.sections.postures_min_clearance`).
     """
-    l = motion.route.section_length
+    arm = tank.arm
     worst = postures_min_clearance(
-        motion.dis, motion.theta, motion.phi, l, SAMPLES_PER_SECTION, kernel_grid(tank)
+        dis, theta, phi, arm.section_length, SAMPLES_PER_SECTION, kernel_grid(tank)
     )
-    return worst - tank.arm.radius
+    return float(worst) - arm.radius
 
 
 def plan_motion(

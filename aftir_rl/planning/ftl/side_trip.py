@@ -17,12 +17,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.core.errors import PlanningError
-from aftir_rl.core.kernel.clearance import kernel_grid
-from aftir_rl.core.kernel.sections import postures_min_clearance
 from aftir_rl.core.robot import ArmSpec, angles_to_kappa
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.closing import close_batch
-from aftir_rl.planning.ftl.model import SAMPLES_PER_SECTION, kappa_to_angles
+from aftir_rl.planning.ftl.model import kappa_to_angles
+from aftir_rl.planning.ftl.plan import postures_clearance
 from aftir_rl.planning.timing import TimedMotion, time_motion
 
 __all__ = [
@@ -94,7 +93,7 @@ def side_trips(
     the moves that keep ``margin`` (checked densely), the one with the least bending is timed
     (none where a cable would leave its travel).
     """
-    arm, grid = tank.arm, kernel_grid(tank)
+    arm = tank.arm
     l, found = arm.section_length, {}
     for b, target in enumerate(targets):
         hosts = [a for a in postures if a != b and np.linalg.norm(targets[a] - target) <= REACH * l]
@@ -113,7 +112,7 @@ def side_trips(
                 bend = float(np.abs(qb - qa).max())  # the bending rate is what takes the time
                 if a not in best or bend < best[a][0]:
                     path = straight_move(qa, qb, arm)
-                    clearance = _clearance(path, arm, grid)
+                    clearance = postures_clearance(tank, *path)
                     if clearance >= margin and np.abs(path[1]).max() <= arm.theta_max + 1e-9:
                         best[a] = (bend, path, clearance)
         for a, (_, path, clearance) in best.items():
@@ -123,17 +122,6 @@ def side_trips(
                 continue
             found[a, b] = SideTrip(a, b, path, timed, clearance)
     return found
-
-
-def _clearance(path: Postures, arm: ArmSpec, grid: object) -> float:
-    """The least clearance [cm] of the arm's surface along ``path`` (exact, compiled)."""
-    worst = postures_min_clearance(
-        *path,
-        arm.section_length,
-        SAMPLES_PER_SECTION,
-        grid,  # type: ignore[arg-type]
-    )
-    return float(worst) - arm.radius
 
 
 def choose_side_trips(

@@ -26,7 +26,7 @@ from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.extras import require
 from aftir_rl.core.tank import Tank
 from aftir_rl.planning.ftl.model import FTLMotion, Route, ftl_motion, kappa_to_angles
-from aftir_rl.planning.ftl.plan import motion_clearance
+from aftir_rl.planning.ftl.plan import postures_clearance
 from aftir_rl.planning.ftl.side_trip import (
     SideTrip,
     choose_side_trips,
@@ -374,8 +374,6 @@ def _assemble(
     dis, theta, phi = (
         np.concatenate([p[c][1 if n else 0 :] for n, p in enumerate(pieces)]) for c in range(3)
     )
-    whole = FTLMotion(tree.routes[order[0]], theta.shape[1], np.zeros(len(dis)), dis, theta,
-                      phi, ())  # fmt: skip
     return Tour(
         targets=tree.targets,
         order=visited,
@@ -386,7 +384,7 @@ def _assemble(
         branches={j: tree.branches[j] for j in order},
         separate_s=_separate_s(tank, tree, legs_of),
         failures=[],
-        min_clearance_cm=motion_clearance(tank, whole),
+        min_clearance_cm=postures_clearance(tank, dis, theta, phi),
         section_length=tank.arm.section_length,
         margin_cm=margin,
         side_trips={j: trip.host for j, trip in chosen.items()},
