@@ -16,12 +16,13 @@ from aftir_rl.core.kernel.geometry import (
     steering_frames,
     usable,
 )
-from aftir_rl.core.kernel.guide import Grid, guide_query, lookahead
+from aftir_rl.core.kernel.guide import Grid, descend_field, guide_query, lookahead
 
 __all__ = [
     "Grid",
     "KernelArms",
     "KernelTank",
+    "descend_field",
     "fk_points",
     "guide_query",
     "lookahead",

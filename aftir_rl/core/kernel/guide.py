@@ -9,7 +9,14 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["cell_of", "guide_query", "lookahead", "relax_field", "field_query"]
+__all__ = [
+    "cell_of",
+    "descend_field",
+    "guide_query",
+    "lookahead",
+    "relax_field",
+    "field_query",
+]
 
 
 #: A guide grid as the kernels read it: its corner ``origin (3,)`` [cm], cell ``size`` [cm] and
@@ -131,28 +138,58 @@ def relax_field(
     dist[x + d_e] + w_e(x)`` over free points (:class:`~aftir_rl.planning.ftl.guide.GuideField`).
     """
     s1, s2 = shape[1], shape[2]
+    # flat offsets: an edge from x is there only where x + neighbours[e] is inside the grid, so
+    # a flat x = y - offset[e] in range with edges[e, x] is the grid point y - neighbours[e]
+    offset = (neighbours[:, 0] * s1 + neighbours[:, 1]) * s2 + neighbours[:, 2]
+    n = dist.shape[0]
     heap = [(0.0, 0)]
     heap.pop()
-    for x in range(dist.shape[0]):
+    for x in range(n):
         if math.isfinite(dist[x]):
             heapq.heappush(heap, (dist[x], x))
     while heap:
         dy, y = heapq.heappop(heap)
         if dy > dist[y]:
             continue
-        y0, rem = y // (s1 * s2), y % (s1 * s2)
-        y1, y2 = rem // s2, rem % s2
-        for e in range(neighbours.shape[0]):
-            x0, x1, x2 = y0 - neighbours[e, 0], y1 - neighbours[e, 1], y2 - neighbours[e, 2]
-            if not (0 <= x0 < shape[0] and 0 <= x1 < s1 and 0 <= x2 < s2):
-                continue
-            x = (x0 * s1 + x1) * s2 + x2
-            if not (edges[e, x] and free[x]):
+        for e in range(offset.shape[0]):
+            x = y - offset[e]
+            if not (0 <= x < n and edges[e, x] and free[x]):
                 continue
             v = dy + weights[e, x]
             if v < dist[x]:
                 dist[x] = v
                 heapq.heappush(heap, (v, x))
+
+
+@njit(cache=True)
+def descend_field(
+    dist: NDArray[np.float64],
+    edges: NDArray[np.bool_],
+    weights: NDArray[np.float64],
+    neighbours: NDArray[np.int64],
+    shape: NDArray[np.int64],
+    out: NDArray[np.int32],
+) -> None:
+    """Per grid point (flat), the neighbour its shortest way goes to next, into ``out``.
+
+    The first neighbour (in ``neighbours`` order) of least ``dist[x + d_e] + w_e(x)`` over the
+    edges of ``x``; a point whose own distance is below that by more than 1e-9 (a seed, an
+    unreachable point) points to itself.
+    """
+    s1, s2 = shape[1], shape[2]
+    for x in range(dist.shape[0]):
+        x0, rem = x // (s1 * s2), x % (s1 * s2)
+        x1, x2 = rem // s2, rem % s2
+        best, nxt = np.inf, x
+        for e in range(neighbours.shape[0]):
+            y0, y1, y2 = x0 + neighbours[e, 0], x1 + neighbours[e, 1], x2 + neighbours[e, 2]
+            if not (edges[e, x] and 0 <= y0 < shape[0] and 0 <= y1 < s1 and 0 <= y2 < s2):
+                continue
+            y = (y0 * s1 + y1) * s2 + y2
+            via = dist[y] + weights[e, x]
+            if via < best:
+                best, nxt = via, y
+        out[x] = x if dist[x] < best - 1e-9 else nxt
 
 
 @njit(cache=True)

@@ -175,33 +175,18 @@ class FieldGuide:
                 centre = self.origin + (cell + 0.5) * self.size
                 field = self._field_cls(self._tank, centre, None, self.clearance_cost)
                 self._table[row] = field.dist.reshape(-1)
-                self._next[row] = self._descent(field.dist, field.weights)
+                kernel.descend_field(
+                    field.dist.reshape(-1),
+                    self._edges_flat,
+                    field.weight_table,
+                    self.neighbours,
+                    self.shape,
+                    self._next[row],
+                )
                 self._row_of[key] = row
                 self._count += 1
             out[i] = row
         return out
-
-    def _descent(
-        self, dist: NDArray[np.float64], weights: Sequence[NDArray[np.float64] | float]
-    ) -> NDArray[np.int32]:
-        """Per grid point (flat), the joined neighbour the shortest way goes to next (flat).
-
-        A point where no neighbour lowers the distance-to-go (the target's, an unreachable one)
-        points to itself.
-        """
-        from aftir_rl.planning.ftl.guide import shifted
-
-        shape = tuple(int(v) for v in self.shape)
-        flat = np.arange(int(np.prod(shape))).reshape(shape)
-        best, nxt = np.full_like(dist, np.inf), flat.copy()
-        for e, (d, w) in enumerate(zip(self.neighbours, weights)):
-            via = np.where(self.edges[e], shifted(dist, -d) + w, np.inf)
-            better = via < best
-            best = np.where(better, via, best)
-            nxt = np.where(better, flat + int(self._flat(d)), nxt)
-        # a seed point (the target's) is nearer than any way through a neighbour
-        nxt = np.where(dist < best - 1e-9, flat, nxt)
-        return nxt.reshape(-1).astype(np.int32)
 
     def lookahead(
         self,

@@ -61,27 +61,17 @@ class GuideField:
             free = free & np.repeat(np.repeat(np.repeat(allowed, 2, 0), 2, 1), 2, 2)
         self.free, self.edges = free, edges
         target = np.asarray(target, dtype=np.float64)
-        centres = self.origin + (np.indices(tuple(self.shape)).transpose(1, 2, 3, 0) + 0.5) * (
-            self.size
-        )
+        centres, weights, table = _grid_weights(tank, self.size, float(clearance_cost))
         dist = np.full(tuple(self.shape), np.inf)
         near = np.linalg.norm(centres - target, axis=-1)
         seed = free & (near <= 1.75 * self.size)
         if not seed.any():
             seed = free & (near <= near[free].min() + 1e-9) if free.any() else seed
         dist[seed] = near[seed]
-        lengths = np.linalg.norm(NEIGHBOURS, axis=1) * self.size
-        weights: list[NDArray[np.float64] | float] = list(lengths)
-        if clearance_cost > 0:
-            cost = clearance_cost * np.clip(1.0 - (clear - tank.arm.radius) / CLEARANCE_RANGE, 0, 1)
-            weights = [
-                w * (1.0 + (cost + shifted(cost, -d)) / 2) for d, w in zip(NEIGHBOURS, lengths)
-            ]
+        #: Each neighbour direction's edge lengths [cm] (a number, or one per grid point).
         self.weights = weights
-        n = int(np.prod(self.shape))
-        table = np.empty((len(NEIGHBOURS), n))
-        for e, w in enumerate(weights):
-            table[e] = np.broadcast_to(w, tuple(self.shape)).reshape(-1)
+        #: The same, ``(26, n)`` over the flat grid (shared by the fields of a tank: read only).
+        self.weight_table = table
         self._flat_edges = edges.reshape(len(NEIGHBOURS), -1)
         flat = dist.reshape(-1)  # a view: relaxed in place
         relax_field(flat, free.reshape(-1), self._flat_edges, table, NEIGHBOURS, self.shape)
@@ -120,6 +110,47 @@ _EDGE_CACHE: weakref.WeakKeyDictionary[
 
 #: Surface clearance [cm] below which ``clearance_cost`` makes an edge dearer.
 CLEARANCE_RANGE = 15.0
+
+
+#: Per tank (held weakly), grid size and clearance cost: grid centres and edge lengths.
+_WEIGHT_CACHE: weakref.WeakKeyDictionary[
+    Tank,
+    dict[
+        tuple[float, float],
+        tuple[NDArray[np.float64], list[NDArray[np.float64] | float], NDArray[np.float64]],
+    ],
+] = weakref.WeakKeyDictionary()
+
+
+def _grid_weights(
+    tank: Tank, size: float, clearance_cost: float
+) -> tuple[NDArray[np.float64], list[NDArray[np.float64] | float], NDArray[np.float64]]:
+    """The grid points' centres [cm], and the edge lengths as a list and a ``(26, n)`` table.
+
+    They do not depend on the target: built once per tank, grid and cost (read only).
+    """
+    cache = _WEIGHT_CACHE.setdefault(tank, {})
+    key = (size, clearance_cost)
+    if key not in cache:
+        shape = tuple(int(n) * 2 for n in tank.raster.shape)
+        origin = np.array(tank.raster.origin, dtype=np.float64)
+        centres = origin + (np.indices(shape).transpose(1, 2, 3, 0) + 0.5) * size
+        _, _, clear = _grid_edges(tank, size)
+        lengths = np.linalg.norm(NEIGHBOURS, axis=1) * size
+        weights: list[NDArray[np.float64] | float] = list(lengths)
+        if clearance_cost > 0:
+            cost = clearance_cost * np.clip(1.0 - (clear - tank.arm.radius) / CLEARANCE_RANGE, 0, 1)
+            weights = [
+                w * (1.0 + (cost + shifted(cost, -d)) / 2) for d, w in zip(NEIGHBOURS, lengths)
+            ]
+        table = np.empty((len(NEIGHBOURS), int(np.prod(shape))))
+        for e, w in enumerate(weights):
+            table[e] = np.broadcast_to(w, shape).reshape(-1)
+        for item in (centres, table, *weights):
+            if isinstance(item, np.ndarray):
+                item.flags.writeable = False
+        cache[key] = (centres, weights, table)
+    return cache[key]
 
 
 def _grid_edges(
