@@ -199,6 +199,24 @@ def add_margin_option(parser: argparse.ArgumentParser, help: str) -> None:
     parser.add_argument("--margin", type=float, default=DEFAULT_MARGIN, metavar="CM", help=help)
 
 
+def add_tank_option(parser: argparse.ArgumentParser, what: str) -> None:
+    """Add ``--tank`` (a name, YAML path, generator spec or pool; :func:`check_tank`)."""
+    parser.add_argument(
+        "--tank",
+        help=f"{what}: a name, YAML path, generator spec such as wing:3:7, or a pool "
+        "wing:BAYS:FIRST-LAST of generated tanks (one per group of rows, or per episode)",
+    )
+
+
+def check_tank(tank: str) -> None:
+    """One line (:class:`ConfigError`) unless ``tank`` loads, or is a pool whose first does."""
+    from aftir_rl.core.tank import load_tank
+    from aftir_rl.envs.ftl.pool import pool_specs
+
+    specs = pool_specs(tank)
+    load_tank(tank if specs is None else specs[0])
+
+
 def check_margin(margin: float) -> None:
     """Refuse a ``--margin`` outside 0 to 20 cm (a :class:`ConfigError`)."""
     if not 0 <= margin <= 20:

@@ -26,8 +26,10 @@ from aftir_rl.cli.args import (
     add_motion_option,
     add_ray_options,
     add_seed_option,
+    add_tank_option,
     add_target_option,
     check_margin,
+    check_tank,
 )
 from aftir_rl.cli.guard import cli, exit_with, preload
 from aftir_rl.core.config import DEFAULT_MARGIN, EVAL_SEED
@@ -109,6 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
         None,
     )
     add_margin_option(parser, f"clearance the arm keeps ({DEFAULT_MARGIN:g} cm)")
+    add_tank_option(parser, "AFTIR-ArmFTL-v0 runs: evaluate here, not in the run's own tank")
     add_ray_options(parser, "evaluate the runs")
     return parser
 
@@ -131,10 +134,13 @@ def _evaluate_runs(
 
         check_ray_options(args.ray, args.workers)
         with ray_session(args.ray, args.workers):
-            rows = evaluate_on_ray(args.runs, targets, args.motion, args.margin, draw=draw)
+            rows = evaluate_on_ray(
+                args.runs, targets, args.motion, args.margin, draw=draw, tank=args.tank
+            )
         return {_row_name(r): row for r, row in zip(args.runs, rows)}
     return {
-        _row_name(r): evaluate_run(r, targets, args.motion, args.margin, draw) for r in args.runs
+        _row_name(r): evaluate_run(r, targets, args.motion, args.margin, draw, args.tank)
+        for r in args.runs
     }
 
 
@@ -198,6 +204,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         draw = _check_draw(args.random, args.seed, targets)
         check_margin(args.margin)
+        if args.tank is not None:
+            check_tank(args.tank)
         check_writable_dir(args.logdir)
         args.runs = [*args.runs, *map(str, map(policy_dir, args.pretrained))]
         if not args.runs:

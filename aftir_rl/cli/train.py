@@ -32,8 +32,10 @@ from aftir_rl.cli.args import (
     add_run_dir_options,
     add_seconds_option,
     add_seed_option,
+    add_tank_option,
     add_target_option,
     check_margin,
+    check_tank,
 )
 from aftir_rl.cli.guard import cli, exit_with
 from aftir_rl.core import interrupts
@@ -177,6 +179,7 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
         f"configs/hyperparams/{algo}.yml (default {DEFAULT_SB3_ENV_ID}); with --config, overrides "
         "its env_id",
     )
+    add_tank_option(p, "AFTIR-ArmFTL-v0's tank (a config names none)")
     add_int_option(
         p,
         "--total-timesteps",
@@ -276,7 +279,15 @@ def _sb3_configs(args: argparse.Namespace) -> list[Any]:
     }
     for k, config in enumerate(configs):
         config = dataclasses.replace(config, **{a: v for a, v in changes.items() if v is not None})
-        configs[k] = with_overrides(config, args.algo, args.env_kwargs, args.hyperparams)
+        config = with_overrides(config, args.algo, args.env_kwargs, args.hyperparams)
+        if args.tank is not None:
+            if config.env_id.split(":")[-1] != "AFTIR-ArmFTL-v0":
+                raise ConfigError("--tank: only AFTIR-ArmFTL-v0 takes a tank")
+            check_tank(args.tank)
+            config = dataclasses.replace(
+                config, env_kwargs={**config.env_kwargs, "tank": args.tank}
+            )
+        configs[k] = config
     return configs
 
 

@@ -46,7 +46,7 @@ REGISTRATIONS: dict[str, dict[str, Any]] = {
     },
     "AFTIR-ArmFTL-v0": {
         "entry_point": f"{_FTL}:ArmFTLEnv",
-        "vector_entry_point": f"{_FTL}:ArmFTLVectorEnv",
+        "vector_entry_point": "aftir_rl.envs.ftl.pool_vector:make_vector_env",
         "max_episode_steps": 300,
     },
 }

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from aftir_rl.core.config import DEFAULT_MARGIN, from_mapping, read_yaml
-from aftir_rl.core.errors import CheckpointError
+from aftir_rl.core.errors import CheckpointError, ConfigError
 from aftir_rl.core.files import run_file
 from aftir_rl.core.shipped import find_config
 from aftir_rl.core.tank.loading import resolve_run_tank
@@ -208,11 +208,18 @@ def _evaluate_q_table(run: QTableRun, motion: str, margin: float) -> dict[str, A
 
 
 def _evaluate_sb3(
-    run: SB3Run, targets: list[np.ndarray] | None, draw: tuple[int, int] | None = None
+    run: SB3Run,
+    targets: list[np.ndarray] | None,
+    draw: tuple[int, int] | None = None,
+    tank: str | None = None,
 ) -> dict[str, Any]:
     from aftir_rl.rl.sb3 import EVAL_SEED, evaluate_policy_on_targets, evaluation_targets
 
     kwargs = dict(run.config.env_kwargs or {})  # the env the model was trained on (spaces)
+    if tank is not None:
+        if run.env_id.split(":")[-1] != "AFTIR-ArmFTL-v0":
+            raise ConfigError(f"--tank: {run.env_id} takes no tank; AFTIR-ArmFTL-v0 runs do")
+        kwargs["tank"] = tank
     if not targets:
         count, seed = draw or (run.config.eval_targets, EVAL_SEED)
         targets = evaluation_targets(run.env_id, count, seed=seed, env_kwargs=kwargs)
@@ -230,6 +237,7 @@ def evaluate_run(
     motion: str = "ftl",
     margin: float = DEFAULT_MARGIN,
     draw: tuple[int, int] | None = None,
+    tank: str | None = None,
 ) -> dict[str, Any]:
     """Evaluate one run directory (Q-table or SB3): one row of ``python -m aftir_rl.evaluate``.
 
@@ -237,13 +245,18 @@ def evaluate_run(
     follow-the-leader motion keeping ``margin`` [cm] (``motion="ftl"``) or the papers' postures
     per cell (``"progressive"``). An SB3 run on ``targets``, else on ``draw = (count, seed)``
     targets drawn by its env (seeds ``seed .. seed + count − 1``), else on the fixed evaluation
-    targets its training measured it on; one deterministic episode each.
+    targets its training measured it on; one deterministic episode each. ``tank``: an
+    ``AFTIR-ArmFTL-v0`` run's policy in another tank or pool than its own (a pool's target ``i``
+    lies in its tank ``i mod K``).
 
     Raises:
         CheckpointError: not a run directory this knows, or unreadable files.
+        ConfigError: ``tank`` for a run that takes none.
 
     """
     run = load_run(run_dir, ("q_table", "sb3"))
     if isinstance(run, QTableRun):
+        if tank is not None:
+            raise ConfigError(f"--tank: {run_dir} is a Q-table run, evaluated in its own tank")
         return _evaluate_q_table(run, motion, margin)
-    return _evaluate_sb3(cast(SB3Run, run), targets, draw)
+    return _evaluate_sb3(cast(SB3Run, run), targets, draw, tank)

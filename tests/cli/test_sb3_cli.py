@@ -7,6 +7,7 @@ import dataclasses
 import pytest
 
 from aftir_rl.cli import train
+from aftir_rl.core.errors import ConfigError
 from aftir_rl.rl.sb3 import load_sb3_config
 from aftir_rl.rl.sb3.config import rollout_steps
 
@@ -26,6 +27,10 @@ def test_steps_below_a_rollout_are_said(capsys):
         (["--env-kwargs", "nope:1"], "unknown key 'nope'"),
         (["--hyperparams", "n_epochs:0"], "n_epochs"),
         (["--env-kwargs", "bay"], "KEY:VALUE"),
+        (["--env-kwargs", "tank:wing:3:1"], "a config names no tank; give --tank"),
+        (["--tank", "nope"], "unknown tank 'nope'"),
+        (["--tank", "wing:3:9-1"], "1 to 64 seeds"),
+        (["--tank", "wing:3:1", "--env", "AFTIR-ArmFull-v0"], "only AFTIR-ArmFTL-v0 takes a tank"),
     ],
 )
 def test_bad_overrides_are_one_line_before_training(extra, says, tmp_path, capsys):
@@ -34,3 +39,15 @@ def test_bad_overrides_are_one_line_before_training(extra, says, tmp_path, capsy
     err = capsys.readouterr().err.strip()
     assert says in err and "\n" not in err
     assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+def test_tank_option_reaches_every_stage_and_files_name_none(tmp_path):
+    args = train.build_parser().parse_args(
+        ["ppo", "--config", "ppo_ftl_curriculum", "--tank", "wing:3:0-7"]
+    )
+    configs = train._sb3_configs(args)
+    assert len(configs) == 2 and all(c.env_kwargs["tank"] == "wing:3:0-7" for c in configs)
+    shared = tmp_path / "tank.yaml"
+    shared.write_text("env_id: AFTIR-ArmFTL-v0\nenv_kwargs:\n  tank: /etc/passwd\n")
+    with pytest.raises(ConfigError, match="a config names no tank"):
+        load_sb3_config(shared, "ppo")

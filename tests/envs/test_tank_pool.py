@@ -7,9 +7,12 @@ import numpy as np
 import pytest
 
 import aftir_rl  # noqa: F401  (registers the envs)
-from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.errors import ConfigError, InvalidActionError
 from aftir_rl.core.tank import load_tank
+from aftir_rl.envs.ftl.env import ArmFTLEnv, ArmFTLVectorEnv
 from aftir_rl.envs.ftl.pool import MAX_POOL, pool_specs
+from aftir_rl.envs.ftl.pool_vector import ArmFTLPoolVectorEnv
+from aftir_rl.rl.sb3.evaluation import evaluation_targets
 
 
 def test_each_episode_draws_a_tank_of_the_pool():
@@ -42,8 +45,8 @@ def test_sync_vector_envs_draw_their_own_tanks():
 
 
 def test_pools_are_refused_where_one_tank_is_needed():
-    with pytest.raises(ConfigError, match="runs in the single env"):
-        gym.make_vec("AFTIR-ArmFTL-v0", 4, tank="wing:2:0-3")
+    with pytest.raises(ConfigError, match="one tank per group of rows"):
+        ArmFTLVectorEnv(4, tank="wing:2:0-3")
     with pytest.raises(ConfigError, match="is a pool of generated tanks"):
         load_tank("wing:2:0-3")
     with pytest.raises(ConfigError, match=f"1 to {MAX_POOL} seeds"):
@@ -51,3 +54,79 @@ def test_pools_are_refused_where_one_tank_is_needed():
     with pytest.raises(ConfigError, match=f"1 to {MAX_POOL} seeds"):
         pool_specs(f"wing:2:0-{MAX_POOL}")
     assert pool_specs("wing:2:7") is None and pool_specs("b737_center") is None
+
+
+def test_batched_pool_rows_are_single_envs_of_their_tanks():
+    """Row ``i`` (SameStep autoreset) has the transitions of a single env of its tank seeded
+    ``seed + i``; groups of 2, 2 and 1 rows for a pool of 3 tanks and 5 rows."""
+    b, steps, pool = 5, 80, "wing:2:0-2"
+    venv = gym.make_vec(
+        "AFTIR-ArmFTL-v0",
+        b,
+        tank=pool,
+        guide=True,
+        max_episode_steps=20,
+        autoreset_mode="SameStep",
+    )
+    assert isinstance(venv, ArmFTLPoolVectorEnv)
+    obs, info = venv.reset(seed=7)
+    assert info["tank"] == ["wing:2:0", "wing:2:0", "wing:2:1", "wing:2:1", "wing:2:2"]
+    assert venv.observation_space.contains(obs)
+    single = [ArmFTLEnv(tank=name, guide=True) for name in info["tank"]]
+    for i, env in enumerate(single):
+        o, first = env.reset(seed=7 + i)
+        np.testing.assert_allclose(first["target"], info["target"][i], atol=1e-5)  # float32 kept
+        np.testing.assert_array_equal(o["observation"], obs["observation"][i])
+    rng = np.random.default_rng(3)
+    ended = 0
+    for _ in range(steps):
+        a = rng.uniform(-1, 1, (b, 3)).astype(np.float32)
+        a[:, 2] = np.abs(a[:, 2])
+        nxt, r, term, trunc, info = venv.step(a)
+        for i, env in enumerate(single):
+            o, r1, te, _, _ = env.step(a[i])
+            assert r1 == r[i] and te == term[i]
+            if term[i] or trunc[i]:
+                ended += 1
+                assert info["_final_obs"][i]
+                for key in o:
+                    np.testing.assert_array_equal(info["final_obs"][key][i], o[key])
+                o, _ = env.reset()
+            for key in o:
+                np.testing.assert_array_equal(nxt[key][i], o[key])
+    assert ended >= b
+
+
+def test_batched_pool_options_and_bad_input():
+    venv = ArmFTLPoolVectorEnv(4, tank="wing:2:0-1", bay=1)
+    _, info = venv.reset(seed=0)
+    targets = info["target"][::-1].copy()  # rows 0, 1 (tank 0) get tank 1's targets: check each
+    for i, name in enumerate(info["tank"]):
+        assert load_tank(name).distance(info["target"][i]) >= 5.0
+    own = info["target"].copy()
+    _, again = venv.reset(options={"target": own})
+    np.testing.assert_array_equal(again["target"], own)
+    with pytest.raises(InvalidActionError):
+        venv.step(np.zeros((3, 3), np.float32))
+    with pytest.raises(ConfigError, match="seeds"):
+        venv.reset(seed=[1, 2])
+    with pytest.raises(ConfigError, match="needs a pool"):
+        ArmFTLPoolVectorEnv(2, tank="wing:2:0")
+    assert targets.shape == (4, 3)
+
+
+def test_single_env_tank_option_and_pool_evaluation_targets():
+    env = gym.make("AFTIR-ArmFTL-v0", tank="wing:2:0-2", bay=2)
+    for option, name in ((2, "wing:2:2"), ("wing:2:1", "wing:2:1")):
+        _, info = env.reset(seed=0, options={"tank": option})
+        assert info["tank"] == name
+    for bad in (3, -1, "wing:2:9", True):
+        with pytest.raises(ConfigError, match="not in the pool"):
+            env.reset(options={"tank": bad})
+    with pytest.raises(ConfigError, match="unknown reset option 'tank'"):
+        gym.make("AFTIR-ArmFTL-v0", tank="wing:2:0").reset(options={"tank": 0})
+    targets = evaluation_targets("AFTIR-ArmFTL-v0", 6, 11, {"tank": "wing:2:0-2", "bay": 2})
+    for i, target in enumerate(targets):  # target i lies in tank i mod 3
+        tank = load_tank(f"wing:2:{i % 3}")
+        lo, hi = tank.bay(2)
+        assert np.all((target > lo) & (target < hi)) and tank.distance(target) >= 5.0

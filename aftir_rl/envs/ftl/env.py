@@ -133,7 +133,8 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
       again becomes worth trying.
     - ``render_mode``: ``"rgb_array"``.
 
-    ``reset(options={"target": (x, y, z)})`` sets the target of one episode.
+    ``reset(options={"target": (x, y, z)})`` sets the target of one episode; with a pool,
+    ``options={"tank": k}`` its tank (an index into the pool, or a spec of it).
 
     ## Version History
 
@@ -150,6 +151,8 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
         specs = pool_specs(spec.task.tank)
         #: The tanks drawn per episode (``tank="wing:BAYS:FIRST-LAST"``), or None.
         self.pool = None if specs is None else TankPool(specs)
+        #: The goal space's corners shared by a pool's tanks, or None (the tank's own).
+        self.goal_bounds = None if self.pool is None else self.pool.goal_bounds
         self._spec, self._tank_index = spec, 0
         self._configure(spec if self.pool is None else self.pool.spec_for(spec, 0), 1)
         self.arm = self.tank.arm
@@ -160,11 +163,6 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
         self._potential: NDArray[np.float64] | None = np.full(1, np.nan)
         self._achieved = np.zeros((1, 3), dtype=np.float32)
         self._open = False  # an episode has steps and has not ended (for failure_bias)
-
-    def _goal_bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The tank's box grown by 1 m; with a pool, every tank's."""
-        pool = self.__dict__.get("pool")
-        return pool.goal_bounds if pool is not None else super()._goal_bounds()
 
     @property
     def target(self) -> NDArray[np.float64]:
@@ -202,12 +200,14 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
     ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
         """Straighten the arm just inside the panel and set a target."""
         super().reset(seed=seed)
-        options = check_options(options)
+        options = check_options(options, ("target", "tank") if self.pool else ("target",))
         if self._open:  # the last episode ended without success (truncated or left)
             self._record_outcomes(self.batch.target, [False])
         self._open = False
         if self.pool is not None:  # this episode's tank
             index = self.pool.draw(self.np_random)
+            if options.get("tank") is not None:
+                index = self.pool.index(options["tank"])
             if index != self._tank_index:
                 self._configure(self.pool.spec_for(self._spec, index), 1)
                 self._tank_index = index
@@ -277,11 +277,14 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
 class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], Any]):
     """``num_envs`` :class:`ArmFTLEnv` s stepped together in numpy (autoreset: next step).
 
-    Same arguments as :class:`ArmFTLEnv` plus ``num_envs`` and ``max_episode_steps``
-    (truncation). Row ``i`` draws its targets from its own generator, seeded ``seed + i`` by
-    ``reset(seed=seed)``, so it reproduces a single env seeded ``seed + i``. As in Gymnasium's
-    ``CartPoleVectorEnv``, a row that ended is reset by the next ``step`` (which returns its
-    first observation with reward 0 and no termination, ignoring that row's action).
+    Same arguments as :class:`ArmFTLEnv` plus ``num_envs``, ``max_episode_steps``
+    (truncation) and ``goal_bounds`` (the goal space's corners, shared by the groups of
+    :class:`~aftir_rl.envs.ftl.pool_vector.ArmFTLPoolVectorEnv`), and one tank: a pool goes to
+    :func:`~aftir_rl.envs.ftl.pool_vector.make_vector_env`. Row ``i`` draws its targets from its
+    own generator, seeded ``seed + i`` by ``reset(seed=seed)``, so it reproduces a single env
+    seeded ``seed + i``. As in Gymnasium's ``CartPoleVectorEnv``, a row that ended is reset by
+    the next ``step`` (which returns its first observation with reward 0 and no termination,
+    ignoring that row's action).
     ``reset(options={"target": ...})`` takes one target for all rows or one per row ``(B, 3)``.
     ``info`` holds per-row arrays ``prev_achieved_goal``, ``contact``, ``is_success``,
     ``distance_cm`` and ``min_clearance_cm``. With ``autoreset_mode="SameStep"`` rows that end are
@@ -299,8 +302,11 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
         *,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
+        goal_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
         **kwargs: Any,
     ) -> None:
+        #: The goal space's corners [cm], or None: the tank's box grown by 1 m.
+        self.goal_bounds = goal_bounds
         if render_mode is not None:
             raise ConfigError("ArmFTLVectorEnv does not render; use ArmFTLEnv for pictures")
         if num_envs < 1 or max_episode_steps < 1:
@@ -311,8 +317,8 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
         spec = FTLSpec.from_kwargs(**kwargs)
         if pool_specs(spec.task.tank) is not None:
             raise ConfigError(
-                "a tank pool (wing:BAYS:FIRST-LAST) runs in the single env, one tank per env: "
-                "gym.make_vec('AFTIR-ArmFTL-v0', n, vectorization_mode='async', tank=...)"
+                "a tank pool (wing:BAYS:FIRST-LAST) has one tank per group of rows: "
+                "ArmFTLPoolVectorEnv, or gym.make_vec('AFTIR-ArmFTL-v0', n, tank=...)"
             )
         self._configure(spec, self.num_envs)
         try:

@@ -67,6 +67,23 @@ class TankPool:
             spec, task=dataclasses.replace(spec.task, tank=self.tanks[index])
         )
 
+    def index(self, tank: object) -> int:
+        """The index of ``tank``: an index into the pool, or one of its specs.
+
+        Raises:
+            ConfigError: neither.
+
+        """
+        if isinstance(tank, (int, np.integer)) and not isinstance(tank, bool):
+            if 0 <= tank < len(self.tanks):
+                return int(tank)
+        elif tank in self.names:
+            return self.names.index(str(tank))
+        raise ConfigError(
+            f"tank {str(tank)[:60]!r} is not in the pool: an index 0..{len(self) - 1} or one of "
+            f"{self.names[0]}..{self.names[-1]}"
+        )
+
     def draw(self, rng: np.random.Generator) -> int:
         """The index of an episode's tank."""
         return int(rng.integers(len(self.tanks)))

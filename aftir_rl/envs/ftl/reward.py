@@ -170,7 +170,10 @@ class GoalReward:
         return bool(out) if out.ndim == 0 else out
 
     def _goal_bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The goal space's corners [cm]: the tank's box grown by 1 m."""
+        """The goal space's corners [cm]: ``goal_bounds`` if set, else the tank's box + 1 m."""
+        shared = self.__dict__.get("goal_bounds")
+        if shared is not None:
+            return shared
         return np.array(self.tank.box_min) - 100.0, np.array(self.tank.box_max) + 100.0
 
     def _goal_space(self) -> spaces.Box:

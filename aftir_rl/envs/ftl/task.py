@@ -25,12 +25,14 @@ from aftir_rl.envs.ftl.targets import FailureRates, bay_region, draw_targets
 __all__ = ["FTLTask", "check_options"]
 
 
-def check_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
-    """``reset``'s options as a dict; any key but ``target`` is a :class:`ConfigError`."""
+def check_options(
+    options: Mapping[str, Any] | None, allowed: tuple[str, ...] = ("target",)
+) -> dict[str, Any]:
+    """``reset``'s options as a dict; any key not ``allowed`` is a :class:`ConfigError`."""
     options = dict(options or {})
-    unknown = sorted(set(options) - {"target"})
+    unknown = sorted(set(options) - set(allowed))
     if unknown:
-        raise ConfigError(f"unknown reset option {unknown[0]!r}; use 'target'")
+        raise ConfigError(f"unknown reset option {unknown[0]!r}; use {' or '.join(allowed)}")
     return options
 
 

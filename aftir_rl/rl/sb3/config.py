@@ -49,6 +49,7 @@ __all__ = [
     "parse_hyperparameters",
     "check_sb3_config",
     "check_goal_settings",
+    "refuse_tank",
     "sb3_config_from_run",
     "constructor_keys",
     "build_model",
@@ -200,6 +201,8 @@ ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
     "AFTIR-ArmFull-v0": {"bay": (int, type(None))},
     "AFTIR-ArmFTL-v0": CONFIG_KWARG_TYPES,
 }
+#: Envs that take a ``tank`` (``--tank``; a run records it): never from a config file.
+TANK_ENV_IDS = ("AFTIR-ArmFTL-v0",)
 #: Env keyword arguments whose values are one of a few.
 ENV_KWARG_CHOICES: dict[str, tuple[object, ...]] = {
     "shaping": tuple(SHAPING_KINDS),
@@ -215,6 +218,17 @@ SB3_ENV_IDS = ("AFTIR-ArmReach-v0", "AFTIR-Arm-v0", "AFTIR-ArmFull-v0", "AFTIR-A
 GOAL_ENV_IDS = ("AFTIR-ArmFTL-v0",)
 #: HerReplayBuffer's settings when ``her`` is on.
 HER_KWARGS = {"n_sampled_goal": 4, "goal_selection_strategy": "future", "copy_info_dict": True}
+
+
+def refuse_tank(env_kwargs: dict[str, Any], source: str) -> None:
+    """A config file or ``--env-kwargs`` names no tank (a shared file points at no other file).
+
+    Raises:
+        ConfigError: ``env_kwargs`` has ``tank``; ``--tank`` gives one.
+
+    """
+    if "tank" in env_kwargs:
+        raise ConfigError(f"{source}: env_kwargs.tank: a config names no tank; give --tank")
 
 
 def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:
@@ -246,6 +260,10 @@ def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:
         _check_her_start(config, algo, bare, source)
     allowed = ENV_KWARGS.get(bare, {})
     for key, value in config.env_kwargs.items():
+        if key == "tank" and bare in TANK_ENV_IDS:  # the command line's or a run's (not a file's)
+            if not isinstance(value, str) or not 0 < len(value) <= 255:
+                raise ConfigError(f"{source}: env_kwargs.tank: unexpected value {brief(value)}")
+            continue
         if key not in allowed:
             raise ConfigError(
                 f"{source}: env_kwargs: unknown key {brief(key)} for {bare}; allowed keys are "

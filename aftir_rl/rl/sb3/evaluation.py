@@ -58,11 +58,12 @@ def evaluation_targets(
     """A fixed set of targets drawn by the env's own sampler, reset ``i`` seeded ``seed + i``.
 
     Drawn by the env as evaluated (:func:`evaluation_env_kwargs`), not as its training drew them.
+    With a pool of ``K`` tanks, target ``i`` lies in the pool's tank ``i mod K``.
     """
     env = gym.make(env_id, **evaluation_env_kwargs(env_kwargs))
     targets = []
     for i in range(count):
-        _, info = env.reset(seed=seed + i)
+        _, info = env.reset(seed=seed + i, options=_pool_option(env.unwrapped, i))
         targets.append(np.asarray(info["target"], dtype=float))
     env.close()
     return targets
@@ -118,7 +119,8 @@ def evaluate_policy_on_targets(
             env.close()
             raise KeyboardInterrupt
         start = time.perf_counter()
-        path, info, smallest = _run_target(model, env, arm, target, clearance, smallest)
+        options = {"target": target, **(_pool_option(arm, i) or {})}
+        path, info, smallest = _run_target(model, env, arm, options, clearance, smallest)
         rows.append(
             (
                 float(info.get("is_success", False)),
@@ -134,17 +136,28 @@ def evaluate_policy_on_targets(
     return _mean_metrics(rows, clearance, smallest), first
 
 
+def _pool_option(arm: Any, i: int) -> dict[str, int] | None:
+    """The reset option of target ``i`` in an env with a pool of ``K`` tanks: tank ``i mod K``."""
+    pool = getattr(arm, "pool", None)
+    return None if pool is None else {"tank": i % len(pool)}
+
+
 def _run_target(
-    model: Any, env: gym.Env, arm: Any, target: np.ndarray, clearance: bool, smallest: float
+    model: Any,
+    env: gym.Env,
+    arm: Any,
+    options: dict[str, Any],
+    clearance: bool,
+    smallest: float,
 ) -> tuple[np.ndarray, dict[str, Any], float]:
-    """One deterministic episode to ``target``.
+    """One deterministic episode, reset with ``options`` (the target, and a pool's tank).
 
     Returns:
         The tip path, the last step's info and ``smallest`` lowered to the smallest clearance
         along the motion (when ``clearance``; else unchanged).
 
     """
-    obs, info = env.reset(options={"target": target})
+    obs, info = env.reset(options=options)
     tips, done = [arm.tip], False
     while not done:
         action, _ = model.predict(obs, deterministic=True)

@@ -31,6 +31,7 @@ from aftir_rl.rl.sb3.config import (
     SB3Config,
     check_sb3_config,
     parse_hyperparameters,
+    refuse_tank,
 )
 
 __all__ = [
@@ -130,6 +131,7 @@ def entry_config(algo: str, env_id: str, path: str | os.PathLike[str] | None = N
     config = dataclasses.replace(
         config, env_id=env_id, hyperparameters=fields["hyperparameters"], **_derived(config, {})
     )
+    refuse_tank(config.env_kwargs, source)
     check_sb3_config(config, algo, source)
     return config
 
@@ -178,6 +180,7 @@ def config_from_mapping(
     )
     if derive:
         config = dataclasses.replace(config, **_derived(config, given))
+    refuse_tank(env_kwargs, source)
     check_sb3_config(config, algo, source)
     return config
 

@@ -17,7 +17,12 @@ from typing import Any
 
 from aftir_rl.core.config import brief, read_yaml
 from aftir_rl.core.errors import ConfigError
-from aftir_rl.rl.sb3.config import SB3Config, check_sb3_config, parse_hyperparameters
+from aftir_rl.rl.sb3.config import (
+    SB3Config,
+    check_sb3_config,
+    parse_hyperparameters,
+    refuse_tank,
+)
 
 __all__ = ["MAX_ITEMS", "parse_key_values", "with_overrides"]
 
@@ -65,7 +70,9 @@ def with_overrides(
     if not env_kwargs and not hyperparams:
         return config
     source = "--env-kwargs/--hyperparams"
-    kwargs = {**config.env_kwargs, **parse_key_values(env_kwargs, "--env-kwargs")}
+    given = parse_key_values(env_kwargs, "--env-kwargs")
+    refuse_tank(given, "--env-kwargs")
+    kwargs = {**config.env_kwargs, **given}
     extra = parse_hyperparameters(parse_key_values(hyperparams, "--hyperparams"), algo, source)
     merged = dataclasses.replace(
         config, env_kwargs=kwargs, hyperparameters={**config.hyperparameters, **extra}

@@ -1,0 +1,165 @@
+"""A pool of tanks in the batched ``AFTIR-ArmFTL-v0``: one tank per group of rows.
+
+:class:`ArmFTLPoolVectorEnv` splits its ``num_envs`` rows into one contiguous group per tank of
+the pool ``tank="wing:BAYS:FIRST-LAST"`` (the first ``num_envs`` tanks if the pool is larger),
+as equal as can be, each group an :class:`~aftir_rl.envs.ftl.env.ArmFTLVectorEnv` of its own
+tank, stepped one after the other. Rows keep their tank: row ``i`` seeded ``seed + i`` draws its
+targets as row ``i - start`` of its group does. The goal space holds every tank of the pool.
+:func:`make_vector_env` is the registered vector entry point: a pool gives this env, one tank
+the plain batched one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+from numpy.typing import NDArray
+
+from aftir_rl.core.errors import ConfigError, InvalidActionError, TargetError
+from aftir_rl.envs.ftl.env import ArmFTLVectorEnv
+from aftir_rl.envs.ftl.pool import TankPool, pool_specs
+
+__all__ = ["ArmFTLPoolVectorEnv", "make_vector_env"]
+
+Obs = dict[str, NDArray[np.float32]]
+
+
+def make_vector_env(num_envs: int = 1, max_episode_steps: int = 300, **kwargs: Any) -> VectorEnv:
+    """The batched env of ``AFTIR-ArmFTL-v0``: :class:`ArmFTLPoolVectorEnv` for a pool."""
+    if pool_specs(kwargs.get("tank")) is not None:
+        return ArmFTLPoolVectorEnv(num_envs, max_episode_steps, **kwargs)
+    return ArmFTLVectorEnv(num_envs, max_episode_steps, **kwargs)
+
+
+class ArmFTLPoolVectorEnv(VectorEnv[Obs, NDArray[np.float32], Any]):
+    """``num_envs`` arms in the tanks of a pool, one batched group of rows per tank.
+
+    Same arguments as :class:`~aftir_rl.envs.ftl.env.ArmFTLVectorEnv`, with ``tank`` a pool.
+    ``reset(options={"target": ...})`` takes one target per row ``(num_envs, 3)`` (or one for
+    all rows, which must then be free in every tank). ``info`` holds the per-row arrays of the
+    groups, and ``reset``'s ``info["tank"]`` each row's tank.
+    """
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        max_episode_steps: int = 300,
+        *,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        render_mode: str | None = None,
+        **kwargs: Any,
+    ) -> None:
+        specs = pool_specs(kwargs.get("tank"))
+        if specs is None:
+            raise ConfigError("ArmFTLPoolVectorEnv needs a pool tank='wing:BAYS:FIRST-LAST'")
+        if not isinstance(num_envs, int) or num_envs < 1:
+            raise ConfigError("num_envs and max_episode_steps must be at least 1")
+        groups = min(len(specs), num_envs)
+        self.pool = TankPool(specs[:groups])
+        sizes = [num_envs // groups + (g < num_envs % groups) for g in range(groups)]
+        #: Each group's first row, and the end: group ``g`` holds rows ``starts[g]:starts[g+1]``.
+        self.starts = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        self.groups = [
+            ArmFTLVectorEnv(
+                size,
+                max_episode_steps,
+                autoreset_mode=autoreset_mode,
+                render_mode=render_mode,
+                goal_bounds=self.pool.goal_bounds,
+                **{**kwargs, "tank": tank},
+            )
+            for size, tank in zip(sizes, self.pool.tanks)
+        ]
+        first = self.groups[0]
+        self.num_envs, self.max_episode_steps = num_envs, first.max_episode_steps
+        self.render_mode = None
+        self.autoreset_mode = first.autoreset_mode
+        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
+        self.single_action_space = first.single_action_space
+        self.single_observation_space = first.single_observation_space
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        #: Each row's tank (its generator spec).
+        self.row_tanks = [name for name, n in zip(self.pool.names, sizes) for _ in range(n)]
+
+    def _slices(self) -> list[slice]:
+        return [slice(a, b) for a, b in zip(self.starts[:-1], self.starts[1:])]
+
+    def reset(
+        self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Obs, dict[str, Any]]:
+        """Reset every row; ``seed`` seeds row ``i`` with ``seed + i`` (or a list, one each)."""
+        if seed is not None and not isinstance(seed, int):
+            if len(seed) != self.num_envs:
+                raise ConfigError(f"reset got {len(seed)} seeds for {self.num_envs} envs")
+        targets = None
+        if options and options.get("target") is not None:
+            t = np.asarray(options["target"], dtype=np.float64)
+            targets = t.reshape(-1, 3) if t.size % 3 == 0 else t
+            if targets.ndim != 2 or len(targets) not in (1, self.num_envs):
+                raise TargetError(f"target must be (3,) or ({self.num_envs}, 3), got {t.shape}")
+            targets = np.broadcast_to(targets, (self.num_envs, 3))
+        outs = []
+        for group, rows in zip(self.groups, self._slices()):
+            own = None if seed is None else _group_seed(seed, rows)
+            opts = dict(options or {})
+            if targets is not None:
+                opts["target"] = targets[rows]
+            outs.append(group.reset(seed=own, options=opts))
+        info = {"target": np.concatenate([o[1]["target"] for o in outs]), "tank": self.row_tanks}
+        return _join([o[0] for o in outs]), info
+
+    def step(
+        self, actions: NDArray[np.float32]
+    ) -> tuple[Obs, NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]]:
+        """Step every group; see :class:`~aftir_rl.envs.ftl.env.ArmFTLVectorEnv`."""
+        a = np.asarray(actions)
+        if a.shape != self.action_space.shape:
+            raise InvalidActionError(
+                f"invalid action of shape {a.shape}: expected {self.action_space.shape} "
+                "finite values in [-1, 1]"
+            )
+        outs = [g.step(a[rows]) for g, rows in zip(self.groups, self._slices())]
+        obs = _join([o[0] for o in outs])
+        reward, terminated, truncated = (np.concatenate([o[i] for o in outs]) for i in (1, 2, 3))
+        return (
+            obs,
+            reward,
+            terminated,
+            truncated,
+            _join_infos([o[0] for o in outs], [o[4] for o in outs]),
+        )
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Close every group."""
+        for group in self.groups:
+            group.close()
+
+
+def _group_seed(seed: int | Sequence[int], rows: slice) -> int | list[int]:
+    """A group's seeds: row ``i`` seeded ``seed + i``."""
+    if isinstance(seed, int):
+        return seed + int(rows.start)
+    return [int(s) for s in seed[rows]]
+
+
+def _join(parts: list[Obs]) -> Obs:
+    return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+
+
+def _join_infos(obs: list[Obs], infos: list[dict[str, Any]]) -> dict[str, Any]:
+    """The groups' infos row by row; ``final_obs`` where any group has one (valid by mask)."""
+    keys = [k for k in infos[0] if k not in ("final_obs", "_final_obs")]
+    out: dict[str, Any] = {k: np.concatenate([i[k] for i in infos]) for k in keys}
+    if any("final_obs" in i for i in infos):
+        out["final_obs"] = _join([i.get("final_obs", o) for i, o in zip(infos, obs)])
+        out["_final_obs"] = np.concatenate(
+            [i.get("_final_obs", np.zeros(len(o["observation"]), bool)) for i, o in zip(infos, obs)]
+        )
+    return out
