@@ -14,7 +14,7 @@ from tqdm import tqdm
 
 from aftir_rl.cli.args import bounded_int
 from aftir_rl.cli.guard import cli
-from aftir_rl.cli.rollout import policy_parser, policy_run, policy_targets
+from aftir_rl.cli.rollout import policy_env_kwargs, policy_parser, policy_run, policy_targets
 from aftir_rl.core.errors import ConfigError
 
 __all__ = ["build_parser", "main"]
@@ -47,11 +47,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not args.output.lower().endswith(".gif"):
         raise ConfigError(f"-o {args.output}: write a .gif")
     _, config, env_id, model = load_run(policy_run(args))
+    env_kwargs = policy_env_kwargs(args, config.env_kwargs)
     frames = []
     for target in tqdm(
-        policy_targets(args, env_id, config.env_kwargs), desc="episodes", disable=args.no_progress
+        policy_targets(args, env_id, env_kwargs), desc="episodes", disable=args.no_progress
     ):
-        episode = record_frames(model, env_id, config.env_kwargs, target)
+        episode = record_frames(model, env_id, env_kwargs, target)
         frames += episode[:: args.every] + [episode[-1]] * 10  # hold the end a moment
     count = save_gif(args.output, frames, args.fps)
     print(f"wrote {args.output} ({count} frames)")

@@ -16,13 +16,26 @@ from typing import Any
 
 import gymnasium as gym
 
-from aftir_rl.cli.args import OneLineParser, add_target_option, bounded_int
+from aftir_rl.cli.args import (
+    OneLineParser,
+    add_tank_option,
+    add_target_option,
+    bounded_int,
+    check_tank,
+)
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import check_writable_dir, write_json
 from aftir_rl.core.tank.loading import keep_run_tank
 
-__all__ = ["build_parser", "main", "policy_parser", "policy_run", "policy_targets"]
+__all__ = [
+    "build_parser",
+    "main",
+    "policy_env_kwargs",
+    "policy_parser",
+    "policy_run",
+    "policy_targets",
+]
 
 #: The most targets one command rolls out.
 MAX_TARGETS = 1000
@@ -49,7 +62,30 @@ def policy_parser(prog: str, what: str) -> argparse.ArgumentParser:
     parser.add_argument(
         "--seed", type=bounded_int(0, 2**31), default=0, metavar="S", help="first seed of --random"
     )
+    add_tank_option(parser, "AFTIR-ArmFTL-v0 runs: roll out in this tank, not the run's own")
     return parser
+
+
+def policy_env_kwargs(args: argparse.Namespace, env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The run's env kwargs, in ``--tank`` if given; a motion is in one tank, not a pool.
+
+    Raises:
+        ConfigError: the tank is a pool (the run's, without ``--tank``), or does not load.
+
+    """
+    from aftir_rl.envs.ftl.pool import pool_specs
+
+    kwargs = dict(env_kwargs)
+    if args.tank is not None:
+        check_tank(args.tank)
+        kwargs["tank"] = args.tank
+    specs = pool_specs(kwargs.get("tank"))
+    if specs is not None:
+        raise ConfigError(
+            f"the run trained on the pool {kwargs['tank']}; a motion is in one tank: give --tank "
+            f"({specs[0]}, another of the pool, or a tank it never saw)"
+        )
+    return kwargs
 
 
 def policy_run(args: argparse.Namespace) -> Path:
@@ -96,16 +132,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     run = policy_run(args)
     algo, config, env_id, model = load_run(run)
-    targets = policy_targets(args, env_id, config.env_kwargs)
+    env_kwargs = policy_env_kwargs(args, config.env_kwargs)
+    targets = policy_targets(args, env_id, env_kwargs)
     out = check_writable_dir(args.output, "--output")
-    tank = config.env_kwargs.get("tank") or gym.spec(env_id.split(":")[-1]).kwargs.get(
+    tank = env_kwargs.get("tank") or gym.spec(env_id.split(":")[-1]).kwargs.get(
         "tank", "b737_center"
     )
     reached = 0
     for target in targets:
         folder = out / _name(target)
         folder.mkdir(exist_ok=True)
-        result = rollout(model, env_id, config.env_kwargs, target)
+        result = rollout(model, env_id, env_kwargs, target)
         write_json(folder / "trajectory.json", result)
         summary = {k: v for k, v in result.items() if k != "motion"}
         summary.update(

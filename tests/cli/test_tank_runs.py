@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from aftir_rl.cli import evaluate, train
+from aftir_rl.cli import evaluate, rollout, train
 from aftir_rl.core.tank import load_tank
 
 POOL_YAML = (
@@ -41,3 +41,11 @@ def test_train_on_a_pool_then_evaluate_in_held_out_tanks(tmp_path, capsys):
     drawn = evaluation_targets("AFTIR-ArmFTL-v0", 4, 1_000_000, {"tank": "wing:2:7-8"})
     for i, target in enumerate(drawn):
         assert load_tank(f"wing:2:{7 + i % 2}").distance(np.asarray(target)) >= 5.0
+    # a motion is in one tank: a pool run rolls out with --tank
+    moves = tmp_path / "moves"
+    assert rollout.main([str(run), "--random", "1", "-o", str(moves)]) == 2
+    assert "give --tank" in capsys.readouterr().err
+    argv = [str(run), "--random", "1", "--tank", "wing:2:8", "-o", str(moves)]
+    assert rollout.main(argv) == 0
+    (folder,) = moves.iterdir()
+    assert json.loads((folder / "summary.json").read_text())["tank"] == "wing:2:8"
