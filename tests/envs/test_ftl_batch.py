@@ -557,3 +557,30 @@ def test_field_guide_cache_starts_again_and_holders_ask_again():
     ids = direct.field_ids(batch.target)
     expect = np.minimum(direct(batch.tip, batch.target, ids)[0], 1000)
     np.testing.assert_allclose(to_go, expect, rtol=1e-5)
+
+
+def test_field_guides_of_a_process_share_one_budget(monkeypatch):
+    """A pool's tanks keep at most ``MAX_GUIDE_VALUES`` together, and every id stays valid."""
+    import weakref
+
+    from aftir_rl.envs.ftl import fields
+
+    monkeypatch.setattr(fields, "_GUIDES", weakref.WeakKeyDictionary())
+    tanks = [load_tank("wing:2:0"), load_tank("wing:2:1")]
+    guides = [fields.field_guide(t) for t in tanks]
+    budget = 5 * guides[0].n_points  # about five fields in all
+    monkeypatch.setattr(fields, "MAX_GUIDE_VALUES", budget)
+    rng = np.random.default_rng(0)
+    tips = np.array([[0.0, 0.0, 10.0], [20.0, 5.0, 30.0]])
+    for step in range(12):
+        k = step % 2
+        lo, hi = np.array(tanks[k].box_min) + 20, np.array(tanks[k].box_max) - 20
+        targets = rng.uniform(lo, hi, (2, 3))
+        ids = guides[k].field_ids(targets)
+        kept = sum(len(g) * g.n_points for g in guides)
+        assert kept <= budget + guides[k].n_points  # at most one field over, when it was empty
+        fresh = fields.FieldGuide(tanks[k])
+        np.testing.assert_allclose(
+            guides[k](tips, targets, ids)[0], fresh(tips, targets, fresh.field_ids(targets))[0]
+        )
+    assert guides[0].generation > 0 and guides[1].generation > 0

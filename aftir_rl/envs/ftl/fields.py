@@ -27,8 +27,8 @@ __all__ = [
     "raster_distance_table",
 ]
 
-#: Largest number of distance-to-go values :class:`FieldGuide` keeps (8 bytes each, with the
-#: next-step table).
+#: Largest number of distance-to-go values the :class:`FieldGuide` s of a process keep together
+#: (8 bytes each, with the next-step table): a pool of tanks shares one budget.
 MAX_GUIDE_VALUES = 50_000_000
 #: ``clearance_cost`` of :class:`FieldGuide`'s fields: ways keep off surfaces where they can.
 GUIDE_CLEARANCE_COST = 2.0
@@ -121,19 +121,33 @@ class FieldGuide:
         self.clearance_cost = float(clearance_cost)
         self._tank = tank
         self._field_cls = GuideField
-        n = int(np.prod(self.shape))
+        n = self.n_points = int(np.prod(self.shape))
         self.capacity = max(1, MAX_GUIDE_VALUES // n)
         #: Incremented whenever the cache starts again: ids from an older generation are void.
         self.generation = 0
         #: The table row of each target cell's field (flat cell index; -1: not built).
         self._row_of = np.full(n, -1, dtype=np.int64)
         self._count = 0
-        self._table = np.empty((min(64, self.capacity), n), dtype=np.float32)
-        self._next = np.empty((min(64, self.capacity), n), dtype=np.int32)
+        self._start_again()
+        self.generation = 0
 
     def __len__(self) -> int:
         """The number of fields kept."""
         return self._count
+
+    def _start_again(self) -> None:
+        """Drop every field (ids given out before are void: see ``generation``), free the tables."""
+        self._row_of[:] = -1
+        self._count = 0
+        self.generation += 1
+        rows = min(64, self.capacity)
+        self._table = np.empty((rows, self.n_points), dtype=np.float32)
+        self._next = np.empty((rows, self.n_points), dtype=np.int32)
+
+    def _over_budget(self, new: int) -> bool:
+        """Whether ``new`` more fields would take the process's guides over the budget."""
+        kept = sum(g._count * g.n_points for g in list(_GUIDES.values()))
+        return kept + new * self.n_points > MAX_GUIDE_VALUES
 
     def _flat(self, cell: NDArray[np.int64]) -> NDArray[np.int64]:
         return (cell[..., 0] * self.shape[1] + cell[..., 1]) * self.shape[2] + cell[..., 2]
@@ -148,14 +162,14 @@ class FieldGuide:
         out = self._row_of[keys]
         if (out >= 0).all():  # every field built already: one gather
             return out
+        if self._count and self._over_budget(len(np.unique(keys[out < 0]))):
+            self._start_again()  # before any id is given out: this call's ids stay valid
+            out = self._row_of[keys]
         for i, key in enumerate(keys.tolist()):
             row = int(self._row_of[key])
             if row < 0:
                 if self._count >= self.capacity:
-                    # full: start again; ids given out before are void (see generation)
-                    self._row_of[:] = -1
-                    self._count = 0
-                    self.generation += 1
+                    self._start_again()
                 row = self._count
                 if row >= len(self._table):
                     size = min(2 * len(self._table), self.capacity)
