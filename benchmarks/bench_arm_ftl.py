@@ -1,15 +1,12 @@
 """AFTIR-ArmFTL-v0: env steps/s, single env against the batched vector env, in one run.
 
-Run: ``python benchmarks/bench_arm_ftl.py [--steps N] [--config CFG] [--pool SPEC]``. One
-process, random
+Run: ``python benchmarks/bench_arm_ftl.py [--steps N] [--config CFG]``. One process, random
 actions (the push biased inwards, so the arm deploys and bends as in training), autoreset;
 FrozenLake-v1 8x8 timed in the same run as a yardstick. The env rows run pinned to one core;
 "as trained" rows use the training config's env kwargs (guide, field shaping, ...) with the
 guide's fields built first, as a run has them after its first minutes. Then PPO trains on the
-config's batched env on every core, and the env's share of its time is measured. ``--pool``
-adds a pool of generated tanks (single env, batched groups, and the pool's first tank alone),
-as trained, its tanks built first and its fields cold, as they stay in a pool. Prints a markdown
-table; ratios are to the single env measured here, side by side.
+config's batched env on every core, and the env's share of its time is measured. Prints a
+markdown table; ratios are to the single env measured here, side by side.
 """
 
 from __future__ import annotations
@@ -23,7 +20,8 @@ import gymnasium as gym
 import numpy as np
 
 import aftir_rl  # noqa: F401
-from aftir_rl.rl.sb3.config import SB3Config, build_model, load_sb3_config
+from aftir_rl.rl.sb3 import load_sb3_config
+from aftir_rl.rl.sb3.config import SB3Config, build_model
 
 ENV_ID = "AFTIR-ArmFTL-v0"
 
@@ -35,8 +33,8 @@ def actions(shape: tuple[int, ...], count: int, seed: int = 0) -> np.ndarray:
     return a
 
 
-def single_rate(env_id: str, steps: int, _env: gym.Env | None = None, **kwargs) -> float:
-    env = gym.make(env_id, **kwargs) if _env is None else _env
+def single_rate(env_id: str, steps: int, **kwargs) -> float:
+    env = gym.make(env_id, **kwargs)
     env.reset(seed=0)
     if isinstance(env.action_space, gym.spaces.Discrete):
         env.action_space.seed(0)
@@ -65,29 +63,6 @@ def vector_rate(num_envs: int, steps: int, **kwargs) -> float:
     for a in acts:
         venv.step(a)
     return len(acts) * num_envs / (time.perf_counter() - start)
-
-
-def pool_rows(pool: str, steps: int, **kwargs) -> list[tuple[str, float]]:
-    """Steps/s of a pool: the single env (every tank visited first), its batched groups (128
-    rows) and its first tank alone in a batched env of 128 rows."""
-    from aftir_rl.envs.ftl.pool import pool_specs
-
-    first = pool_specs(pool)[0]
-    env = gym.make(ENV_ID, tank=pool, **kwargs)
-    for episode in range(4 * len(env.unwrapped.pool)):  # every tank built before timing
-        env.reset(seed=episode)
-    single = single_rate(ENV_ID, steps, _env=env)
-    return [
-        (f"{ENV_ID} single env, pool {pool}, as trained", single),
-        (
-            f"{ENV_ID} vector env, 128 envs, pool {pool}, as trained",
-            vector_rate(128, 20 * steps, tank=pool, **kwargs),
-        ),
-        (
-            f"{ENV_ID} vector env, 128 envs, {first} alone, as trained",
-            vector_rate(128, 20 * steps, tank=first, **kwargs),
-        ),
-    ]
 
 
 def warm_fields(max_draws: int, **kwargs) -> tuple[int, int, int]:
@@ -146,7 +121,6 @@ def main() -> None:
         default="experiments/configs/ppo_ftl_cost.yaml",
         help="training config of the PPO row and of the 'as trained' env rows",
     )
-    parser.add_argument("--pool", help="also a pool of tanks, e.g. wing:3:0-31 (slow to build)")
     args = parser.parse_args()
     config = load_sb3_config(args.config, "ppo")
     trained = dict(config.env_kwargs)
@@ -186,8 +160,6 @@ def main() -> None:
             vector_rate(128, 20 * args.steps, **trained),
         )
     )
-    if args.pool:
-        rows += pool_rows(args.pool, args.steps, **trained)
     if all_cores:
         os.sched_setaffinity(0, all_cores)
     ppo = [ppo_env_share(config, 10 * args.steps) for _ in range(max(1, args.ppo_runs))]
