@@ -100,7 +100,6 @@ def test_batched_pool_rows_are_single_envs_of_their_tanks():
 def test_batched_pool_options_and_bad_input():
     venv = ArmFTLPoolVectorEnv(4, tank="wing:2:0-1", bay=1)
     _, info = venv.reset(seed=0)
-    targets = info["target"][::-1].copy()  # rows 0, 1 (tank 0) get tank 1's targets: check each
     for i, name in enumerate(info["tank"]):
         assert load_tank(name).distance(info["target"][i]) >= 5.0
     own = info["target"].copy()
@@ -112,7 +111,6 @@ def test_batched_pool_options_and_bad_input():
         venv.reset(seed=[1, 2])
     with pytest.raises(ConfigError, match="needs a pool"):
         ArmFTLPoolVectorEnv(2, tank="wing:2:0")
-    assert targets.shape == (4, 3)
 
 
 def test_single_env_tank_option_and_pool_evaluation_targets():
