@@ -24,8 +24,8 @@ from bench_posture import best_time  # benchmarks/ is the script's own folder
 
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.papers import ST2014_TABLE1, ST2014_TABLE2
+from aftir_rl.core.tank.raster import format_point
 from aftir_rl.planning.posture import Planner
-from aftir_rl.planning.posture.context import fmt_point
 from aftir_rl.planning.posture.region_division import bearing, geometric_solution, region_division
 
 
@@ -42,7 +42,7 @@ def table1(planner: Planner, repeats: int) -> None:
         t_blind, _ = best_time(lambda t=target: planner.plan(t, method="blind"), 1)
         t_rd, _ = best_time(lambda t=target: region_division(planner, t), repeats)
         print(
-            f"| {fmt_point(target)} | {t_blind:.3f} | {t_rd * 1e3:.2f} ms | "
+            f"| {format_point(target)} | {t_blind:.3f} | {t_rd * 1e3:.2f} ms | "
             f"{t_blind / t_rd:.0f}x | {paper_blind} | {paper_rd} | "
             f"{paper_blind / paper_rd:.0f}x |"
         )
@@ -63,7 +63,7 @@ def table2(planner: Planner) -> None:
     )
     print("|---:|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for i, row in enumerate(ST2014_TABLE2, start=1):
-        where = f"{fmt_point(row.paper_target)} → {fmt_point(row.target)}"
+        where = f"{format_point(row.paper_target)} → {format_point(row.target)}"
         try:
             r = region_division(planner, row.target)
         except PlanningError as exc:
@@ -99,7 +99,7 @@ def table2_exact() -> None:
         phi = math.degrees(bearing(row.paper_target)) % 360
         bend = math.degrees(c.bend)
         print(
-            f"| {i} | {fmt_point(row.paper_target)} | {c.region} | {c.method} / {row.method} | "
+            f"| {i} | {format_point(row.paper_target)} | {c.region} | {c.method} / {row.method} | "
             f"{phi:.2f} / {row.rotation_deg:g} | {bend:.2f} / {row.bend_deg:g} | "
             f"{c.descending:.2f} / {row.descending_cm:g} | "
             f"{c.joints} / {row.joints} |"

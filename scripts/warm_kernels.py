@@ -3,8 +3,9 @@
     python scripts/warm_kernels.py
 
 Run by ``make install``: the follow-the-leader planner's kernels, the camera's line of sight,
-the ``AFTIR-ArmFTL-v0`` step and the goal-conditioned Q-learning sweep otherwise compile on first
-use (about 45 s in all on 2 cores). Nothing is written but numba's cache files.
+the ``AFTIR-ArmFTL-v0`` step, the posture collision pre-check and the goal-conditioned
+Q-learning sweep otherwise compile on first use (about 45 s in all on 2 cores). Nothing is
+written but numba's cache files.
 """
 
 from __future__ import annotations
@@ -15,8 +16,10 @@ import gymnasium as gym
 import numpy as np
 
 import aftir_rl  # noqa: F401  (registers the envs)
+from aftir_rl.core.collision import CollisionScene
 from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.kernel.visibility import seen_by_groups
+from aftir_rl.core.robot import Posture
 from aftir_rl.core.tank import load_tank
 from aftir_rl.planning.ftl.plan import warm_up
 from aftir_rl.rl.tabular.q_table_goal import train_all_targets
@@ -31,6 +34,7 @@ def main() -> None:
     one = np.array([[0.0, 0.0, 50.0]])
     seen_by_groups(one, one / 50.0, np.array([0, 1]), one + 10.0, one / 50.0,
                    tank.arm.camera.cosines(), kernel_grid(tank), seen)  # fmt: skip
+    CollisionScene(tank).collides_fast(Posture(-60.0, (0.0, 0.0), (0.0, 0.0)))
     env = gym.make("AFTIR-ArmFTL-v0")
     env.reset(seed=0)
     env.step(np.zeros(env.action_space.shape, dtype=np.float32))

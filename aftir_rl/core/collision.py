@@ -22,8 +22,12 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.interrupts import held
+from aftir_rl.core.kernel.arrays import KernelTank
+from aftir_rl.core.kernel.clearance import kernel_grid
+from aftir_rl.core.kernel.sections import posture_verdict
 from aftir_rl.core.robot import ArmSpec, Posture, body_points
 from aftir_rl.core.tank import Solid, Tank, TankDistance
+from aftir_rl.core.tank.plate import ROUND_VERTICES
 from aftir_rl.core.tank.solids import rotation_z_to
 
 __all__ = [
@@ -33,6 +37,10 @@ __all__ = [
     "points_clear",
     "panel_violation",
 ]
+
+
+#: Backbone samples of :meth:`CollisionScene.collides_fast` per sample of the panel rule.
+_FINER = 4
 
 
 @dataclass(frozen=True)
@@ -98,6 +106,12 @@ class CollisionScene:
         self._solid_hi = np.array([b[1] for b in bounds]).reshape(-1, 3)
         self._box_lo = np.array(tank.box_min, dtype=np.float64)
         self._box_hi = np.array(tank.box_max, dtype=np.float64)
+        self._frame = np.array(
+            [*tank.panel.center, tank.panel.radius, *tank.box_min[:2], *tank.box_max],
+            dtype=np.float64,
+        )
+        self._kernel: KernelTank | None = None  # the compiled signed distance, on first use
+        self._bounds = (0.0, math.inf)
 
     def __getstate__(self) -> dict[str, object]:
         # fcl objects do not pickle; a copy rebuilds them (envs are pickled by vector wrappers).
@@ -222,19 +236,55 @@ class CollisionScene:
         return self.arm.section_length / (2 * samples_per_section) + sagitta + 0.1
 
     def collides_fast(self, posture: Posture) -> bool:
-        """:meth:`collides`, with a numpy pre-check that skips python-fcl when it can.
+        """:meth:`collides`, with a compiled pre-check that skips python-fcl when it can.
 
-        The same verdict, several times faster away from the tank's solids. The panel rule is
-        checked on the same backbone samples as :meth:`panel_ok`, ``l/2K`` apart, and samples
-        farther than radius + :meth:`sample_margin` from everything clear every capsule.
+        The same verdict, about ten times faster. The panel rule is checked on the same backbone
+        samples as :meth:`panel_ok`, ``l/2K`` apart, and the distances on four times as many:
+        samples farther than radius + :meth:`sample_margin` from everything clear every capsule;
+        a sample inside the tank's box nearer than the radius less a link's sagitta (and not
+        that near the floor, whose opening python-fcl cuts square) lies in its capsule, which
+        then touches. python-fcl decides the rest. The distance is the tank's exact signed
+        distance (compiled), less what python-fcl's polygonal holes add (:func:`polygon_slack`).
+        A tank with mesh solids, whose distance is read from a grid, is pre-checked against
+        their bounding boxes instead, and a posture bent past the limit goes to python-fcl.
         """
         k = 2 * self.links_per_section
-        pts = posture.points(self.arm.section_length, k)
-        if panel_violation(self.tank, pts[None])[0]:
-            return True
-        if self.far_from_everything(pts, self.arm.radius + self.sample_margin(k)):
-            return False
-        return self._touches(posture)
+        if max(map(abs, posture.theta), default=0.0) > self.arm.theta_max:
+            return self.collides(posture)  # the margins above assume bends within the limit
+        if self._hollow:
+            pts = posture.points(self.arm.section_length, k)
+            if panel_violation(self.tank, pts[None])[0]:
+                return True
+            if self.far_from_everything(pts, self.arm.radius + self.sample_margin(k)):
+                return False
+            return self._touches(posture)
+        if self._kernel is None:
+            self._kernel = kernel_grid(self.tank)
+            clear = self.arm.radius + self.sample_margin(_FINER * k) + polygon_slack(self.tank)
+            self._bounds = (self._inner_radius() - 1e-3, clear)
+        verdict = posture_verdict(
+            posture.dis,
+            np.array(posture.theta),
+            np.array(posture.phi),
+            self.arm.section_length,
+            (_FINER * k, _FINER),
+            self._frame,
+            self._bounds,
+            self._kernel,
+            np.empty((posture.n_sections * _FINER * k + 1, 3)),
+        )
+        return verdict < 0 or (verdict == 0 and self._touches(posture))
+
+    def _inner_radius(self) -> float:
+        """The radius of a ball about any backbone point that lies inside its link's capsule.
+
+        A capsule's axis is the chord of its link's arc, within the sagitta of every point of
+        the arc.
+        """
+        bend = self.arm.theta_max / self.links_per_section
+        link = self.arm.section_length / self.links_per_section
+        sagitta = link / bend * (1 - math.cos(bend / 2)) if bend > 0 else 0.0
+        return self.arm.radius - sagitta
 
     def collides_batch(self, dis: ArrayLike, theta: ArrayLike, phi: ArrayLike) -> NDArray[np.bool_]:
         """:meth:`collides` for postures stacked as arrays ``(B,)``, ``(B, N)``, ``(B, N)``."""
@@ -259,6 +309,22 @@ def _outside_boxes(
             if inside:
                 return False
     return True
+
+
+def polygon_slack(tank: Tank) -> float:
+    """How much nearer [cm] python-fcl's plates can be than the exact signed distance says.
+
+    python-fcl holds a plate's round holes as polygons of ``ROUND_VERTICES`` corners inscribed
+    in them, so its plate reaches into a hole of radius ``r`` by up to ``r (1 - cos(π/V))``.
+    """
+    radii = [
+        max(h.width, h.height) / 2
+        for s in tank.solids
+        if s.kind == "plate"
+        for h in s.holes  # type: ignore[attr-defined]
+        if h.shape != "rect"
+    ]
+    return max(radii, default=0.0) * (1.0 - math.cos(math.pi / ROUND_VERTICES)) + 1e-6
 
 
 def _finite_or_inf(distance: float) -> float:

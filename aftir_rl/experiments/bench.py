@@ -26,6 +26,7 @@ import numpy as np
 from aftir_rl.core import papers
 from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.core.extras import require
+from aftir_rl.core.tank.raster import format_point
 from aftir_rl.experiments.outcomes import Outcome, Planners, Row, method_outcome, needs_ompl
 from aftir_rl.experiments.outcomes import sb3_outcomes as sb3_outcomes
 from aftir_rl.planning.posture.registry import REGISTRY
@@ -140,7 +141,7 @@ def run_benchmark(
             for tank, target in items:
                 planner = planners(tank)
                 if progress:
-                    progress(f"{name} {method} {tuple(np.round(target, 1))}")
+                    progress(f"{name} {method} {format_point(target)}")
                 row.outcomes.append(method_outcome(planner, method, target, **options))
             rows.append(row)
     for run_dir in models:

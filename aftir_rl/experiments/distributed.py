@@ -31,6 +31,7 @@ import numpy as np
 
 from aftir_rl.core.config import shorten
 from aftir_rl.core.errors import AftirError, CheckpointError
+from aftir_rl.core.tank.raster import format_point
 
 __all__ = [
     "INSTALL_HINT",
@@ -343,7 +344,7 @@ def benchmark_on_ray(
             state = "failed" if isinstance(result, TaskFailure) else "done"
             if k < len(items):
                 name, method, _, target = items[order[k]]
-                progress(f"{state}: {name} {method} {tuple(np.round(target, 1))}")
+                progress(f"{state}: {name} {method} {format_point(target)}")
             else:
                 progress(f"{state}: {models[k - len(items)]}")
 

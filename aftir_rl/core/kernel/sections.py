@@ -28,6 +28,7 @@ __all__ = [
     "clearance_at",
     "min_clearance",
     "postures_min_clearance",
+    "posture_verdict",
     "extend",
     "chain",
     "tip_of",
@@ -113,6 +114,43 @@ def postures_min_clearance(
         fk_row(dis[t], theta[t], phi[t], section_length, samples, rot, points)
         best[t] = min_clearance(points, tank)
     return best.min() if entries else math.inf
+
+
+@njit(cache=True)
+def posture_verdict(
+    dis: float,
+    theta: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    section_length: float,
+    samples: tuple[int, int],
+    frame: NDArray[np.float64],
+    bounds: tuple[float, float],
+    tank: KernelTank,
+    points: NDArray[np.float64],
+) -> int:
+    """One posture's backbone into ``points``, and what the samples alone decide about contact.
+
+    ``samples``: samples per section, and the stride of those the panel rule reads.
+    ``frame``: the panel's centre and radius, then the box's corners ``x0, y0, x1, y1, z1``.
+    ``-1``: a sample below the panel's centre lies outside its radius (the panel rule), or a
+    sample inside the box, higher than ``bounds[0]`` above the floor, is nearer the tank than
+    ``bounds[0]`` (exact signed distance); ``1``: every sample is farther than ``bounds[1]``;
+    ``0``: neither, so the body must be checked.
+    """
+    rot = np.empty((3, 3))
+    fk_row(dis, theta, phi, section_length, samples[0], rot, points)
+    touch, clear = bounds
+    for p in range(points.shape[0]):
+        x, y, z = points[p, 0], points[p, 1], points[p, 2]
+        if z < frame[2]:
+            if p % samples[1]:
+                continue
+            if math.sqrt((x - frame[0]) ** 2 + (y - frame[1]) ** 2) > frame[3] + 1e-9:
+                return -1
+        elif frame[4] < x < frame[6] and frame[5] < y < frame[7] and z < frame[8]:
+            if z > frame[2] + touch and clearance_at(x, y, z, tank, touch) < touch:
+                return -1
+    return 1 if min_clearance(points, tank) > clear else 0
 
 
 @njit(cache=True, parallel=True)

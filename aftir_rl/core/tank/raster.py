@@ -22,7 +22,7 @@ __all__ = ["Raster", "format_point"]
 
 def format_point(v: ArrayLike) -> str:
     """``(x, y, z)`` with ``%g`` numbers, for messages."""
-    return "(" + ", ".join(f"{x:g}" for x in np.atleast_1d(v)) + ")"
+    return "(" + ", ".join(f"{float(x):g}" for x in np.asarray(v).ravel()) + ")"
 
 
 @dataclass(frozen=True)

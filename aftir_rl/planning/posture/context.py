@@ -29,13 +29,13 @@ from aftir_rl.core.collision import CollisionReport, CollisionScene, point_clear
 from aftir_rl.core.errors import ConfigError, PlanningError
 from aftir_rl.core.robot import Posture
 from aftir_rl.core.tank import Tank, load_tank
+from aftir_rl.core.tank.raster import format_point
 
 __all__ = [
     "PlannedPosture",
     "PlanningContext",
     "PostureMethod",
     "Method",
-    "fmt_point",
     "random_free_targets",
 ]
 
@@ -80,11 +80,6 @@ class PlannedPosture:
             "method": self.method,
             "seconds": self.seconds,
         }
-
-
-def fmt_point(v: ArrayLike) -> str:
-    """``(x, y, z)`` with ``:g`` numbers, for messages."""
-    return "(" + ", ".join(f"{float(x):g}" for x in np.asarray(v).ravel()) + ")"
 
 
 class PlanningContext:
@@ -146,19 +141,19 @@ class PlanningContext:
             raise PlanningError(f"Cannot reach the target: expected x y z in cm, got {target!r}")
         if not self.tank.contains_point(t):
             raise PlanningError(
-                f"Cannot reach the target: {fmt_point(t)} cm is outside the tank box "
-                f"{fmt_point(self.tank.box_min)}..{fmt_point(self.tank.box_max)}"
+                f"Cannot reach the target: {format_point(t)} cm is outside the tank box "
+                f"{format_point(self.tank.box_min)}..{format_point(self.tank.box_max)}"
             )
         solid = self.tank.solid_at(t)
         if solid is not None:
             raise PlanningError(
-                f"Cannot reach the target: {fmt_point(t)} cm is inside {solid.name or 'a solid'}"
+                f"Cannot reach the target: {format_point(t)} cm is inside {solid.name or 'a solid'}"
             )
         clearance = float(point_clearance(self.tank, t[None])[0])
         if clearance <= self.arm.radius:
             raise PlanningError(
-                f"Cannot reach the target: {fmt_point(t)} cm is {clearance:.1f} cm from a wall or "
-                f"obstacle, closer than the arm's radius {self.arm.radius:g} cm"
+                f"Cannot reach the target: {format_point(t)} cm is {clearance:.1f} cm from a wall "
+                f"or obstacle, closer than the arm's radius {self.arm.radius:g} cm"
             )
         return t
 

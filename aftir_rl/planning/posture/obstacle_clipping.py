@@ -28,8 +28,9 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.robot import Posture, tip_position
 from aftir_rl.core.tank import Sphere, Tank
+from aftir_rl.core.tank.raster import format_point
 from aftir_rl.planning.posture.clipping import clip_regions, gauss_newton
-from aftir_rl.planning.posture.context import Method, PlannedPosture, PlanningContext, fmt_point
+from aftir_rl.planning.posture.context import Method, PlannedPosture, PlanningContext
 from aftir_rl.planning.posture.obstacle_zones import ObstacleProblem
 
 __all__ = [
@@ -265,7 +266,7 @@ def _no_posture(
     target: NDArray[np.float64], n_min: int, n_max: int, r_oba: NDArray[np.float64]
 ) -> PlanningError:
     """The error when no section count from ``n_min`` to ``n_max`` gives a checked posture."""
-    where = fmt_point(target)
+    where = format_point(target)
     if n_min > _MAX_SECTIONS:
         return PlanningError(
             f"Cannot reach the target: {where} cm needs {n_min} sections; region clipping over "

@@ -28,8 +28,9 @@ from numpy.typing import ArrayLike
 
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.robot import Posture
+from aftir_rl.core.tank.raster import format_point
 from aftir_rl.planning.jointspace import pad_sections
-from aftir_rl.planning.posture.context import Method, PlannedPosture, PlanningContext, fmt_point
+from aftir_rl.planning.posture.context import Method, PlannedPosture, PlanningContext
 
 __all__ = [
     "ARC_PEAK",
@@ -328,7 +329,7 @@ def _details(cand: Candidate, psi: float, posture: Posture, tried: int) -> dict[
 
 
 def _failure(goal: np.ndarray, found: Sequence[Candidate], reasons: Sequence[str]) -> str:
-    where = fmt_point(goal)
+    where = format_point(goal)
     if not found:
         return (
             f"Cannot reach the target: region division has no arc to {where} cm within the "

@@ -25,7 +25,8 @@ from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.kernel.planar import planar_clear
 from aftir_rl.core.robot import Posture
-from aftir_rl.planning.posture.context import Method, PlannedPosture, PlanningContext, fmt_point
+from aftir_rl.core.tank.raster import format_point
+from aftir_rl.planning.posture.context import Method, PlannedPosture, PlanningContext
 from aftir_rl.planning.posture.search import (
     BLIND_LIMIT,
     Feasible,
@@ -250,7 +251,7 @@ def tga(
     if found is None:
         raise PlanningError(
             f"Cannot reach the target: no collision-free {method.upper()} posture of "
-            f"{sections.start} to {sections.stop - 1} sections reaches {fmt_point(target)} cm"
+            f"{sections.start} to {sections.stop - 1} sections reaches {format_point(target)} cm"
         )
     theta, dis, result = found
     posture = Posture(dis, theta, (psi,) * len(theta))

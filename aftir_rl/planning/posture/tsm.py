@@ -25,7 +25,8 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.core.collision import CollisionReport, point_clearance
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.robot import Posture, forward_kinematics, section_transforms
-from aftir_rl.planning.posture.context import Method, PlannedPosture, PlanningContext, fmt_point
+from aftir_rl.core.tank.raster import format_point
+from aftir_rl.planning.posture.context import Method, PlannedPosture, PlanningContext
 from aftir_rl.planning.posture.search import SearchResult
 from aftir_rl.planning.posture.tga import Frame, search_sections
 
@@ -69,7 +70,7 @@ def tsm(context: PlanningContext, target: ArrayLike) -> PlannedPosture:
         counts = Counter(r.split(": ", 1)[-1] if "deg:" in r else r for r in reasons)
         why = "; ".join(f"{k} ({v}x)" if v > 1 else k for k, v in counts.most_common(3))
         raise PlanningError(
-            f"Cannot reach the target: TSM found no posture to {fmt_point(target)} cm ({why})"
+            f"Cannot reach the target: TSM found no posture to {format_point(target)} cm ({why})"
         )
     posture, details, report = best
     return context.checked(posture, target, "tsm", context.tolerance, details, start, report)
