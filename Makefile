@@ -50,7 +50,7 @@ docs: $(STAMP)
 	OMP_NUM_THREADS=1 $(VENV)/bin/sphinx-build -W --keep-going -q -b html docs docs/_build/html
 	@echo "open docs/_build/html/index.html"
 
-bench: $(STAMP)  ## every benchmark table of docs/benchmarks.md (about 12 minutes on 2 cores)
+bench: $(STAMP)  ## every benchmark table of docs/benchmarks.md (about 10 minutes on 2 cores)
 	$(PY) benchmarks/bench_tank.py
 	$(PY) benchmarks/bench_posture.py
 	$(PY) benchmarks/bench_icra2014.py

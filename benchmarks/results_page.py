@@ -156,7 +156,7 @@ def readme_table(results: Path) -> str:
                 what = METHODS.get(r["method"], "")
                 lines.append(
                     f"| `{r['method']}`: {what} | bay 2, {r['targets']} random targets | "
-                    f"{_num(r['success_rate'] * 100, '.0f')}% | {_num(r['seconds'], '.2f')} s "
+                    f"{_num(r['success_rate'] * 100, '.0f')}% | {_num(r['seconds'], '.2g')} s "
                     "per target | one run |"
                 )
     for path in sorted(results.glob("seeds_*.json")):

@@ -5,7 +5,8 @@ are hollow) and checks the arm as a chain of capsules of its body radius, built 
 with ``setTransform``; only arm-against-tank pairs are tested. The access-panel rule
 (docs/design.md §2) holds for every posture. :func:`point_clearance` is the vectorised numpy
 counterpart on backbone points (:class:`~aftir_rl.core.tank.distance.TankDistance`), which the
-planners use to pre-filter candidate postures before the exact fcl check of the one they return.
+planners use to pre-filter candidate postures before the exact fcl check of the one they return;
+:meth:`CollisionScene.collides_fast` gives fcl's verdict, asking fcl only near contact.
 The walls, the capsules, the precision of the check and why self-collision is not checked:
 docs/design.md §3.
 """
