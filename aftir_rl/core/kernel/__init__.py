@@ -2,7 +2,8 @@
 
 One loop per arm or point, no temporaries. By concern: :mod:`.geometry` (forward kinematics,
 shift-and-copy, the tank's signed distance and the arms' clearance, usable targets), :mod:`.guide`
-(the guide field: Dijkstra and queries), :mod:`.sections` and :mod:`.deployment` (the route
+(the guide field: Dijkstra and queries), :mod:`.surface` (the clearance of the whole backbone,
+between its samples too), :mod:`.sections` and :mod:`.deployment` (the route
 search and the deployment), :mod:`.arrays` (the arrays they read), :mod:`.packing` and
 :mod:`.clearance` (a tank packed into those arrays, with its clearance grid). Compiled on first
 use and cached beside the files (``cache=True``); each is tested equal to its numpy definition.
@@ -17,6 +18,7 @@ from aftir_rl.core.kernel.geometry import (
     usable,
 )
 from aftir_rl.core.kernel.guide import Grid, descend_field, guide_query, lookahead
+from aftir_rl.core.kernel.surface import surface_clearance
 
 __all__ = [
     "Grid",
@@ -29,5 +31,6 @@ __all__ = [
     "refresh",
     "sdf",
     "steering_frames",
+    "surface_clearance",
     "usable",
 ]

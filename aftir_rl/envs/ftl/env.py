@@ -257,7 +257,7 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
             "is_success": success,
             "collision": hit,
             "distance_cm": float(distance[0]),
-            "min_clearance_cm": float(b.body_clearance[0]),
+            "min_clearance_cm": float(b.surface_clearance[0]),
         }
         obs = {k: v[0] for k, v in rows.items()}
         return obs, float(reward[0]), success or hit, False, info
@@ -415,7 +415,7 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
             is_success=success,
             collision=contact,
             distance_cm=distance,
-            min_clearance_cm=b.body_clearance.copy(),
+            min_clearance_cm=b.surface_clearance.copy(),
         )
         done = terminated | truncated
         ended = np.flatnonzero(done)

@@ -185,7 +185,9 @@ class FTLBatch:
         (:func:`ftl_kappa_batch`), the backbone samples (:func:`~aftir_rl.core.robot.body_points`),
         the exact body clearance (:meth:`ClearanceGrid.row_min
         <aftir_rl.core.kernel.clearance.ClearanceGrid.row_min>`) and the rays' clearances
-        (:meth:`~aftir_rl.core.kernel.clearance.ClearanceGrid.approx`). Below the floor the body is
+        (:meth:`~aftir_rl.core.kernel.clearance.ClearanceGrid.approx`); then the surface clearance
+        between the samples too (:func:`aftir_rl.core.kernel.surface_clearance`), which the
+        contact rule reads. Below the floor the body is
         straight on the guide's axis (the route starts at the floor), where the distance does
         not change with depth: the base stands for every sample deeper than the opening's rim
         can reach. For every env, every array is new (holders of the previous ones keep them);
@@ -197,7 +199,8 @@ class FTLBatch:
             self.theta, self.phi = np.empty((b, n)), np.empty((b, n))
             self.points = np.empty((b, n * self.k_samples + 1, 3))
             self.heading = np.empty((b, 3))
-            self.body_clearance = np.empty(b)  # surface [cm]
+            self.body_clearance = np.empty(b)  # surface [cm], at the samples
+            self.surface_clearance = np.empty(b)  # surface [cm], between them too
             self.ray_clearance = np.empty((b, (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)))
         core_kernel.refresh(
             np.asarray(rows, dtype=np.int64),
@@ -209,9 +212,18 @@ class FTLBatch:
             (_RAY_AXES, _RAY_STEPS),
             self._kernel_tank,
         )
+        core_kernel.surface_clearance(
+            np.asarray(rows, dtype=np.int64),
+            self.kernel_arms(),
+            self.l,
+            self.k_samples,
+            (float(self.arm.radius), float(self.margin), self._deep),
+            self._kernel_tank,
+            self.surface_clearance,
+        )
         self.dis = self.s - n * self.l
         self.tip = self.points[:, -1]
-        self.contact = self.body_clearance < self.margin
+        self.contact = self.surface_clearance < self.margin
 
     def kernel_arms(self) -> core_kernel.KernelArms:
         """The batch's arrays as the compiled kernels read them (the arrays themselves)."""
