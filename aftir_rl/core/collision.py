@@ -249,10 +249,21 @@ class CollisionScene:
         A tank with mesh solids, whose distance is read from a grid, is pre-checked against
         their bounding boxes instead, and a posture bent past the limit goes to python-fcl.
         """
+        return self.collides_joints(posture.dis, np.array(posture.theta), np.array(posture.phi))
+
+    def collides_joints(
+        self, dis: float, theta: NDArray[np.float64], phi: NDArray[np.float64]
+    ) -> bool:
+        """:meth:`collides_fast` of the posture ``(dis, theta, phi)`` given as float arrays.
+
+        For callers that hold joint vectors (RRT-Connect's states): no :class:`Posture` is built
+        unless python-fcl is asked.
+        """
         k = 2 * self.links_per_section
-        if max(map(abs, posture.theta), default=0.0) > self.arm.theta_max:
-            return self.collides(posture)  # the margins above assume bends within the limit
+        if theta.size and float(np.max(np.abs(theta))) > self.arm.theta_max:
+            return self.collides(Posture(dis, theta, phi))  # the margins assume bends in limit
         if self._hollow:
+            posture = Posture(dis, theta, phi)
             pts = posture.points(self.arm.section_length, k)
             if panel_violation(self.tank, pts[None])[0]:
                 return True
@@ -264,17 +275,17 @@ class CollisionScene:
             clear = self.arm.radius + self.sample_margin(_FINER * k) + polygon_slack(self.tank)
             self._bounds = (self._inner_radius() - 1e-3, clear)
         verdict = posture_verdict(
-            posture.dis,
-            np.array(posture.theta),
-            np.array(posture.phi),
+            float(dis),
+            theta,
+            phi,
             self.arm.section_length,
             (_FINER * k, _FINER),
             self._frame,
             self._bounds,
             self._kernel,
-            np.empty((posture.n_sections * _FINER * k + 1, 3)),
+            np.empty((theta.size * _FINER * k + 1, 3)),
         )
-        return verdict < 0 or (verdict == 0 and self._touches(posture))
+        return verdict < 0 or (verdict == 0 and self._touches(Posture(dis, theta, phi)))
 
     def _inner_radius(self) -> float:
         """The radius of a ball about any backbone point that lies inside its link's capsule.

@@ -256,7 +256,7 @@ def rrt_connect(
 
     def valid(state: object) -> bool:
         checks[0] += 1
-        return not scene.collides_fast(frame.posture(state))
+        return not scene.collides_joints(*frame.joints(state))
 
     space, bounds, setup, states = _simple_setup(ob, og, frame, valid, resolution)
     plan = _solve(setup, frame, simplify, time_limit)
@@ -322,6 +322,19 @@ class _JointFrame:
         dims = 1 + (n if plane is not None else 2 * n)
         x0, x1, low, high = x0[:dims], x1[:dims], low[:dims], high[:dims]
         return cls(scene, start, goal, dims, x0, x1, low, high, ends, plane, family, sign)
+
+    def joints(self, state: object) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
+        """``dis`` [cm] and the ``θ``, ``φ`` arrays of an OMPL state (:meth:`posture`'s values)."""
+        x: NDArray[np.float64] = np.fromiter(
+            (state[i] for i in range(self.dims)),  # type: ignore[index]
+            np.float64,
+            self.dims,
+        )
+        if self.plane is not None:
+            assert self.sign is not None and self.family is not None
+            return float(x[0]) * self.scene.arm.section_length, x[1:] * self.sign, self.family
+        n = (self.dims - 1) // 2
+        return float(x[0]) * self.scene.arm.section_length, x[1 : n + 1], x[n + 1 :]
 
     def posture(self, state: object) -> Posture:
         """The posture of an OMPL state."""
