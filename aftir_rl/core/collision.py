@@ -239,15 +239,16 @@ class CollisionScene:
     def collides_fast(self, posture: Posture) -> bool:
         """:meth:`collides`, with a compiled pre-check that skips python-fcl when it can.
 
-        The same verdict, about ten times faster. The panel rule is checked on the same backbone
-        samples as :meth:`panel_ok`, ``l/2K`` apart, and the distances on four times as many:
-        samples farther than radius + :meth:`sample_margin` from everything clear every capsule;
-        a sample inside the tank's box nearer than the radius less a link's sagitta (and not
-        that near the floor, whose opening python-fcl cuts square) lies in its capsule, which
-        then touches. python-fcl decides the rest. The distance is the tank's exact signed
-        distance (compiled), less what python-fcl's polygonal holes add (:func:`polygon_slack`).
-        A tank with mesh solids, whose distance is read from a grid, is pre-checked against
-        their bounding boxes instead, and a posture bent past the limit goes to python-fcl.
+        The same verdict, about ten times faster than :meth:`collides`. The panel rule is
+        checked on the same backbone samples as :meth:`panel_ok`, ``l/2K`` apart, and the
+        distances on four times as many: samples farther than radius + :meth:`sample_margin`
+        from everything clear every capsule; a sample inside the tank's box nearer than the
+        radius less a link's sagitta (and not that near the floor, whose opening python-fcl
+        cuts square) lies in its capsule, which then touches. python-fcl decides the rest. The
+        distance is the tank's exact signed distance (compiled), less what python-fcl's
+        polygonal holes add (:func:`polygon_slack`). A tank with mesh solids, whose distance is
+        read from a grid, or a scene built without the tank's walls is pre-checked against
+        bounding boxes instead, and a posture bent past the limit goes to python-fcl.
         """
         return self.collides_joints(posture.dis, np.array(posture.theta), np.array(posture.phi))
 
@@ -262,7 +263,7 @@ class CollisionScene:
         k = 2 * self.links_per_section
         if theta.size and float(np.max(np.abs(theta))) > self.arm.theta_max:
             return self.collides(Posture(dis, theta, phi))  # the margins assume bends in limit
-        if self._hollow:
+        if self._hollow or self.walls != self.tank.walls:
             posture = Posture(dis, theta, phi)
             pts = posture.points(self.arm.section_length, k)
             if panel_violation(self.tank, pts[None])[0]:

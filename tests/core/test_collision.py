@@ -224,3 +224,19 @@ def test_compiled_pre_check_gives_python_fcls_verdict(name):
     verdicts = [(scene.collides_fast(p), scene.collides(p)) for p in near + anywhere]
     assert all(fast == full for fast, full in verdicts)
     assert 0 < sum(full for _, full in verdicts) < len(verdicts)
+
+
+def test_pre_check_of_a_scene_without_walls_gives_its_verdict():
+    """A scene built without the tank's walls is not pre-checked with the walls' distance."""
+    from aftir_rl.core.tank import load_tank
+
+    scene = CollisionScene(load_tank("b737_center"), walls=False)
+    rng = np.random.default_rng(5)
+    postures = [Posture(10.0, (0.0, 0.0), (0.0, 0.0))]  # pokes through the ceiling: no wall
+    theta = rng.uniform(-1, 1, (200, 3)) * scene.arm.theta_max
+    postures += [
+        Posture(d, t, p)
+        for d, t, p in zip(rng.uniform(-150, 0, 200), theta, rng.uniform(-4, 4, (200, 3)))
+    ]
+    assert all(scene.collides_fast(p) == scene.collides(p) for p in postures)
+    assert not scene.collides_fast(postures[0])
