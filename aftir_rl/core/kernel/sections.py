@@ -29,6 +29,7 @@ __all__ = [
     "min_clearance",
     "postures_min_clearance",
     "posture_verdict",
+    "postures_clear",
     "extend",
     "chain",
     "tip_of",
@@ -114,6 +115,23 @@ def postures_min_clearance(
         fk_row(dis[t], theta[t], phi[t], section_length, samples, rot, points)
         best[t] = min_clearance(points, tank)
     return best.min() if entries else math.inf
+
+
+@njit(cache=True, parallel=True)
+def postures_clear(
+    points: NDArray[np.float64], limit: float, tank: KernelTank, out: NDArray[np.bool_]
+) -> None:
+    """``out[b]``: every point ``points[b] (P, 3)`` is farther than ``limit`` from the tank.
+
+    The grid's bound decides where it can; the exact distance elsewhere, until a point fails.
+    """
+    for b in prange(points.shape[0]):
+        out[b] = True
+        for p in range(points.shape[1]):
+            if clearance_at(points[b, p, 0], points[b, p, 1], points[b, p, 2], tank,
+                            limit + 1e-9) <= limit:  # fmt: skip
+                out[b] = False
+                break
 
 
 @njit(cache=True)
