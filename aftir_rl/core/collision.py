@@ -231,10 +231,8 @@ class CollisionScene:
         point of the arc is within half the sample spacing ``l/2k`` of a sample. With 0.1 cm of
         slack for rounding.
         """
-        bend = self.arm.theta_max / self.links_per_section
-        link = self.arm.section_length / self.links_per_section
-        sagitta = link / bend * (1 - math.cos(bend / 2)) if bend > 0 else 0.0
-        return self.arm.section_length / (2 * samples_per_section) + sagitta + 0.1
+        spacing = self.arm.section_length / samples_per_section
+        return spacing / 2 + self._link_sagitta() + 0.1
 
     def collides_fast(self, posture: Posture) -> bool:
         """:meth:`collides`, with a compiled pre-check that skips python-fcl when it can.
@@ -294,10 +292,13 @@ class CollisionScene:
         A capsule's axis is the chord of its link's arc, within the sagitta of every point of
         the arc.
         """
+        return self.arm.radius - self._link_sagitta()
+
+    def _link_sagitta(self) -> float:
+        """How far a capsule's axis, the chord of its link, lies from the arc at most [cm]."""
         bend = self.arm.theta_max / self.links_per_section
         link = self.arm.section_length / self.links_per_section
-        sagitta = link / bend * (1 - math.cos(bend / 2)) if bend > 0 else 0.0
-        return self.arm.radius - sagitta
+        return link / bend * (1 - math.cos(bend / 2)) if bend > 0 else 0.0
 
     def collides_batch(self, dis: ArrayLike, theta: ArrayLike, phi: ArrayLike) -> NDArray[np.bool_]:
         """:meth:`collides` for postures stacked as arrays ``(B,)``, ``(B, N)``, ``(B, N)``."""

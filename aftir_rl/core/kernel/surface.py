@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.kernel.arrays import KernelArms, KernelTank
 from aftir_rl.core.kernel.geometry import grid_value, rotate, sdf
-from aftir_rl.core.robot import SMALL
+from aftir_rl.core.kernel.sections import arc_point
 
 __all__ = ["FINEST", "surface_clearance"]
 
@@ -41,11 +41,8 @@ def _backbone_point(
     ox, oy, oz = 0.0, 0.0, base[0]
     for i in range(theta.shape[0]):
         t = min(arc, l)
-        th, cp, sp = theta[i] * t / l, math.cos(phi[i]), math.sin(phi[i])
-        h = 0.5 * th
-        sinc_h = 1.0 - h * h / 6.0 if abs(h) < 0.5 * SMALL else math.sin(h) / h
-        radial = t * (h * sinc_h * sinc_h)
-        lx, ly, lz = radial * cp, radial * sp, t * (sinc_h * math.cos(h))
+        cp, sp = math.cos(phi[i]), math.sin(phi[i])
+        lx, ly, lz = arc_point(theta[i] * t / l, cp, sp, t)
         ox += rot[0, 0] * lx + rot[0, 1] * ly + rot[0, 2] * lz
         oy += rot[1, 0] * lx + rot[1, 1] * ly + rot[1, 2] * lz
         oz += rot[2, 0] * lx + rot[2, 1] * ly + rot[2, 2] * lz
@@ -131,11 +128,11 @@ def surface_clearance(
         lower = np.empty(n_points)
         for p in range(n_points):
             x, y, z = points[p, 0], points[p, 1], points[p, 2]
-            v = grid_value(x, y, z, lo, spacing, shape, tank.grid_offset, tank.grid_values)
             if p == 0 or z <= deep:
                 lower[p] = base_distance
-            else:
-                lower[p] = sdf(x, y, z, tank) if math.isnan(v) else v - tank.slack
+                continue
+            v = grid_value(x, y, z, lo, spacing, shape, tank.grid_offset, tank.grid_values)
+            lower[p] = sdf(x, y, z, tank) if math.isnan(v) else v - tank.slack
         for p in range(n_points - 1):
             a, c = lower[p], lower[p + 1]
             if min(min(a, c), 0.5 * (a + c - h)) >= threshold:
