@@ -5,11 +5,13 @@ The env's arm traces a route of constant-curvature sections that start at the fl
 while the tip is in it. :func:`route_actions` turns such a route into the env's actions: pull
 back to the floor, then for each route section steer at its start, where none of it is part of
 the body yet, and push through it. :class:`FTLExpert` plans the route
-(:func:`~aftir_rl.planning.ftl.route.plan_route`, lead 0, the main search variants of
+(:func:`~aftir_rl.planning.ftl.route.plan_route`, lead 0, the search settings of
 :func:`~aftir_rl.planning.ftl.plan.plan_motion`) and replays the actions in a copy of the env:
 between stages the env's body interpolates its sections, which can graze what the planned route
 clears, so the route's slack is raised until the env itself ends the episode in success and
-python-fcl finds the margin kept at every step. Only such replayed motions are returned.
+python-fcl finds the margin kept at every step. Only such replayed motions are returned. A
+route whose closing moved its start off the floor by up to ``max_lead`` is replayed as if it
+started there (the motion is shifted along the panel's axis by that much; the replay judges it).
 """
 
 from __future__ import annotations
@@ -26,15 +28,52 @@ from aftir_rl.core.collision import CollisionScene
 from aftir_rl.core.errors import ConfigError, PlanningError
 from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.envs.ftl.spec import TRAINING_ONLY_KWARGS
-from aftir_rl.planning.ftl.plan import MAIN_VARIANTS, warm_up
-from aftir_rl.planning.ftl.route import plan_route
+from aftir_rl.planning.ftl.plan import SEARCH_VARIANTS, warm_up
+from aftir_rl.planning.ftl.route import RouteSettings, plan_route
 
-__all__ = ["ExpertPlan", "FTLExpert", "SLACKS", "route_actions"]
+__all__ = [
+    "EXPERT_SETTINGS",
+    "ExpertPlan",
+    "ExpertPolicy",
+    "FTLExpert",
+    "MAX_LEAD",
+    "SLACKS",
+    "arm_state",
+    "route_actions",
+]
 
 #: Extra route clearances [cm] tried in turn, for the env's deviation between stages.
 SLACKS = (5.0, 8.0, 3.0, 1.5)
+#: The largest start off the floor [cm] (a route's ``lead``) replayed from the floor.
+MAX_LEAD = 1.0
+#: The route searches tried in turn, each with every slack of :data:`SLACKS`: those of
+#: :func:`~aftir_rl.planning.ftl.plan.plan_motion` (its slacks replaced), all starting on the
+#: floor, where the env's arm starts.
+EXPERT_SETTINGS: tuple[RouteSettings, ...] = tuple(
+    dict.fromkeys(replace(v, slack=0.0, leads=(0.0,)) for v in SEARCH_VARIANTS)
+)
 #: Env keyword arguments that change only the observation or the reward: the replay drops them.
 _SIM_DROPS = ("guide", "near_goal", "shaping", "step_cost", "render_mode", "bay", "target")
+
+
+#: What the env's arm is: the traced route's ``κ`` ``(k + 1, 2)``, the steered section ``k`` and
+#: the tip's arc length ``s`` [cm].
+ArmState = tuple[NDArray[np.float64], int, float]
+
+
+def arm_state(env: ArmFTLEnv) -> ArmState:
+    """The arm of a single ``AFTIR-ArmFTL-v0`` env (:data:`ArmState`), a copy."""
+    return env.route_kappa, int(env.batch.k[0]), env.insertion
+
+
+def same_arm(a: ArmState, b: ArmState) -> bool:
+    """Whether two arms are the same to 1e-9 (κ [rad], s [cm])."""
+    return (
+        a[1] == b[1]
+        and abs(a[2] - b[2]) <= 1e-9
+        and a[0].shape == b[0].shape
+        and bool(np.allclose(a[0], b[0], rtol=0.0, atol=1e-9))
+    )
 
 
 def route_actions(
@@ -105,12 +144,22 @@ class FTLExpert:
     Args:
         max_seconds: planning budget per target [s].
         max_steps: the most actions a motion may take (the env truncates at 300).
+        max_lead: routes that start up to this far off the floor [cm] are replayed from it
+            (0: only routes that start on it).
+        settings: the route searches tried in turn (default :data:`EXPERT_SETTINGS`).
         env_kwargs: the env's keyword arguments (those of the task: tank, steps, margin,
             steer...; the observation's and the reward's are ignored).
 
     """
 
-    def __init__(self, max_seconds: float = 30.0, max_steps: int = 300, **env_kwargs: Any):
+    def __init__(
+        self,
+        max_seconds: float = 30.0,
+        max_steps: int = 300,
+        max_lead: float = MAX_LEAD,
+        settings: tuple[RouteSettings, ...] = EXPERT_SETTINGS,
+        **env_kwargs: Any,
+    ):
         sim_kwargs = {
             k: v
             for k, v in env_kwargs.items()
@@ -119,15 +168,22 @@ class FTLExpert:
         self.sim = ArmFTLEnv(**sim_kwargs)
         self.max_seconds = float(max_seconds)
         self.max_steps = int(max_steps)
+        self.max_lead = float(max_lead)
+        self.settings = tuple(settings)
         self.scene = CollisionScene(self.sim.tank)
 
     def replay(
-        self, target: ArrayLike, actions: NDArray[np.float32], state: ArmFTLEnv | None = None
+        self,
+        target: ArrayLike,
+        actions: NDArray[np.float32],
+        state: ArmFTLEnv | None = None,
+        arms: list[ArmState] | None = None,
     ) -> tuple[bool, int, float]:
         """Replay ``actions`` from the start (or from ``state``'s arm): success, steps, clearance.
 
         Success: the env's (the tip within tolerance, no contact) with python-fcl's surface
         clearance at least the margin after every step; the clearance returned is fcl's least.
+        ``arms``, when given, gets the arm after each step (:func:`arm_state`).
         """
         sim, b = self.sim, self.sim.batch
         sim.reset(options={"target": np.asarray(target, dtype=np.float64)})
@@ -138,6 +194,8 @@ class FTLExpert:
         least = math.inf
         for t, a in enumerate(actions[: self.max_steps]):
             _, _, done, _, info = sim.step(a)
+            if arms is not None:
+                arms.append(arm_state(sim))
             least = min(least, self.scene.clearance(sim.posture))
             if least < b.margin:
                 return False, t + 1, least
@@ -156,19 +214,17 @@ class FTLExpert:
         start = time.perf_counter()
         target = np.asarray(target, dtype=np.float64)
         tries = 0
-        # each setting once whatever its slack (the slacks below replace it); not the last
-        # resorts: their deep leads are not the env's, and their wide beams cost a miss minutes
-        for settings in dict.fromkeys(replace(v, slack=0.0) for v in MAIN_VARIANTS):
+        for settings in self.settings:
             for slack in SLACKS:  # more slack while the env's deployment grazes
                 left = self.max_seconds - (time.perf_counter() - start)
                 if left <= 0:
                     return None
-                knobs = replace(settings, leads=(0.0,), slack=slack, max_seconds=min(left, 8.0))
+                knobs = replace(settings, slack=slack, max_seconds=min(left, 8.0))
                 try:
                     found = plan_route(tank, target, None, knobs, tank.arm)
                 except PlanningError:  # the search changes with the slack: the next may find one
                     continue
-                if abs(found.route.lead) > 1e-9:  # a near closing moved it: not the env's
+                if abs(found.route.lead) > self.max_lead + 1e-9:  # closing moved it too far
                     continue
                 tries += 1
                 origin = state if state is not None else self._start()
@@ -190,3 +246,117 @@ class FTLExpert:
         """The sim at the start of an episode (its arm as every episode starts)."""
         self.sim.batch.reset_rows(np.array([0]), self.sim.batch.target[:1])
         return self.sim
+
+
+class ExpertPolicy:
+    """The expert as the policy of one ``AFTIR-ArmFTL-v0`` env: plans, follows, recovers.
+
+    It reads the target and the arm from ``env`` (a ``gym.make`` env or an :class:`ArmFTLEnv`).
+    At an episode's first call (a new target) it plans from the arm as it is and plays the
+    plan's actions, checking before each that the env's arm is where the plan's replay put it.
+    When not (another action was taken, as a learner's in DAgger), it replans from the arm as it
+    is (pull back to the floor, deploy a new route: :meth:`FTLExpert.plan` with ``state``).
+    When that finds nothing within the budget it falls back: it pulls the arm back to the floor
+    and plans once more from there; when that fails too it holds the arm still. Call
+    :meth:`reset` (or ``predict`` with ``episode_start``) when an episode starts.
+
+    Args:
+        env: the env the policy acts in.
+        expert: the planner, made with the env's keyword arguments (default: one made from
+            those ``gym.make`` recorded in ``env.spec``, with ``max_seconds``).
+        max_seconds: planning budget per (re)plan [s], for the default expert.
+
+    Raises:
+        ConfigError: no ``expert`` for an env not made by ``gym.make``, or an expert whose
+            tank, steering or steps are not the env's.
+
+    """
+
+    def __init__(self, env: Any, expert: FTLExpert | None = None, max_seconds: float = 10.0):
+        self.env: ArmFTLEnv = env.unwrapped
+        if expert is None:
+            if self.env.spec is None:
+                raise ConfigError("ExpertPolicy: pass expert=FTLExpert(**the env's kwargs)")
+            expert = FTLExpert(max_seconds=max_seconds, **self.env.spec.kwargs)
+        mine, its = self.env.batch, expert.sim.batch
+        same = (mine.steer, mine.kappa_step, mine.push_step, mine.l) == (
+            its.steer,
+            its.kappa_step,
+            its.push_step,
+            its.l,
+        )
+        if not same or expert.sim.tank != self.env.tank:
+            raise ConfigError(
+                "ExpertPolicy: the expert's tank, steering or steps are not the env's"
+            )
+        self.expert = expert
+        #: Plans made after the first of an episode (the state had left the plan).
+        self.replans = 0
+        #: Calls that fell back to pulling the arm back (no plan from where the arm was).
+        self.fallbacks = 0
+        self._target: NDArray[np.float64] | None = None
+        self._actions: NDArray[np.float32] = np.zeros((0, 3), np.float32)
+        self._arms: list[ArmState] = []
+        self._next = 0
+        self._retreat = False
+        self.reset()
+
+    def predict(
+        self,
+        observation: Any = None,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[NDArray[np.float32], None]:
+        """The next action, SB3's ``predict`` signature (the env is read, not ``observation``)."""
+        if episode_start is not None and np.any(episode_start):
+            self.reset()
+        return self(), None
+
+    def reset(self) -> None:
+        """Forget the plan: the next call plans from the env's arm."""
+        self._target, self._retreat = None, False
+        self._actions, self._arms, self._next = np.zeros((0, 3), np.float32), [], 0
+
+    def __call__(self) -> NDArray[np.float32]:
+        """The next action for the env as it is now."""
+        target, arm = self.env.target, arm_state(self.env)
+        if self._target is None or not np.array_equal(target, self._target):
+            self._target, self._retreat = target, False
+            self._plan(target)
+        elif not self._on_plan(arm):
+            self.replans += 1
+            self._plan(target)
+        if self._next < len(self._actions):
+            self._next += 1
+            return self._actions[self._next - 1]
+        if self._retreat and self.env.insertion <= 1e-9:  # back on the floor: one more plan
+            self._retreat = False
+            self._plan(target)
+            if len(self._actions):
+                self._next = 1
+                return self._actions[0]
+        if not self._retreat and self.env.insertion > 1e-9 and not len(self._actions):
+            self.fallbacks += 1
+            self._retreat = True
+        return self._hold(-1.0 if self._retreat else 0.0)
+
+    def _on_plan(self, arm: ArmState) -> bool:
+        """Whether the arm is where the plan put it after the actions played so far."""
+        return self._next == 0 or same_arm(arm, self._arms[self._next - 1])
+
+    def _plan(self, target: NDArray[np.float64]) -> None:
+        """Plan from the env's arm; keep the actions and the arm the replay had after each."""
+        self._actions, self._arms, self._next = np.zeros((0, 3), np.float32), [], 0
+        plan = self.expert.plan(target, state=self.env)
+        if plan is not None:
+            arms: list[ArmState] = []
+            self.expert.replay(target, plan.actions, self.env, arms)
+            self._actions, self._arms = plan.actions, arms
+
+    def _hold(self, push: float) -> NDArray[np.float32]:
+        """Keep the steered bend, pushing ``push`` (-1: pull back a step, 0: hold)."""
+        b = self.env.batch
+        bend = b.kappa[0, b.k[0]] / float(self.env.arm.theta_max)
+        steer = bend if b.steer == "target" else np.zeros(2)
+        return np.clip(np.array([steer[0], steer[1], push], np.float32), -1.0, 1.0)

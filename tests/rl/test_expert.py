@@ -9,7 +9,7 @@ from aftir_rl.core.collision import CollisionScene
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.planning.ftl.model import Route
-from aftir_rl.rl.expert import FTLExpert, route_actions
+from aftir_rl.rl.expert import EXPERT_SETTINGS, ExpertPolicy, FTLExpert, route_actions
 
 KWARGS = {"bay": 2, "steer": "target", "guide": True, "shaping": "field", "step_cost": 0.02}
 
@@ -76,6 +76,94 @@ def test_the_expert_reaches_a_target_without_contact(target):
         assert not info["contact"] and not trunc
         assert term == (k == len(plan.actions) - 1)
     assert info["is_success"] and info["distance_cm"] < 2.0
+
+
+def _replays_clear(plan, target):
+    """Whether the env ends ``plan`` in success, python-fcl keeping the margin at every step."""
+    import gymnasium as gym
+
+    env = gym.make("AFTIR-ArmFTL-v0", **KWARGS)
+    env.reset(options={"target": target})
+    scene = CollisionScene(env.unwrapped.tank)
+    least = np.inf
+    for a in plan.actions:
+        _, _, term, trunc, info = env.step(a)
+        least = min(least, scene.check(env.unwrapped.posture).clearance_cm)
+    return bool(term and info["is_success"] and not info["contact"]) and least >= 1.0
+
+
+def test_a_route_a_little_off_the_floor_is_replayed_from_it():
+    """A target (reset seed 2,000,001) whose only clear route of the main search settings
+    starts 0.31 cm below the floor: refused with ``max_lead=0``, replayed to success with the
+    default 1 cm (the motion shifted up by 0.31 cm, the tip within tolerance)."""
+    target = (153.40852063499338, 88.32054359939697, 50.93567738346021)
+    main = EXPERT_SETTINGS[:6]
+    assert FTLExpert(max_seconds=10.0, max_lead=0.0, settings=main, **KWARGS).plan(target) is None
+    plan = FTLExpert(max_seconds=10.0, settings=main, **KWARGS).plan(target)
+    assert plan is not None and _replays_clear(plan, target)
+
+
+def _run_policy(env, policy, seed, pulls=(0, 0)):
+    """An episode of ``policy`` (``pulls[1]`` pull-backs from step ``pulls[0]``, off its plan):
+    the last info and python-fcl's least clearance over every step."""
+    scene = CollisionScene(env.unwrapped.tank)
+    obs, info = env.reset(seed=seed)
+    least, start = np.inf, True
+    for t in range(300):
+        if pulls[0] <= t < pulls[0] + pulls[1]:  # keep the bend, pull back a step
+            b = env.unwrapped.batch
+            a = np.array([*(b.kappa[0, b.k[0]] / float(env.unwrapped.arm.theta_max)), -1.0])
+        else:
+            a, _ = policy.predict(obs, episode_start=np.array([start]))
+        start = False
+        obs, _, term, trunc, info = env.step(a.astype(np.float32))
+        least = min(least, scene.check(env.unwrapped.posture).clearance_cm)
+        if term or trunc:
+            return info, least
+    return info, least
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_expert_policy_recovers_when_taken_off_its_plan(seed):
+    """Pulled back 1-6 steps at a random step of its motion (actions it did not choose), the
+    policy notices, plans again from that arm and still ends in success with the margin kept
+    (python-fcl after every step); left alone it never replans."""
+    import gymnasium as gym
+
+    rng = np.random.default_rng(seed)
+    env = gym.make("AFTIR-ArmFTL-v0", **KWARGS)
+    policy = ExpertPolicy(env)
+    reset_seed = 2_000_000 + 3 * seed
+    info, least = _run_policy(env, policy, reset_seed)
+    assert info["is_success"] and least >= 1.0 and policy.replans == 0
+    steps = int(rng.integers(5, 50))
+    info, least = _run_policy(env, policy, reset_seed, (steps, int(rng.integers(1, 7))))
+    assert info["is_success"] and not info["contact"] and least >= 1.0
+    assert policy.replans == 1 and policy.fallbacks == 0
+
+
+def test_the_expert_policy_falls_back_to_the_floor_without_a_plan():
+    """An expert that finds no motion: it pulls the arm back to the floor (10 cm, 5 cm a step),
+    plans once more there, and then holds."""
+    import gymnasium as gym
+
+    env = gym.make("AFTIR-ArmFTL-v0", **KWARGS)
+    policy = ExpertPolicy(env, FTLExpert(settings=(), **KWARGS))
+    env.reset(seed=0)
+    pushes = []
+    for _ in range(4):
+        a, _ = policy.predict(None)
+        env.step(a)
+        pushes.append(float(a[2]))
+    assert pushes == [-1.0, -1.0, 0.0, 0.0] and env.unwrapped.insertion == 0.0
+    assert policy.fallbacks == 1
+
+
+def test_an_expert_policy_refuses_an_expert_of_another_env():
+    with pytest.raises(ConfigError, match="not the env's|differ"):
+        ExpertPolicy(ArmFTLEnv(steer="increment"), FTLExpert(**KWARGS))
+    with pytest.raises(ConfigError, match="pass expert"):
+        ExpertPolicy(ArmFTLEnv(**KWARGS))
 
 
 @pytest.mark.slow
