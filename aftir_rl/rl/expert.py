@@ -267,13 +267,15 @@ class ExpertPolicy:
         max_seconds: planning budget per (re)plan [s], for the default expert.
 
     Raises:
-        ConfigError: no ``expert`` for an env not made by ``gym.make``, or an expert whose
-            tank, steering or steps are not the env's.
+        ConfigError: a pool of tanks, no ``expert`` for an env not made by ``gym.make``, or an
+            expert whose tank, steering or steps are not the env's.
 
     """
 
     def __init__(self, env: Any, expert: FTLExpert | None = None, max_seconds: float = 10.0):
         self.env: ArmFTLEnv = env.unwrapped
+        if self.env.pool is not None:
+            raise ConfigError("ExpertPolicy plays in one tank, not in a pool of tanks")
         if expert is None:
             if self.env.spec is None:
                 raise ConfigError("ExpertPolicy: pass expert=FTLExpert(**the env's kwargs)")

@@ -164,6 +164,8 @@ def test_an_expert_policy_refuses_an_expert_of_another_env():
         ExpertPolicy(ArmFTLEnv(steer="increment"), FTLExpert(**KWARGS))
     with pytest.raises(ConfigError, match="pass expert"):
         ExpertPolicy(ArmFTLEnv(**KWARGS))
+    with pytest.raises(ConfigError, match="pool"):
+        ExpertPolicy(ArmFTLEnv(tank="wing:2:0-1"))
 
 
 @pytest.mark.slow
