@@ -60,6 +60,7 @@ bench: $(STAMP)  ## every benchmark table of docs/benchmarks.md (about 10 minute
 	$(PY) benchmarks/bench_goal.py
 	$(PY) benchmarks/bench_render.py
 	$(PY) benchmarks/bench_arm_ftl.py
+	$(PY) benchmarks/bench_fields.py
 	$(PY) -m aftir_rl.bench
 
 tensorboard: $(STAMP)

@@ -131,6 +131,63 @@ def test_guide_dijkstra_equals_scipy(tank):
     np.testing.assert_allclose(got[np.isfinite(got)], want[np.isfinite(want)], atol=1e-9)
 
 
+def _heapq_dijkstra(dist, free, edges, weights, shape):
+    """The textbook Dijkstra in Python (``heapq`` of ``(distance, point)`` pairs, stale pairs
+    skipped), over the same flat grid and edges as :func:`relax_field`."""
+    import heapq
+
+    off = [int(np.dot(d, [shape[1] * shape[2], shape[2], 1])) for d in NEIGHBOURS]
+    dist = dist.copy()
+    heap = [(float(d), int(x)) for x, d in enumerate(dist) if np.isfinite(d)]
+    heapq.heapify(heap)
+    n = len(dist)
+    while heap:
+        dy, y = heapq.heappop(heap)
+        if dy > dist[y]:
+            continue
+        for e, o in enumerate(off):
+            x = y - o
+            if 0 <= x < n and edges[e, x] and free[x] and dy + weights[e, x] < dist[x]:
+                dist[x] = dy + weights[e, x]
+                heapq.heappush(heap, (dist[x], x))
+    return dist
+
+
+def test_guide_dijkstra_settles_as_heapq_does():
+    """Fields of random targets in a tank and a wing, bit for bit those of the textbook
+    Dijkstra on a ``heapq`` (the same sums in the same order), and each grid point's next step
+    the first neighbour of least distance via it."""
+    from aftir_rl.core.kernel.guide import descend_field, relax_field
+
+    rng = np.random.default_rng(14)
+    for name in ("b737_center", "wing:2:7"):
+        tank = load_tank(name)
+        for _ in range(2):
+            field = GuideField(tank, rng.uniform(tank.box_min, tank.box_max), clearance_cost=2.0)
+            shape, free = field.shape, field.free.reshape(-1)
+            edges, table = field._flat_edges, field.weight_table
+            seeded = np.where(
+                field.dist.reshape(-1) <= 1.75 * field.size, field.dist.reshape(-1), np.inf
+            )
+            got = seeded.copy()
+            relax_field(got, free, edges, table, NEIGHBOURS, shape)
+            want = _heapq_dijkstra(seeded, free, edges, table, shape)
+            np.testing.assert_array_equal(got, want)
+            nxt = np.empty(len(got), dtype=np.int32)
+            descend_field(got, edges, table, NEIGHBOURS, shape, nxt)
+            flat = np.arange(len(got)).reshape(tuple(shape))
+            best, arg = np.full(len(got), np.inf), np.arange(len(got))
+            for e, d in enumerate(NEIGHBOURS):
+                y = shifted(flat.astype(float), -d).reshape(-1)  # x + d, inf outside
+                ok = edges[e] & np.isfinite(y)
+                via = np.full(len(got), np.inf)
+                via[ok] = got[y[ok].astype(int)] + table[e, ok]
+                better = via < best
+                best[better], arg[better] = via[better], y[better].astype(int)
+            arg[got < best - 1e-9] = np.flatnonzero(got < best - 1e-9)
+            np.testing.assert_array_equal(nxt, arg)
+
+
 def _centres(field):
     return field.origin + (np.indices(tuple(field.shape)).transpose(1, 2, 3, 0) + 0.5) * field.size
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import heapq
 import math
 
 import numpy as np
@@ -136,21 +135,27 @@ def relax_field(
     Flat grid points; ``edges[e, x]``: the edge from ``x`` to ``x + neighbours[e]`` exists,
     ``weights[e, x]`` its length. ``dist`` ends as the fixed point of ``dist[x] = min_e
     dist[x + d_e] + w_e(x)`` over free points (:class:`~aftir_rl.planning.ftl.guide.GuideField`).
+    The queue is a binary heap of ``(distance, point)`` holding each point once (a lowered
+    distance moves it up), so points settle in the order of ``heapq`` on those pairs.
     """
     s1, s2 = shape[1], shape[2]
     # flat offsets: an edge from x is there only where x + neighbours[e] is inside the grid, so
     # a flat x = y - offset[e] in range with edges[e, x] is the grid point y - neighbours[e]
     offset = (neighbours[:, 0] * s1 + neighbours[:, 1]) * s2 + neighbours[:, 2]
     n = dist.shape[0]
-    heap = [(0.0, 0)]
-    heap.pop()
+    keys, points = np.empty(n), np.empty(n, dtype=np.int64)
+    slot = np.full(n, -1, dtype=np.int64)  # a point's place in the heap; -1: not in it
+    size = 0
     for x in range(n):
         if math.isfinite(dist[x]):
-            heapq.heappush(heap, (dist[x], x))
-    while heap:
-        dy, y = heapq.heappop(heap)
-        if dy > dist[y]:
-            continue
+            _sift_up(keys, points, slot, size, dist[x], x)
+            size += 1
+    while size > 0:
+        dy, y = keys[0], points[0]
+        slot[y] = -1
+        size -= 1
+        if size > 0:
+            _sift_down(keys, points, slot, size, keys[size], points[size])
         for e in range(offset.shape[0]):
             x = y - offset[e]
             if not (0 <= x < n and edges[e, x] and free[x]):
@@ -158,7 +163,63 @@ def relax_field(
             v = dy + weights[e, x]
             if v < dist[x]:
                 dist[x] = v
-                heapq.heappush(heap, (v, x))
+                if slot[x] < 0:
+                    _sift_up(keys, points, slot, size, v, x)
+                    size += 1
+                else:
+                    _sift_up(keys, points, slot, slot[x], v, x)
+
+
+@njit(cache=True, inline="always")
+def _before(k1: float, p1: int, k2: float, p2: int) -> bool:
+    """Whether ``(k1, p1)`` comes before ``(k2, p2)`` (as tuples compare)."""
+    return k1 < k2 or (k1 == k2 and p1 < p2)
+
+
+@njit(cache=True)
+def _sift_up(
+    keys: NDArray[np.float64],
+    points: NDArray[np.int64],
+    slot: NDArray[np.int64],
+    i: int,
+    key: float,
+    point: int,
+) -> None:
+    """Put ``(key, point)`` at heap place ``i`` (free, or its own) and move it up to its place."""
+    while i > 0:
+        parent = (i - 1) >> 1
+        if not _before(key, point, keys[parent], points[parent]):
+            break
+        keys[i], points[i] = keys[parent], points[parent]
+        slot[points[i]] = i
+        i = parent
+    keys[i], points[i], slot[point] = key, point, i
+
+
+@njit(cache=True)
+def _sift_down(
+    keys: NDArray[np.float64],
+    points: NDArray[np.int64],
+    slot: NDArray[np.int64],
+    size: int,
+    key: float,
+    point: int,
+) -> None:
+    """Put ``(key, point)`` at the root of a heap of ``size`` and move it down to its place."""
+    i = 0
+    while True:
+        child = 2 * i + 1
+        if child >= size:
+            break
+        right = child + 1
+        if right < size and _before(keys[right], points[right], keys[child], points[child]):
+            child = right
+        if not _before(keys[child], points[child], key, point):
+            break
+        keys[i], points[i] = keys[child], points[child]
+        slot[points[i]] = i
+        i = child
+    keys[i], points[i], slot[point] = key, point, i
 
 
 @njit(cache=True)
@@ -174,22 +235,27 @@ def descend_field(
 
     The first neighbour (in ``neighbours`` order) of least ``dist[x + d_e] + w_e(x)`` over the
     edges of ``x``; a point whose own distance is below that by more than 1e-9 (a seed, an
-    unreachable point) points to itself.
+    unreachable point) points to itself. One pass per direction, over the points it joins.
     """
-    s1, s2 = shape[1], shape[2]
-    for x in range(dist.shape[0]):
-        x0, rem = x // (s1 * s2), x % (s1 * s2)
-        x1, x2 = rem // s2, rem % s2
-        best, nxt = np.inf, x
-        for e in range(neighbours.shape[0]):
-            y0, y1, y2 = x0 + neighbours[e, 0], x1 + neighbours[e, 1], x2 + neighbours[e, 2]
-            if not (edges[e, x] and 0 <= y0 < shape[0] and 0 <= y1 < s1 and 0 <= y2 < s2):
-                continue
-            y = (y0 * s1 + y1) * s2 + y2
-            via = dist[y] + weights[e, x]
-            if via < best:
-                best, nxt = via, y
-        out[x] = x if dist[x] < best - 1e-9 else nxt
+    s0, s1, s2 = shape[0], shape[1], shape[2]
+    n = dist.shape[0]
+    best = np.full(n, np.inf)
+    for x in range(n):
+        out[x] = x
+    for e in range(neighbours.shape[0]):
+        d0, d1, d2 = neighbours[e, 0], neighbours[e, 1], neighbours[e, 2]
+        step = (d0 * s1 + d1) * s2 + d2
+        for x0 in range(max(0, -d0), min(s0, s0 - d0)):
+            for x1 in range(max(0, -d1), min(s1, s1 - d1)):
+                row = (x0 * s1 + x1) * s2
+                for x in range(row + max(0, -d2), row + min(s2, s2 - d2)):
+                    if edges[e, x]:
+                        via = dist[x + step] + weights[e, x]
+                        if via < best[x]:  # strict: the first direction of equals
+                            best[x], out[x] = via, x + step
+    for x in range(n):
+        if dist[x] < best[x] - 1e-9:
+            out[x] = x
 
 
 @njit(cache=True)
