@@ -92,6 +92,7 @@ def _replays_clear(plan, target):
     return bool(term and info["is_success"] and not info["contact"]) and least >= 1.0
 
 
+@pytest.mark.slow
 def test_a_route_a_little_off_the_floor_is_replayed_from_it():
     """A target (reset seed 2,000,001) whose only clear route of the main search settings
     starts 0.31 cm below the floor: refused with ``max_lead=0``, replayed to success with the
@@ -123,7 +124,7 @@ def _run_policy(env, policy, seed, pulls=(0, 0)):
     return info, least
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow), 2])
 def test_the_expert_policy_recovers_when_taken_off_its_plan(seed):
     """Pulled back 1-6 steps at a random step of its motion (actions it did not choose), the
     policy notices, plans again from that arm and still ends in success with the margin kept
