@@ -66,7 +66,7 @@ def arm_state(env: ArmFTLEnv) -> ArmState:
     return env.route_kappa, int(env.batch.k[0]), env.insertion
 
 
-def same_arm(a: ArmState, b: ArmState) -> bool:
+def _same_arm(a: ArmState, b: ArmState) -> bool:
     """Whether two arms are the same to 1e-9 (κ [rad], s [cm])."""
     return (
         a[1] == b[1]
@@ -345,7 +345,7 @@ class ExpertPolicy:
 
     def _on_plan(self, arm: ArmState) -> bool:
         """Whether the arm is where the plan put it after the actions played so far."""
-        return self._next == 0 or same_arm(arm, self._arms[self._next - 1])
+        return self._next == 0 or _same_arm(arm, self._arms[self._next - 1])
 
     def _plan(self, target: NDArray[np.float64]) -> None:
         """Plan from the env's arm; keep the actions and the arm the replay had after each."""
