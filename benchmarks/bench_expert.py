@@ -91,7 +91,7 @@ def main() -> None:
     scene = CollisionScene(env.unwrapped.tank)
     experts = {"expert": FTLExpert(max_seconds=args.max_seconds, **KWARGS)}
     if args.baseline:
-        first = tuple(s for s in EXPERT_SETTINGS if replace(s, leads=(0.0,)) in _main())
+        first = tuple(s for s in EXPERT_SETTINGS if s in _main())
         experts["first"] = FTLExpert(args.max_seconds, max_lead=0.0, settings=first, **KWARGS)
     rows: dict[str, list[dict[str, Any]]] = {name: [] for name in experts}
     for seed in range(args.seed, args.seed + args.random):

@@ -84,7 +84,11 @@ def measure(name: str, targets: int, rng: np.random.Generator) -> dict[str, floa
     tank = load_tank(name)
     lo, hi = np.asarray(tank.box_min, float), np.asarray(tank.box_max, float)
     probe = GuideField(tank, (lo + hi) / 2, clearance_cost=1.0)
-    free, edges, table = probe.free.reshape(-1), probe._flat_edges, probe.weight_table
+    free, edges, table = (
+        probe.free.reshape(-1),
+        np.ascontiguousarray(probe.edges.reshape(len(NEIGHBOURS), -1)),
+        probe.weight_table,
+    )
     shape, n = probe.shape, probe.free.size
     centres = probe.origin + (np.indices(tuple(shape)).reshape(3, -1).T + 0.5) * probe.size
     times: dict[str, list[float]] = {"relax now": [], "relax before": []}

@@ -126,6 +126,7 @@ class ExpertPlan:
         min_clearance_cm: the least surface clearance of the replay [cm].
         seconds: planning and replay time [s].
         tries: routes planned and replayed.
+        arms: the env's arm after each action of the replay (:func:`arm_state`).
 
     """
 
@@ -136,6 +137,7 @@ class ExpertPlan:
     min_clearance_cm: float
     seconds: float
     tries: int
+    arms: list[ArmState]
 
 
 class FTLExpert:
@@ -168,6 +170,8 @@ class FTLExpert:
         self.sim = ArmFTLEnv(**sim_kwargs)
         self.max_seconds = float(max_seconds)
         self.max_steps = int(max_steps)
+        if not 0.0 <= max_lead < math.inf:
+            raise ConfigError(f"max_lead must be a length of 0 cm or more, got {max_lead!r}")
         self.max_lead = float(max_lead)
         self.settings = tuple(settings)
         self.scene = CollisionScene(self.sim.tank)
@@ -229,7 +233,8 @@ class FTLExpert:
                 tries += 1
                 origin = state if state is not None else self._start()
                 actions = route_actions(found.route.kappa, origin)
-                ok, steps, least = self.replay(target, actions, state)
+                arms: list[ArmState] = []
+                ok, steps, least = self.replay(target, actions, state, arms)
                 if ok:
                     return ExpertPlan(
                         target=target,
@@ -239,6 +244,7 @@ class FTLExpert:
                         min_clearance_cm=least,
                         seconds=time.perf_counter() - start,
                         tries=tries,
+                        arms=arms,
                     )
         return None
 
@@ -352,9 +358,7 @@ class ExpertPolicy:
         self._actions, self._arms, self._next = np.zeros((0, 3), np.float32), [], 0
         plan = self.expert.plan(target, state=self.env)
         if plan is not None:
-            arms: list[ArmState] = []
-            self.expert.replay(target, plan.actions, self.env, arms)
-            self._actions, self._arms = plan.actions, arms
+            self._actions, self._arms = plan.actions, plan.arms
 
     def _hold(self, push: float) -> NDArray[np.float32]:
         """Keep the steered bend, pushing ``push`` (-1: pull back a step, 0: hold)."""

@@ -165,7 +165,10 @@ def test_guide_dijkstra_settles_as_heapq_does():
         for _ in range(2):
             field = GuideField(tank, rng.uniform(tank.box_min, tank.box_max), clearance_cost=2.0)
             shape, free = field.shape, field.free.reshape(-1)
-            edges, table = field._flat_edges, field.weight_table
+            edges, table = (
+                np.ascontiguousarray(field.edges.reshape(len(NEIGHBOURS), -1)),
+                field.weight_table,
+            )
             seeded = np.where(
                 field.dist.reshape(-1) <= 1.75 * field.size, field.dist.reshape(-1), np.inf
             )

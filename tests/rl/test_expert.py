@@ -161,12 +161,14 @@ def test_the_expert_policy_falls_back_to_the_floor_without_a_plan():
 
 
 def test_an_expert_policy_refuses_an_expert_of_another_env():
-    with pytest.raises(ConfigError, match="not the env's|differ"):
+    with pytest.raises(ConfigError, match="steering or steps are not the env's"):
         ExpertPolicy(ArmFTLEnv(steer="increment"), FTLExpert(**KWARGS))
     with pytest.raises(ConfigError, match="pass expert"):
         ExpertPolicy(ArmFTLEnv(**KWARGS))
     with pytest.raises(ConfigError, match="pool"):
         ExpertPolicy(ArmFTLEnv(tank="wing:2:0-1"))
+    with pytest.raises(ConfigError, match="max_lead"):
+        FTLExpert(max_lead=-1.0, **KWARGS)
 
 
 @pytest.mark.slow
