@@ -15,8 +15,13 @@ import pytest
 from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.kernel.deployment import fit_shape, traced_deviation
-from aftir_rl.core.kernel.sections import close, extend, postures_min_clearance
-from aftir_rl.core.robot import body_points, kappa_to_angles, tip_position
+from aftir_rl.core.kernel.sections import (
+    close,
+    extend,
+    joint_tip_jacobian,
+    postures_min_clearance,
+)
+from aftir_rl.core.robot import body_points, kappa_to_angles, tip_jacobian, tip_position
 from aftir_rl.core.tank import load_tank
 from aftir_rl.planning.ftl.guide import NEIGHBOURS, GuideField, shifted
 from aftir_rl.planning.ftl.model import clip_kappa
@@ -96,6 +101,22 @@ def test_close_puts_the_numpy_tip_on_the_target(tank):
     assert np.all(np.hypot(got_k[..., 0], got_k[..., 1]) <= arm.theta_max + 1e-12)
     assert np.all((got_lead >= -25.0) & (got_lead <= 60.0))
     np.testing.assert_array_equal(got_k[:, : m - 3], kappa[:, : m - 3])  # fixed sections stay
+
+
+@pytest.mark.parametrize("n", [1, 4, 13])
+def test_joint_tip_jacobian_equals_numpy_and_an_analytic_column(n):
+    """The compiled tip and Jacobian against numpy's (random joints, straight sections among
+    them), and the dis column against its exact value: the tip moves with dis along z."""
+    rng = np.random.default_rng(n)
+    for _ in range(20):
+        theta = rng.uniform(-1.5, 1.5, n) * (rng.random(n) > 0.3)
+        x = np.concatenate([[rng.uniform(-300, 0)], theta, rng.uniform(-np.pi, np.pi, n)])
+        tip, jac = np.empty(3), np.empty((3, len(x)))
+        joint_tip_jacobian(x, 25.0, 1e-6, tip, jac)
+        want_tip, want_jac = tip_jacobian(x, 25.0)
+        np.testing.assert_allclose(tip, want_tip, atol=1e-9)
+        np.testing.assert_allclose(jac, want_jac, atol=1e-6)
+        np.testing.assert_allclose(jac[:, 0], [0, 0, 1], atol=1e-6)
 
 
 def test_guide_dijkstra_equals_scipy(tank):

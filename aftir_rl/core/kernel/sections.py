@@ -33,6 +33,8 @@ __all__ = [
     "extend",
     "chain",
     "tip_of",
+    "joint_tip",
+    "joint_tip_jacobian",
     "close",
 ]
 
@@ -273,6 +275,48 @@ def tip_of(
     r[:] = 0.0
     r[0, 0], r[1, 1], r[2, 2] = 1.0, 1.0, 1.0
     return chain(kappa, 0, kappa.shape[0], l, r, (0.0, 0.0, lead))
+
+
+@njit(cache=True)
+def joint_tip(
+    x: NDArray[np.float64], l: float, r: NDArray[np.float64]
+) -> tuple[float, float, float]:
+    """The tip [cm] of the joint vector ``x = (dis, θ_1..θ_N, φ_1..φ_N)``; ``r (3, 3)`` scratch."""
+    n = (x.shape[0] - 1) // 2
+    r[:] = 0.0
+    r[0, 0], r[1, 1], r[2, 2] = 1.0, 1.0, 1.0
+    px, py, pz = 0.0, 0.0, x[0]
+    for j in range(n):
+        th, ph = x[1 + j], x[1 + n + j]
+        cp, sp = math.cos(ph), math.sin(ph)
+        lx, ly, lz = arc_point(th, cp, sp, l)
+        px += r[0, 0] * lx + r[0, 1] * ly + r[0, 2] * lz
+        py += r[1, 0] * lx + r[1, 1] * ly + r[1, 2] * lz
+        pz += r[2, 0] * lx + r[2, 1] * ly + r[2, 2] * lz
+        rotate(r, th, cp, sp)
+    return px, py, pz
+
+
+@njit(cache=True)
+def joint_tip_jacobian(
+    x: NDArray[np.float64], l: float, h: float, tip: NDArray[np.float64], jac: NDArray[np.float64]
+) -> None:
+    """The tip into ``tip (3,)`` and its Jacobian by central differences into ``jac (3, P)``.
+
+    What :func:`~aftir_rl.core.robot.tip_jacobian` computes with numpy, in one compiled loop.
+    """
+    r = np.empty((3, 3))
+    y = x.copy()
+    tip[0], tip[1], tip[2] = joint_tip(x, l, r)
+    for c in range(x.shape[0]):
+        y[c] = x[c] + h
+        ax, ay, az = joint_tip(y, l, r)
+        y[c] = x[c] - h
+        bx, by, bz = joint_tip(y, l, r)
+        y[c] = x[c]
+        jac[0, c] = (ax - bx) / (2 * h)
+        jac[1, c] = (ay - by) / (2 * h)
+        jac[2, c] = (az - bz) / (2 * h)
 
 
 @njit(cache=True)

@@ -9,7 +9,8 @@ What :mod:`aftir_rl.planning.posture.trajectory` builds its chains of postures f
 - :func:`slide`: the arm pushed further in along its own backbone (an approximate
   follow-the-leader step).
 
-The tip's Jacobian is :func:`~aftir_rl.core.robot.tip_jacobian`'s.
+The tip's Jacobian is :func:`~aftir_rl.core.robot.tip_jacobian`'s, compiled
+(:func:`~aftir_rl.core.kernel.sections.joint_tip_jacobian`).
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from aftir_rl.core.collision import point_clearance
-from aftir_rl.core.robot import Posture, body_points, finite_differences, tip_jacobian
+from aftir_rl.core.kernel.sections import joint_tip_jacobian
+from aftir_rl.core.robot import Posture, body_points, finite_differences
 from aftir_rl.planning.jointspace import align
 from aftir_rl.planning.posture.context import PlanningContext
 
@@ -38,7 +40,8 @@ def _tip_jacobian(x: np.ndarray, n: int, l: float) -> tuple[np.ndarray, np.ndarr
 
     Sections still inside the guide (ending below the floor) are frozen straight.
     """
-    tip, jac = tip_jacobian(x, l)
+    tip, jac = np.empty(3), np.empty((3, len(x)))
+    joint_tip_jacobian(np.ascontiguousarray(x, dtype=np.float64), l, 1e-6, tip, jac)
     ends = x[0] + l * np.arange(1, n + 1)
     jac[:, np.concatenate([[False], ends <= 0.0, ends <= 0.0])] = 0.0
     return tip, jac
