@@ -3,7 +3,8 @@
     python scripts/warm_kernels.py
 
 Run by ``make install``: the follow-the-leader planner's kernels, the camera's line of sight,
-the ``AFTIR-ArmFTL-v0`` step, the posture collision pre-check and the goal-conditioned
+the ``AFTIR-ArmFTL-v0`` step, the posture collision pre-check, the posture chain's tip
+Jacobian and the goal-conditioned
 Q-learning sweep otherwise compile on first use (about 45 s in all on 2 cores). Nothing is
 written but numba's cache files.
 """
@@ -18,6 +19,7 @@ import numpy as np
 import aftir_rl  # noqa: F401  (registers the envs)
 from aftir_rl.core.collision import CollisionScene
 from aftir_rl.core.kernel.clearance import kernel_grid
+from aftir_rl.core.kernel.sections import joint_tip_jacobian
 from aftir_rl.core.kernel.visibility import seen_by_groups
 from aftir_rl.core.robot import Posture
 from aftir_rl.core.tank import load_tank
@@ -35,6 +37,7 @@ def main() -> None:
     seen_by_groups(one, one / 50.0, np.array([0, 1]), one + 10.0, one / 50.0,
                    tank.arm.camera.cosines(), kernel_grid(tank), seen)  # fmt: skip
     CollisionScene(tank).collides_fast(Posture(-60.0, (0.0, 0.0), (0.0, 0.0)))
+    joint_tip_jacobian(np.zeros(5), 25.0, 1e-6, np.empty(3), np.empty((3, 5)))
     env = gym.make("AFTIR-ArmFTL-v0")
     env.reset(seed=0)
     env.step(np.zeros(env.action_space.shape, dtype=np.float32))
