@@ -3,10 +3,9 @@
     python scripts/warm_kernels.py
 
 Run by ``make install``: the follow-the-leader planner's kernels, the camera's line of sight,
-the ``AFTIR-ArmFTL-v0`` step, the posture collision pre-check, the posture chain's tip
-Jacobian and the goal-conditioned
-Q-learning sweep otherwise compile on first use (about 45 s in all on 2 cores). Nothing is
-written but numba's cache files.
+the ``AFTIR-ArmFTL-v0`` step, the posture collision pre-check, the posture chain's tip Jacobian
+and the goal-conditioned Q-learning sweep otherwise compile on first use (about 45 s in all on
+2 cores). Nothing is written but numba's cache files.
 """
 
 from __future__ import annotations

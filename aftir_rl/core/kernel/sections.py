@@ -2,7 +2,8 @@
 
 Each computes in one compiled loop what the planner (:mod:`aftir_rl.planning.ftl`) defines,
 tested against numpy in ``tests/planning/test_route_kernels.py``: a new route section from every
-beam state (:func:`extend`), route tips (:func:`tip_of`), closing routes on a target by damped
+beam state (:func:`extend`), route tips (:func:`tip_of`; of a joint vector and its Jacobian,
+for the posture chain: :func:`joint_tip_jacobian`), closing routes on a target by damped
 least squares (:func:`close`) and the exact smallest clearance of many backbones
 (:func:`min_clearance`, :func:`postures_min_clearance`, pruned by the clearance grid as the env's
 step is). The deployment's kernels are in :mod:`.deployment`.
