@@ -238,6 +238,22 @@ def extend(
             rotate(out_rot[i], th, cp, sp)
 
 
+@njit(cache=True, inline="always")
+def _arc_step(
+    th: float, cp: float, sp: float, l: float, r: NDArray[np.float64], x: float, y: float, z: float
+) -> tuple[float, float, float]:
+    """The end of one section bent by ``θ`` in the plane at ``φ`` (given as cos, sin).
+
+    It starts at ``(x, y, z)`` in frame ``r``; ``r`` turns to its end rotation (in place).
+    """
+    lx, ly, lz = arc_point(th, cp, sp, l)
+    x += r[0, 0] * lx + r[0, 1] * ly + r[0, 2] * lz
+    y += r[1, 0] * lx + r[1, 1] * ly + r[1, 2] * lz
+    z += r[2, 0] * lx + r[2, 1] * ly + r[2, 2] * lz
+    rotate(r, th, cp, sp)
+    return x, y, z
+
+
 @njit(cache=True)
 def chain(
     kappa: NDArray[np.float64],
@@ -256,12 +272,7 @@ def chain(
         kx, ky = kappa[j, 0], kappa[j, 1]
         th = math.hypot(kx, ky)
         ph = math.atan2(ky, kx) if th > 1e-12 else 0.0
-        cp, sp = math.cos(ph), math.sin(ph)
-        lx, ly, lz = arc_point(th, cp, sp, l)
-        x += r[0, 0] * lx + r[0, 1] * ly + r[0, 2] * lz
-        y += r[1, 0] * lx + r[1, 1] * ly + r[1, 2] * lz
-        z += r[2, 0] * lx + r[2, 1] * ly + r[2, 2] * lz
-        rotate(r, th, cp, sp)
+        x, y, z = _arc_step(th, math.cos(ph), math.sin(ph), l, r, x, y, z)
     return x, y, z
 
 
@@ -288,13 +299,8 @@ def joint_tip(
     r[0, 0], r[1, 1], r[2, 2] = 1.0, 1.0, 1.0
     px, py, pz = 0.0, 0.0, x[0]
     for j in range(n):
-        th, ph = x[1 + j], x[1 + n + j]
-        cp, sp = math.cos(ph), math.sin(ph)
-        lx, ly, lz = arc_point(th, cp, sp, l)
-        px += r[0, 0] * lx + r[0, 1] * ly + r[0, 2] * lz
-        py += r[1, 0] * lx + r[1, 1] * ly + r[1, 2] * lz
-        pz += r[2, 0] * lx + r[2, 1] * ly + r[2, 2] * lz
-        rotate(r, th, cp, sp)
+        ph = x[1 + n + j]
+        px, py, pz = _arc_step(x[1 + j], math.cos(ph), math.sin(ph), l, r, px, py, pz)
     return px, py, pz
 
 
