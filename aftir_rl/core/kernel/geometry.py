@@ -291,6 +291,62 @@ def grid_value(
     return math.nan
 
 
+@njit(cache=True, inline="always")
+def _route_posture(
+    kappa: NDArray[np.float64],
+    m: int,
+    u: float,
+    theta: NDArray[np.float64],
+    phi: NDArray[np.float64],
+) -> None:
+    """``θ, φ (N,)`` with the tip ``u`` sections along route ``kappa[:m]`` (shift-and-copy)."""
+    n = kappa.shape[0]
+    kk = min(int(math.floor(u)), m)
+    f = u - kk
+    for j in range(n):
+        q0, q1 = 0.0, 0.0  # (1 − f)·κ(j) + f·κ(j + 1), straight before the route
+        for side in range(2):
+            idx = kk + j - n + side
+            if idx >= 0:
+                src = min(max(min(idx, m - 1), 0), n - 1)
+                w = f if side else 1.0 - f
+                q0 += w * kappa[src, 0]
+                q1 += w * kappa[src, 1]
+        th = math.hypot(q0, q1)
+        theta[j] = th
+        phi[j] = math.atan2(q1, q0) if th > 1e-12 else 0.0
+
+
+@njit(cache=True, inline="always")
+def _least_distance(
+    points: NDArray[np.float64], deep: float, bound: NDArray[np.float64], tank: KernelTank
+) -> float:
+    """The exact least surface distance of ``points`` above ``deep`` (and the first).
+
+    Exact only where the grid value (± its slack) can hold the minimum; ``bound``: scratch.
+    """
+    lo, spacing, shape = tank.grid_lo, tank.grid_spacing, tank.grid_shape
+    offset, values, slack = tank.grid_offset, tank.grid_values, tank.slack
+    upper = math.inf
+    for p in range(points.shape[0]):
+        if p > 0 and points[p, 2] <= deep:
+            bound[p] = math.inf
+            continue
+        v = grid_value(points[p, 0], points[p, 1], points[p, 2], lo, spacing, shape, offset,
+                       values)  # fmt: skip
+        bound[p] = v
+        if not math.isnan(v):
+            upper = min(upper, v + slack)
+    best = math.inf
+    for p in range(points.shape[0]):
+        v = bound[p]
+        if v == math.inf:
+            continue
+        if math.isnan(v) or v - slack <= upper:
+            best = min(best, sdf(points[p, 0], points[p, 1], points[p, 2], tank))
+    return best
+
+
 @njit(cache=True)
 def refresh(
     rows: NDArray[np.int64],
@@ -313,73 +369,32 @@ def refresh(
     """
     kappa, k, s, theta, phi = arms.kappa, arms.k, arms.s, arms.theta, arms.phi
     points, heading = arms.points, arms.heading
-    body_clearance, ray_clearance = arms.body_clearance, arms.ray_clearance
     ray_axes, ray_distances = rays
-    n = kappa.shape[1]
-    lo, spacing, shape = tank.grid_lo, tank.grid_spacing, tank.grid_shape
-    offset, values, slack = tank.grid_offset, tank.grid_values, tank.slack
+    n, n_d = kappa.shape[1], ray_distances.shape[0]
     l = section_length
     n_points = n * samples + 1
     bound = np.empty(n_points)
     rot = np.empty((3, 3))
     for b in rows:
-        # shift-and-copy: the route's κ interpolated at the sections' arc lengths
         m = k[b] + 1
-        u = min(max(s[b] / l, 0.0), float(m))
-        kk = min(int(math.floor(u)), m)
-        f = u - kk
-        for j in range(n):
-            q0, q1 = 0.0, 0.0  # (1 − f)·κ(j) + f·κ(j + 1), straight before the route
-            for side in range(2):
-                idx = kk + j - n + side
-                if idx >= 0:
-                    src = min(max(min(idx, m - 1), 0), n - 1)
-                    w = f if side else 1.0 - f
-                    q0 += w * kappa[b, src, 0]
-                    q1 += w * kappa[b, src, 1]
-            th = math.hypot(q0, q1)
-            theta[b, j] = th
-            phi[b, j] = math.atan2(q1, q0) if th > 1e-12 else 0.0
-        # forward kinematics of every sample
+        _route_posture(kappa[b], m, min(max(s[b] / l, 0.0), float(m)), theta[b], phi[b])
         fk_row(s[b] - n * l, theta[b], phi[b], l, samples, rot, points[b])
-        last, before = n_points - 1, n_points - 2
-        tx, ty, tz = points[b, last, 0], points[b, last, 1], points[b, last, 2]
-        hx, hy, hz = tx - points[b, before, 0], ty - points[b, before, 1], tz - points[b, before, 2]
+        tip, before = points[b, n_points - 1], points[b, n_points - 2]
+        hx, hy, hz = tip[0] - before[0], tip[1] - before[1], tip[2] - before[2]
         norm = max(math.sqrt(hx * hx + hy * hy + hz * hz), 1e-12)
         heading[b, 0], heading[b, 1], heading[b, 2] = hx / norm, hy / norm, hz / norm
-        # the exact minimum over the used samples: only those whose bound can hold it
-        upper = math.inf
-        for p in range(n_points):
-            if p > 0 and points[b, p, 2] <= deep:
-                bound[p] = math.inf
-                continue
-            v = grid_value(points[b, p, 0], points[b, p, 1], points[b, p, 2], lo, spacing,
-                            shape, offset, values)  # fmt: skip
-            bound[p] = v
-            if not math.isnan(v):
-                upper = min(upper, v + slack)
-        best = math.inf
-        for p in range(n_points):
-            v = bound[p]
-            if v == math.inf:
-                continue
-            if math.isnan(v) or v - slack <= upper:
-                best = min(best, sdf(points[b, p, 0], points[b, p, 1], points[b, p, 2], tank))
-        body_clearance[b] = best - radius
+        arms.body_clearance[b] = _least_distance(points[b], deep, bound, tank) - radius
         # the rays: the heading, then the fixed axes
-        n_d = ray_distances.shape[0]
         for a in range(ray_axes.shape[0] + 1):
-            if a == 0:
-                ax, ay, az = heading[b, 0], heading[b, 1], heading[b, 2]
-            else:
-                ax, ay, az = ray_axes[a - 1, 0], ray_axes[a - 1, 1], ray_axes[a - 1, 2]
+            axis = heading[b] if a == 0 else ray_axes[a - 1]
             for di in range(n_d):
                 dd = ray_distances[di]
-                px, py, pz = tx + ax * dd, ty + ay * dd, tz + az * dd
-                v = grid_value(px, py, pz, lo, spacing, shape, offset, values)
+                px, py, pz = tip[0] + axis[0] * dd, tip[1] + axis[1] * dd, tip[2] + axis[2] * dd
+                v = grid_value(px, py, pz, tank.grid_lo, tank.grid_spacing, tank.grid_shape,
+                               tank.grid_offset, tank.grid_values)  # fmt: skip
                 if math.isnan(v):
                     v = sdf(px, py, pz, tank)
-                ray_clearance[b, a * n_d + di] = v
+                arms.ray_clearance[b, a * n_d + di] = v
 
 
 @njit(cache=True)

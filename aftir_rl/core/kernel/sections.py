@@ -209,8 +209,7 @@ def extend(
                 last[b, 0] + changes[c, 0], last[b, 1] + changes[c, 1], theta_max
             )
             out_kappa[i, 0], out_kappa[i, 1] = kx, ky
-            ok, cost = allowed[b], 0.0
-            px, py, pz = pos[b, 0], pos[b, 1], pos[b, 2]
+            ok, cost, px, py, pz = allowed[b], 0.0, pos[b, 0], pos[b, 1], pos[b, 2]
             # sample j bends by h_j = j·h₁ (half its angle): sin, cos by the addition formulas
             h1 = 0.5 * th / k
             s1, c1 = math.sin(h1), math.cos(h1)
@@ -231,8 +230,7 @@ def extend(
                 if d < need:
                     ok = False
                 cost += 1.0 / max(d - radius - margin, 0.25)
-            out_ok[i] = ok
-            out_cost[i] = cost
+            out_ok[i], out_cost[i] = ok, cost
             out_pos[i, 0], out_pos[i, 1], out_pos[i, 2] = px, py, pz
             out_rot[i] = r
             rotate(out_rot[i], th, cp, sp)

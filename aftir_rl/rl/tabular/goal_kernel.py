@@ -15,6 +15,47 @@ from numpy.typing import NDArray
 __all__ = ["goal_episodes"]
 
 
+@njit(cache=True, inline="always")
+def _episode(
+    local: NDArray[np.float64],
+    model: tuple[NDArray[np.int64], NDArray[np.bool_], int, int],
+    eps: float,
+    update: tuple[float, float, int],
+    rewards: NDArray[np.float64],
+) -> tuple[float, int]:
+    """One ε-greedy episode on one goal's table ``local (S, A)``: its return and steps.
+
+    ``model``: ``next_state`` and ``hit`` flat by ``s·A + a``, the goal and the start state;
+    ``update``: α, γ and the step limit.
+    """
+    next_state, hit, goal, start = model
+    alpha, gamma, max_steps = update
+    n_actions = local.shape[1]
+    s, t, ret = start, 0, 0.0
+    while True:
+        a = 0  # greedy, lowest index on ties
+        for b in range(1, n_actions):
+            if local[s, b] > local[s, a]:
+                a = b
+        if np.random.random() < eps:
+            a = np.random.randint(0, n_actions)
+        sa = s * n_actions + a
+        s2, h = next_state[sa], hit[sa]
+        reached = s2 == goal  # a hit stays in s, never the goal during an episode
+        r = rewards[int(h) + 2 * int(reached)]
+        boot = 0.0
+        if not (h or reached):
+            boot = local[s2, 0]
+            for b in range(1, n_actions):
+                boot = max(boot, local[s2, b])
+        local[s, a] += alpha * (r + gamma * boot - local[s, a])
+        t += 1
+        ret += r
+        if h or reached or t >= max_steps:
+            return ret, t
+        s = s2
+
+
 @njit(cache=True, parallel=True)
 def goal_episodes(
     q: NDArray[np.float64],
@@ -55,33 +96,11 @@ def goal_episodes(
         for s in range(n_cells):
             for a in range(n_actions):
                 local[s, a] = q[a, s, g]
-        goal = goals[g]
         for e in range(episodes):
             eps = max(eps_min, eps0 * decay ** (done_before + e))
-            s, t, ret = start, 0, 0.0
-            while True:
-                a = 0  # greedy, lowest index on ties
-                for b in range(1, n_actions):
-                    if local[s, b] > local[s, a]:
-                        a = b
-                if np.random.random() < eps:
-                    a = np.random.randint(0, n_actions)
-                sa = s * n_actions + a
-                s2, h = next_state[sa], hit[sa]
-                reached = s2 == goal  # a hit stays in s, never the goal during an episode
-                r = rewards[int(h) + 2 * int(reached)]
-                boot = 0.0
-                if not (h or reached):
-                    boot = local[s2, 0]
-                    for b in range(1, n_actions):
-                        boot = max(boot, local[s2, b])
-                local[s, a] += alpha * (r + gamma * boot - local[s, a])
-                t += 1
-                ret += r
-                if h or reached or t >= max_steps:
-                    break
-                s = s2
-            returns[g, e], lengths[g, e] = ret, t
+            returns[g, e], lengths[g, e] = _episode(
+                local, (next_state, hit, goals[g], start), eps, (alpha, gamma, max_steps), rewards
+            )
         steps += int(lengths[g].sum())
         for s in range(n_cells):
             for a in range(n_actions):
