@@ -29,6 +29,7 @@ __all__ = [
     "mesh_sdf",
     "sdf",
     "grid_value",
+    "least_distance",
     "refresh",
     "usable_point",
     "usable",
@@ -318,12 +319,12 @@ def _route_posture(
 
 
 @njit(cache=True, inline="always")
-def _least_distance(
+def least_distance(
     points: NDArray[np.float64], deep: float, bound: NDArray[np.float64], tank: KernelTank
 ) -> float:
-    """The exact least surface distance of ``points`` above ``deep`` (and the first).
+    """The exact least signed distance [cm] of ``points (P, 3)`` above ``deep`` (and the first).
 
-    Exact only where the grid value (± its slack) can hold the minimum; ``bound``: scratch.
+    Exact only where the grid value (± its slack) can hold the minimum; ``bound (P,)``: scratch.
     """
     lo, spacing, shape = tank.grid_lo, tank.grid_spacing, tank.grid_shape
     offset, values, slack = tank.grid_offset, tank.grid_values, tank.slack
@@ -371,8 +372,7 @@ def refresh(
     points, heading = arms.points, arms.heading
     ray_axes, ray_distances = rays
     n, n_d = kappa.shape[1], ray_distances.shape[0]
-    l = section_length
-    n_points = n * samples + 1
+    l, n_points = section_length, n * samples + 1
     bound = np.empty(n_points)
     rot = np.empty((3, 3))
     for b in rows:
@@ -383,7 +383,7 @@ def refresh(
         hx, hy, hz = tip[0] - before[0], tip[1] - before[1], tip[2] - before[2]
         norm = max(math.sqrt(hx * hx + hy * hy + hz * hz), 1e-12)
         heading[b, 0], heading[b, 1], heading[b, 2] = hx / norm, hy / norm, hz / norm
-        arms.body_clearance[b] = _least_distance(points[b], deep, bound, tank) - radius
+        arms.body_clearance[b] = least_distance(points[b], deep, bound, tank) - radius
         # the rays: the heading, then the fixed axes
         for a in range(ray_axes.shape[0] + 1):
             axis = heading[b] if a == 0 else ray_axes[a - 1]

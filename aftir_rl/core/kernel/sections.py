@@ -21,7 +21,7 @@ from numba import njit, prange
 from numpy.typing import NDArray
 
 from aftir_rl.core.kernel.arrays import KernelTank
-from aftir_rl.core.kernel.geometry import fk_row, grid_value, rotate, sdf
+from aftir_rl.core.kernel.geometry import fk_row, grid_value, least_distance, rotate, sdf
 from aftir_rl.core.robot import SMALL
 
 __all__ = [
@@ -78,22 +78,7 @@ def clearance_at(x: float, y: float, z: float, tank: KernelTank, exact_below: fl
 @njit(cache=True)
 def min_clearance(points: NDArray[np.float64], tank: KernelTank) -> float:
     """The exact smallest signed distance [cm] of points ``(P, 3)`` (grid-pruned)."""
-    upper = math.inf
-    n = points.shape[0]
-    bound = np.empty(n)
-    for p in range(n):
-        v = grid_value(points[p, 0], points[p, 1], points[p, 2], tank.grid_lo,
-                       tank.grid_spacing, tank.grid_shape, tank.grid_offset,
-                       tank.grid_values)  # fmt: skip
-        bound[p] = v
-        if not math.isnan(v):
-            upper = min(upper, v + tank.slack)
-    best = math.inf
-    for p in range(n):
-        v = bound[p]
-        if math.isnan(v) or v - tank.slack <= upper:
-            best = min(best, sdf(points[p, 0], points[p, 1], points[p, 2], tank))
-    return best
+    return least_distance(points, -math.inf, np.empty(points.shape[0]), tank)
 
 
 @njit(cache=True, parallel=True)
