@@ -80,8 +80,9 @@ def test_render():
 @pytest.mark.parametrize(
     "algo, steps",
     [
-        ("ppo", 256),
-        # off-policy loops: the fast tier has SAC+HER on AFTIR-ArmFTL-v0 (test_arm_ftl.py)
+        # the fast tier trains PPO through the CLI on the batched env (test_ftl_batch.py) and
+        # SAC+HER on AFTIR-ArmFTL-v0 (test_arm_ftl.py)
+        pytest.param("ppo", 256, marks=pytest.mark.slow),
         pytest.param("sac", 200, marks=pytest.mark.slow),
         pytest.param("td3", 200, marks=pytest.mark.slow),
     ],
