@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from aftir_rl.cli.args import (
+    MAX_SEED,
     OneLineParser,
     add_int_option,
     add_margin_option,
@@ -28,6 +29,7 @@ from aftir_rl.cli.args import (
     add_seed_option,
     add_tank_option,
     add_target_option,
+    bounded_int,
     check_margin,
     check_tank,
 )
@@ -111,6 +113,15 @@ def build_parser() -> argparse.ArgumentParser:
         None,
     )
     add_margin_option(parser, f"clearance the arm keeps ({DEFAULT_MARGIN:g} cm)")
+    parser.add_argument(
+        "--stochastic",
+        nargs="?",
+        const=0,
+        type=bounded_int(0, MAX_SEED - MAX_RANDOM_TARGETS),
+        metavar="SEED",
+        help="SB3 runs: sample the policy's actions (RL Zoo's --stochastic) instead of taking "
+        "its mean; target i's episode seeded SEED + i (default 0)",
+    )
     add_tank_option(parser, "AFTIR-ArmFTL-v0 runs: evaluate here, not in the run's own tank")
     add_ray_options(parser, "evaluate the runs")
     return parser
@@ -135,11 +146,19 @@ def _evaluate_runs(
         check_ray_options(args.ray, args.workers)
         with ray_session(args.ray, args.workers):
             rows = evaluate_on_ray(
-                args.runs, targets, args.motion, args.margin, draw=draw, tank=args.tank
+                args.runs,
+                targets,
+                args.motion,
+                args.margin,
+                draw=draw,
+                tank=args.tank,
+                policy_seed=args.stochastic,
             )
         return {_row_name(r): row for r, row in zip(args.runs, rows)}
     return {
-        _row_name(r): evaluate_run(r, targets, args.motion, args.margin, draw, args.tank)
+        _row_name(r): evaluate_run(
+            r, targets, args.motion, args.margin, draw, args.tank, args.stochastic
+        )
         for r in args.runs
     }
 

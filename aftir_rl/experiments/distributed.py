@@ -418,6 +418,7 @@ def evaluate_on_ray(
     progress: Callable[[str], None] | None = None,
     draw: tuple[int, int] | None = None,
     tank: str | None = None,
+    policy_seed: int | None = None,
 ) -> list[dict[str, Any]]:
     """:func:`aftir_rl.cli.evaluate.evaluate_run` of every run directory, each a Ray task.
 
@@ -437,6 +438,6 @@ def evaluate_on_ray(
             state = "failed" if isinstance(result, TaskFailure) else "done"
             progress(f"{state}: {runs[k]}")
 
-    calls = [(str(r), targets, motion, margin, draw, tank) for r in runs]
+    calls = [(str(r), targets, motion, margin, draw, tank, policy_seed) for r in runs]
     results = run_tasks(evaluate_run, calls, report)
     return [failed_evaluation(r.error) if isinstance(r, TaskFailure) else r for r in results]

@@ -212,6 +212,7 @@ def _evaluate_sb3(
     targets: list[np.ndarray] | None,
     draw: tuple[int, int] | None = None,
     tank: str | None = None,
+    policy_seed: int | None = None,
 ) -> dict[str, Any]:
     from aftir_rl.rl.sb3 import EVAL_SEED, evaluate_policy_on_targets, evaluation_targets
 
@@ -224,10 +225,11 @@ def _evaluate_sb3(
         count, seed = draw or (run.config.eval_targets, EVAL_SEED)
         targets = evaluation_targets(run.env_id, count, seed=seed, env_kwargs=kwargs)
     metrics, _ = evaluate_policy_on_targets(
-        run.model, run.env_id, targets, clearance=True, env_kwargs=kwargs
+        run.model, run.env_id, targets, True, kwargs, policy_seed
     )
     note = f"{metrics['collision_rate']:.1%} collided" if metrics["collision_rate"] else ""
-    agent = f"{run.algo} ({run.config.env_id})"
+    sampled = "" if policy_seed is None else f", sampled from seed {policy_seed}"
+    agent = f"{run.algo} ({run.config.env_id}{sampled})"
     return {"agent": agent, "targets": len(targets), **metrics, "note": note}
 
 
@@ -238,6 +240,7 @@ def evaluate_run(
     margin: float = DEFAULT_MARGIN,
     draw: tuple[int, int] | None = None,
     tank: str | None = None,
+    policy_seed: int | None = None,
 ) -> dict[str, Any]:
     """Evaluate one run directory (Q-table or SB3): one row of ``python -m aftir_rl.evaluate``.
 
@@ -245,18 +248,23 @@ def evaluate_run(
     follow-the-leader motion keeping ``margin`` [cm] (``motion="ftl"``) or the papers' postures
     per cell (``"progressive"``). An SB3 run on ``targets``, else on ``draw = (count, seed)``
     targets drawn by its env (seeds ``seed .. seed + count − 1``), else on the fixed evaluation
-    targets its training measured it on; one deterministic episode each. ``tank``: an
+    targets its training measured it on; one episode each, of the deterministic policy, or
+    with actions sampled from it given a ``policy_seed``
+    (:func:`~aftir_rl.rl.sb3.evaluation.evaluate_policy_on_targets`). ``tank``: an
     ``AFTIR-ArmFTL-v0`` run's policy in another tank or pool than its own (a pool's target ``i``
     lies in its tank ``i mod K``).
 
     Raises:
         CheckpointError: not a run directory this knows, or unreadable files.
-        ConfigError: ``tank`` for a run that takes none.
+        ConfigError: ``tank`` or ``policy_seed`` for a Q-table run, or ``tank`` for a run
+            whose env takes none.
 
     """
     run = load_run(run_dir, ("q_table", "sb3"))
     if isinstance(run, QTableRun):
         if tank is not None:
             raise ConfigError(f"--tank: {run_dir} is a Q-table run, evaluated in its own tank")
+        if policy_seed is not None:
+            raise ConfigError(f"--stochastic: {run_dir} is a Q-table run, evaluated greedily")
         return _evaluate_q_table(run, motion, margin)
-    return _evaluate_sb3(cast(SB3Run, run), targets, draw, tank)
+    return _evaluate_sb3(cast(SB3Run, run), targets, draw, tank, policy_seed)

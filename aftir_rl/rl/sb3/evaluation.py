@@ -20,6 +20,7 @@ from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
+import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import Image
@@ -88,8 +89,9 @@ def evaluate_policy_on_targets(
     targets: list[np.ndarray],
     clearance: bool = False,
     env_kwargs: dict[str, Any] | None = None,
+    policy_seed: int | None = None,
 ) -> tuple[dict[str, float], dict[str, Any]]:
-    """Run the deterministic policy once per target.
+    """Run the policy once per target: its mean action, or sampled with ``policy_seed``.
 
     Args:
         model: anything with SB3's ``predict``.
@@ -99,6 +101,10 @@ def evaluate_policy_on_targets(
             at every step; slower).
         env_kwargs: keyword arguments of the env (the run's ``SB3Config.env_kwargs``; the
             training-only ones are left out, :func:`evaluation_env_kwargs`).
+        policy_seed: None for the deterministic policy (the mean action); else the actions are
+            sampled from the policy's distribution (RL Zoo's ``--stochastic``), episode ``i``
+            with torch's generator seeded ``policy_seed + i``, so each episode is reproducible
+            on its own.
 
     Returns:
         Means over targets (``success_rate``, ``tip_error_cm``, ``path_length_cm``,
@@ -120,7 +126,11 @@ def evaluate_policy_on_targets(
             raise KeyboardInterrupt
         start = time.perf_counter()
         options = {"target": target, **(_pool_option(arm, i) or {})}
-        path, info, smallest = _run_target(model, env, arm, options, clearance, smallest)
+        if policy_seed is not None:
+            torch.manual_seed(policy_seed + i)
+        path, info, smallest = _run_target(
+            model, env, arm, options, clearance, smallest, policy_seed is None
+        )
         rows.append(
             (
                 float(info.get("is_success", False)),
@@ -149,8 +159,9 @@ def _run_target(
     options: dict[str, Any],
     clearance: bool,
     smallest: float,
+    deterministic: bool = True,
 ) -> tuple[np.ndarray, dict[str, Any], float]:
-    """One deterministic episode, reset with ``options`` (the target, and a pool's tank).
+    """One episode, reset with ``options`` (the target, and a pool's tank).
 
     Returns:
         The tip path, the last step's info and ``smallest`` lowered to the smallest clearance
@@ -160,7 +171,7 @@ def _run_target(
     obs, info = env.reset(options=options)
     tips, done = [arm.tip], False
     while not done:
-        action, _ = model.predict(obs, deterministic=True)
+        action, _ = model.predict(obs, deterministic=deterministic)
         obs, _, terminated, truncated, info = env.step(action)
         tips.append(arm.tip)
         if clearance:
