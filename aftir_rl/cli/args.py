@@ -170,6 +170,23 @@ def add_seed_option(parser: argparse.ArgumentParser, help: str, default: int | N
     add_int_option(parser, "--seed", (0, MAX_SEED), help, default, metavar="SEED")
 
 
+#: The largest ``--stochastic`` seed: target ``i`` of up to 10,000 is seeded ``SEED + i``.
+MAX_POLICY_SEED = MAX_SEED - 10_000
+
+
+def add_stochastic_option(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--stochastic [SEED]``: sampled actions, target ``i``'s episode seeded ``SEED + i``."""
+    parser.add_argument(
+        "--stochastic",
+        nargs="?",
+        const=0,
+        type=bounded_int(0, MAX_POLICY_SEED),
+        metavar="SEED",
+        help=f"{what}: sample the policy's actions (RL Zoo's --stochastic) instead of taking "
+        "its mean; target i's episode seeded SEED + i (default 0)",
+    )
+
+
 def add_seconds_option(
     parser: argparse.ArgumentParser, flag: str, default: float, help: str
 ) -> None:

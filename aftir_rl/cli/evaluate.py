@@ -20,16 +20,15 @@ from typing import Any
 import numpy as np
 
 from aftir_rl.cli.args import (
-    MAX_SEED,
     OneLineParser,
     add_int_option,
     add_margin_option,
     add_motion_option,
     add_ray_options,
     add_seed_option,
+    add_stochastic_option,
     add_tank_option,
     add_target_option,
-    bounded_int,
     check_margin,
     check_tank,
 )
@@ -113,15 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
         None,
     )
     add_margin_option(parser, f"clearance the arm keeps ({DEFAULT_MARGIN:g} cm)")
-    parser.add_argument(
-        "--stochastic",
-        nargs="?",
-        const=0,
-        type=bounded_int(0, MAX_SEED - MAX_RANDOM_TARGETS),
-        metavar="SEED",
-        help="SB3 runs: sample the policy's actions (RL Zoo's --stochastic) instead of taking "
-        "its mean; target i's episode seeded SEED + i (default 0)",
-    )
+    add_stochastic_option(parser, "SB3 runs")
     add_tank_option(parser, "AFTIR-ArmFTL-v0 runs: evaluate here, not in the run's own tank")
     add_ray_options(parser, "evaluate the runs")
     return parser

@@ -1,8 +1,8 @@
 """``aftir record RUN_DIR --target X Y Z -o arm.gif``: a policy's episode as an animated picture.
 
 A thin command line over :func:`aftir_rl.experiments.rollout.record_frames`: the env's
-``rgb_array`` frames of one deterministic episode per target, written as one GIF (Pillow), every
-``--every``-th frame, with a progress bar.
+``rgb_array`` frames of one episode per target (``--stochastic``: sampled actions), written
+as one GIF (Pillow), every ``--every``-th frame, with a progress bar.
 """
 
 from __future__ import annotations
@@ -14,7 +14,13 @@ from tqdm import tqdm
 
 from aftir_rl.cli.args import bounded_int
 from aftir_rl.cli.guard import cli
-from aftir_rl.cli.rollout import policy_env_kwargs, policy_parser, policy_run, policy_targets
+from aftir_rl.cli.rollout import (
+    policy_env_kwargs,
+    policy_parser,
+    policy_run,
+    policy_seed,
+    policy_targets,
+)
 from aftir_rl.core.errors import ConfigError
 
 __all__ = ["build_parser", "main"]
@@ -49,10 +55,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     _, config, env_id, model = load_run(policy_run(args))
     env_kwargs = policy_env_kwargs(args, config.env_kwargs)
     frames = []
-    for target in tqdm(
-        policy_targets(args, env_id, env_kwargs), desc="episodes", disable=args.no_progress
-    ):
-        episode = record_frames(model, env_id, env_kwargs, target)
+    targets = policy_targets(args, env_id, env_kwargs)
+    for i, target in enumerate(tqdm(targets, desc="episodes", disable=args.no_progress)):
+        episode = record_frames(model, env_id, env_kwargs, target, policy_seed(args, i))
         frames += episode[:: args.every] + [episode[-1]] * 10  # hold the end a moment
     count = save_gif(args.output, frames, args.fps)
     print(f"wrote {args.output} ({count} frames)")

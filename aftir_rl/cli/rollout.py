@@ -1,7 +1,8 @@
 """``aftir rollout RUN_DIR --target X Y Z -o DIR``: a policy's motions, drawn like the planner's.
 
 A thin command line over :func:`aftir_rl.experiments.rollout.rollout`: for each target, the
-deterministic policy of an SB3 run (loaded without unpickling) runs once and
+policy of an SB3 run (loaded without unpickling; its mean actions, or sampled with
+``--stochastic``) runs once and
 ``DIR/<target>/trajectory.json`` (the planner's contract) and ``summary.json`` (tank, env, result)
 are written, so ``aftir view DIR/<target>`` shows the arm moving, beside a planner's run if given
 too. ``--random N`` draws N targets with the run's env instead (seeds from ``--seed``).
@@ -18,6 +19,7 @@ import gymnasium as gym
 
 from aftir_rl.cli.args import (
     OneLineParser,
+    add_stochastic_option,
     add_tank_option,
     add_target_option,
     bounded_int,
@@ -34,6 +36,7 @@ __all__ = [
     "policy_env_kwargs",
     "policy_parser",
     "policy_run",
+    "policy_seed",
     "policy_targets",
 ]
 
@@ -63,7 +66,13 @@ def policy_parser(prog: str, what: str) -> argparse.ArgumentParser:
         "--seed", type=bounded_int(0, 2**31), default=0, metavar="S", help="first seed of --random"
     )
     add_tank_option(parser, "AFTIR-ArmFTL-v0 runs: roll out in this tank, not the run's own")
+    add_stochastic_option(parser, "each episode")
     return parser
+
+
+def policy_seed(args: argparse.Namespace, i: int) -> int | None:
+    """The sampling seed of target ``i``'s episode: ``--stochastic SEED`` + ``i``, or None."""
+    return None if args.stochastic is None else args.stochastic + i
 
 
 def policy_env_kwargs(args: argparse.Namespace, env_kwargs: dict[str, Any]) -> dict[str, Any]:
@@ -139,10 +148,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         "tank", "b737_center"
     )
     reached = 0
-    for target in targets:
+    for i, target in enumerate(targets):
         folder = out / _name(target)
         folder.mkdir(exist_ok=True)
-        result = rollout(model, env_id, env_kwargs, target)
+        result = rollout(model, env_id, env_kwargs, target, policy_seed(args, i))
         write_json(folder / "trajectory.json", result)
         summary = {k: v for k, v in result.items() if k != "motion"}
         summary.update(

@@ -1,9 +1,10 @@
 """A trained policy's motion to a target, as the planner's ``trajectory.json``; and its frames.
 
-:func:`rollout` runs the deterministic policy of an SB3 run once, from the env's start to the
-target, and keeps every posture the arm took, its clearance and the tip error, in the
-``trajectory.json`` contract of the planner (``docs/design.md`` §9), so ``aftir view`` draws a
-policy's motion exactly as it draws a planned one, and the two overlay on one page.
+:func:`rollout` runs the policy of an SB3 run once (its mean actions, or sampled), from the
+env's start to the target, and keeps every posture the arm took, its clearance and the tip
+error, in the ``trajectory.json`` contract of the planner (``docs/design.md`` §9), so ``aftir
+view`` draws a policy's motion exactly as it draws a planned one, and the two overlay on one
+page.
 :func:`record_frames` keeps the env's ``rgb_array`` frames of the same episode instead.
 """
 
@@ -18,7 +19,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.rl.sb3.evaluation import arm_clearance, evaluation_env_kwargs
+from aftir_rl.rl.sb3.evaluation import arm_clearance, evaluation_env_kwargs, sampling
 
 __all__ = ["rollout", "record_frames"]
 
@@ -38,9 +39,16 @@ def _episode(
 
 
 def rollout(
-    model: Any, env_id: str, env_kwargs: dict[str, Any] | None, target: Any
+    model: Any,
+    env_id: str,
+    env_kwargs: dict[str, Any] | None,
+    target: Any,
+    policy_seed: int | None = None,
 ) -> dict[str, Any]:
-    """One deterministic episode of ``model`` to ``target``, in the ``trajectory.json`` contract.
+    """One episode of ``model`` to ``target``, in the ``trajectory.json`` contract.
+
+    The policy's mean actions, or with ``policy_seed`` actions sampled from it
+    (:func:`~aftir_rl.rl.sb3.evaluation.sampling`).
 
     Returns:
         ``complete`` (reached within the env's tolerance without contact), ``method``,
@@ -56,9 +64,9 @@ def rollout(
     with _episode(env_id, env_kwargs, target) as (env, arm, obs, info):
         motion, tips = [arm.posture.to_dict()], [arm.tip]
         clearance = arm_clearance(arm)
-        done = False
+        done, deterministic = False, sampling(policy_seed)
         while not done:
-            action, _ = model.predict(obs, deterministic=True)
+            action, _ = model.predict(obs, deterministic=deterministic)
             obs, _, terminated, truncated, info = env.step(action)
             motion.append(arm.posture.to_dict())
             tips.append(arm.tip)
@@ -83,13 +91,17 @@ def rollout(
 
 
 def record_frames(
-    model: Any, env_id: str, env_kwargs: dict[str, Any] | None, target: Any
+    model: Any,
+    env_id: str,
+    env_kwargs: dict[str, Any] | None,
+    target: Any,
+    policy_seed: int | None = None,
 ) -> list[NDArray[np.uint8]]:
-    """The ``rgb_array`` frames of one deterministic episode of ``model`` to ``target``."""
+    """The ``rgb_array`` frames of one episode of ``model`` to ``target`` (as :func:`rollout`)."""
     with _episode(env_id, env_kwargs, target, render=True) as (env, _, obs, _):
-        frames, done = [env.render()], False
+        frames, done, deterministic = [env.render()], False, sampling(policy_seed)
         while not done:
-            action, _ = model.predict(obs, deterministic=True)
+            action, _ = model.predict(obs, deterministic=deterministic)
             obs, _, terminated, truncated, _ = env.step(action)
             frames.append(env.render())
             done = bool(terminated or truncated)

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from aftir_rl.cli import evaluate, train
+from aftir_rl.cli import evaluate, rollout, train
 from aftir_rl.rl.pretrained import load, policy_dir
 
 
@@ -110,5 +110,11 @@ def test_stochastic_evaluation_samples_the_policy_reproducibly(tmp_path, capsys)
             done = terminated or truncated
         errors.append(info["distance_cm"])
     assert sampled["tip_error_cm"] == pytest.approx(np.mean(errors), rel=1e-12)
+    # aftir rollout --stochastic 11: the same episodes, written as motions
+    out = tmp_path / "motions"
+    argv = ["--pretrained", name, "--random", "3", "--seed", str(draw[1]), "--stochastic", "11"]
+    assert rollout.main([*argv, "-o", str(out)]) == 0
+    rolled = [json.loads(p.read_text())["tip_error_cm"] for p in out.glob("*/summary.json")]
+    assert sorted(rolled) == pytest.approx(sorted(errors), rel=1e-12)
     assert evaluate.main([str(run), "--stochastic", "-3"]) == 2
     assert "--stochastic must be from 0" in capsys.readouterr().err

@@ -39,6 +39,7 @@ __all__ = [
     "Period",
     "ArmEvalCallback",
     "AtomicCheckpoint",
+    "sampling",
     "save_model",
 ]
 
@@ -126,10 +127,9 @@ def evaluate_policy_on_targets(
             raise KeyboardInterrupt
         start = time.perf_counter()
         options = {"target": target, **(_pool_option(arm, i) or {})}
-        if policy_seed is not None:
-            torch.manual_seed(policy_seed + i)
+        deterministic = sampling(None if policy_seed is None else policy_seed + i)
         path, info, smallest = _run_target(
-            model, env, arm, options, clearance, smallest, policy_seed is None
+            model, env, arm, options, clearance, smallest, deterministic
         )
         rows.append(
             (
@@ -144,6 +144,18 @@ def evaluate_policy_on_targets(
             first = {"tips": path, "target": target, "arm": arm.body(), "tank": arm.tank}
     env.close()
     return _mean_metrics(rows, clearance, smallest), first
+
+
+def sampling(policy_seed: int | None) -> bool:
+    """``deterministic`` for one episode's ``predict`` calls, seeding torch for a sampled one.
+
+    None: the policy's mean action (True). A seed: torch's generator is seeded with it and the
+    actions are sampled from the policy's distribution (False), so the episode replays.
+    """
+    if policy_seed is None:
+        return True
+    torch.manual_seed(policy_seed)
+    return False
 
 
 def _pool_option(arm: Any, i: int) -> dict[str, int] | None:
