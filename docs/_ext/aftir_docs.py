@@ -173,7 +173,10 @@ def write_pretrained_page(docs: Path) -> None:
         "\n\n| name | algorithm | env | env arguments | steps | training minutes | test targets "
         "| success | tip error (cm) | contacts |\n|---|---|---|---|---:|---:|---|---:|---:|---:|\n"
         + "\n".join(rows)
-        + "\n"
+        + "\n\nSuccess is the deterministic policy's (its mean action). `aftir evaluate "
+        "--pretrained NAME --random 200 --seed 4000000 --stochastic SEED` samples the actions "
+        "instead; the [journal](experiments.md#the-mean-action-against-sampled-actions) "
+        "compares the two.\n"
     )
     _write(docs / "pretrained.md", text)
 
