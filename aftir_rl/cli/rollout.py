@@ -159,6 +159,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             algo=algo,
             env_id=config.env_id,
             run=args.pretrained or str(run.resolve()),
+            policy_seed=policy_seed(args, i),
         )
         write_json(folder / "summary.json", summary)
         reached += result["complete"]

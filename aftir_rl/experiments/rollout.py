@@ -76,7 +76,7 @@ def rollout(
         collision = bool(info.get("collision", False))
         return {
             "complete": bool(info.get("is_success", False)) and not collision,
-            "method": f"policy ({type(model).__name__})",
+            "method": f"policy ({type(model).__name__}{'' if deterministic else ', sampled'})",
             "section_length": float(arm.arm.section_length),
             "target": [float(v) for v in arm.target],
             "motion": motion,

@@ -114,7 +114,10 @@ def test_stochastic_evaluation_samples_the_policy_reproducibly(tmp_path, capsys)
     out = tmp_path / "motions"
     argv = ["--pretrained", name, "--random", "3", "--seed", str(draw[1]), "--stochastic", "11"]
     assert rollout.main([*argv, "-o", str(out)]) == 0
-    rolled = [json.loads(p.read_text())["tip_error_cm"] for p in out.glob("*/summary.json")]
+    summaries = [json.loads(p.read_text()) for p in out.glob("*/summary.json")]
+    rolled = [s["tip_error_cm"] for s in summaries]
     assert sorted(rolled) == pytest.approx(sorted(errors), rel=1e-12)
+    assert sorted(s["policy_seed"] for s in summaries) == [11, 12, 13]
+    assert all(s["method"] == "policy (PPO, sampled)" for s in summaries)
     assert evaluate.main([str(run), "--stochastic", "-3"]) == 2
     assert "--stochastic must be from 0" in capsys.readouterr().err
