@@ -3,14 +3,18 @@
     python scripts/warm_kernels.py
 
 Run by ``make install``: the follow-the-leader planner's kernels, the camera's line of sight,
-the ``AFTIR-ArmFTL-v0`` step, the posture collision pre-check, the posture chain's tip Jacobian
-and the goal-conditioned Q-learning sweep otherwise compile on first use (about 45 s in all on
-2 cores). Nothing is written but numba's cache files.
+the ``AFTIR-ArmFTL-v0`` step (with and without the guide), the posture planners' planar search,
+the posture collision pre-check, the posture chain's tip Jacobian, the mesh tanks' distance
+kernels and the goal-conditioned Q-learning sweep otherwise compile on first use (about a
+minute in all on 2 cores). Nothing is written but numba's cache files (and a mesh in a
+temporary folder, removed).
 """
 
 from __future__ import annotations
 
+import tempfile
 import time
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -22,7 +26,9 @@ from aftir_rl.core.kernel.sections import joint_tip_jacobian
 from aftir_rl.core.kernel.visibility import seen_by_groups
 from aftir_rl.core.robot import Posture
 from aftir_rl.core.tank import load_tank
+from aftir_rl.core.tank.meshes import export_tank_mesh
 from aftir_rl.planning.ftl.plan import warm_up
+from aftir_rl.planning.posture.planner import Planner
 from aftir_rl.rl.tabular.q_table_goal import train_all_targets
 
 
@@ -37,10 +43,17 @@ def main() -> None:
                    tank.arm.camera.cosines(), kernel_grid(tank), seen)  # fmt: skip
     CollisionScene(tank).collides_fast(Posture(-60.0, (0.0, 0.0), (0.0, 0.0)))
     joint_tip_jacobian(np.zeros(5), 25.0, 1e-6, np.empty(3), np.empty((3, 5)))
-    env = gym.make("AFTIR-ArmFTL-v0")
-    env.reset(seed=0)
-    env.step(np.zeros(env.action_space.shape, dtype=np.float32))
-    env.close()
+    for kwargs in ({}, {"guide": True, "shaping": "field", "steer": "target"}):
+        env = gym.make("AFTIR-ArmFTL-v0", **kwargs)
+        env.reset(seed=0)
+        env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+        env.close()
+    planner = Planner("b737_center")
+    for target in ((100.0, 50.0, 50.0), (230.0, 140.0, 90.0)):  # bay 1 (TGA), bay 2 (TSM)
+        planner.plan(target)
+    with tempfile.TemporaryDirectory() as folder:
+        export_tank_mesh(tank, Path(folder) / "t.stl", Path(folder) / "t.yaml")
+        load_tank(str(Path(folder) / "t.yaml")).raster  # noqa: B018  (builds the mesh grids)
     train_all_targets(tank="b737_center", episodes=1, seed=0)
     print(f"numba kernels compiled or loaded in {time.perf_counter() - start:.1f} s")
 
