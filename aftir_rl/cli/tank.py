@@ -7,8 +7,9 @@ A thin command line over :mod:`aftir_rl.core.tank`:
   scene export (docs/design.md §5);
 - ``aftir tank generate --kind wing --bays N --seed S -o wing.yaml`` writes a generated wing
   tank (:func:`~aftir_rl.core.tank.generate.wing_tank`);
-- ``aftir tank export TANK -o tank.stl [--yaml OUT.yaml]`` writes the tank's solids as one
-  triangle mesh (needs ``aftir_rl[mesh]``), and with ``--yaml`` a tank file that reads it back.
+- ``aftir tank export TANK -o tank.stl [--walls walls.stl] [--yaml OUT.yaml]`` writes the
+  tank's solids as one triangle mesh (needs ``aftir_rl[mesh]``), with ``--walls`` its box as a
+  walls mesh, and with ``--yaml`` a tank file that reads them back.
 
 A tank that cannot be read or written prints "error: <why>" and exits with status 2.
 """
@@ -52,7 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
     export = sub.add_parser("export", help="the tank's solids as a triangle mesh (STL, OBJ, PLY)")
     export.add_argument("tank", help=_TANK_HELP)
     export.add_argument("-o", "--output", required=True, help="mesh file: .stl, .obj or .ply")
-    export.add_argument("--yaml", help="also write a tank YAML whose obstacles are that mesh")
+    export.add_argument("--walls", help="also write the box as a walls mesh (the tank's inside)")
+    export.add_argument("--yaml", help="also write a tank YAML that reads the mesh files back")
     return parser
 
 
@@ -74,11 +76,9 @@ def _export(args: argparse.Namespace) -> None:
     from aftir_rl.core.tank.meshes import export_tank_mesh
 
     tank = load_tank(args.tank)
-    triangles = export_tank_mesh(tank, args.output, args.yaml)
-    print(
-        f"wrote {args.output}: {triangles:,} triangles"
-        + (f", and {args.yaml}" if args.yaml else "")
-    )
+    triangles = export_tank_mesh(tank, args.output, args.yaml, args.walls)
+    also = [name for name in (args.walls, args.yaml) if name]
+    print(f"wrote {args.output}: {triangles:,} triangles" + "".join(f", and {a}" for a in also))
 
 
 @cli

@@ -2,8 +2,9 @@
 
 :data:`SCENES` are the reference 737 tank, that tank read back from its own exported mesh,
 generated wing tanks of 2 to 5 bays, a wing whose ribs have only round and oval holes, and a
-wing given only as a mesh. :func:`suite_targets` draws a scene's targets (seeded, at least
-:data:`CLEARANCE` from every surface, in a raster cell reachable from the start);
+wing given only as meshes (its walls and its solids). :func:`suite_targets` draws a scene's
+targets (seeded, at least :data:`CLEARANCE` from every surface, in a raster cell reachable from
+the start);
 :func:`run_suite` plans a follow-the-leader motion with the 1 cm margin to each (the planner
 that applies to any tank) and writes ``suite.json``, ``suite.csv`` and ``suite.db``, an SQLite
 file in OMPL's benchmark-database layout (``experiments``, ``plannerConfigs``, ``runs``) that
@@ -41,7 +42,7 @@ SCENES: dict[str, Any] = {
     "wing_4bay": "wing:4:3",
     "wing_5bay": "wing:5:4",
     "wing_round_holes": ("round", 6),
-    "wing_mesh_only": ("mesh_of", "wing:3:5"),
+    "wing_mesh_only": ("mesh_only", "wing:3:5"),
 }
 #: How far every target lies from every surface [cm].
 CLEARANCE = 10.0
@@ -69,8 +70,11 @@ def scene_tanks(folder: Path, names: list[str] | None = None) -> dict[str, Tank]
         how = SCENES[name]
         if isinstance(how, str):
             out[name] = load_tank(how)
-        elif how[0] == "mesh_of":
-            export_tank_mesh(load_tank(how[1]), folder / f"{name}.stl", folder / f"{name}.yaml")
+        elif how[0] in ("mesh_of", "mesh_only"):
+            walls = folder / f"{name}_walls.stl" if how[0] == "mesh_only" else None
+            export_tank_mesh(
+                load_tank(how[1]), folder / f"{name}.stl", folder / f"{name}.yaml", walls
+            )
             out[name] = load_tank(folder / f"{name}.yaml")
         else:
             ranges = WingRanges(access_shapes=("oval",), lightening_holes=(2, 3))

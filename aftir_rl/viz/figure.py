@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.core.tank import Box, Solid, Tank
+from aftir_rl.core.tank.meshes import is_walls
 from aftir_rl.core.tank.solids import Mesh
 from aftir_rl.viz.runs import RunData
 
@@ -39,10 +40,13 @@ _SOLID_GROUPS = {
     "sphere": ("spheres", "#e45756", 0.5),
     "wedge": ("taper", "#9fb4c7", 0.3),
     "mesh": ("meshes", "#6b8e23", 0.5),
+    "walls": ("walls (mesh)", "#b0b0b0", 0.12),
 }
 
 
 def _solid_group(solid: Solid) -> str:
+    if is_walls(solid):
+        return "walls"
     if solid.kind == "plate" or (solid.kind == "box" and solid.name.startswith("baffle")):
         return "baffle"
     return solid.kind

@@ -44,11 +44,13 @@ from aftir_rl.core.tank.parts import (
     parse_baffles,
     parse_obstacles,
     parse_taper,
+    parse_walls_mesh,
     positive,
     require,
     section,
 )
-from aftir_rl.core.tank.solids import Vec3
+from aftir_rl.core.tank.raster import format_point
+from aftir_rl.core.tank.solids import Solid, Vec3
 
 __all__ = [
     "TANK_DIR",
@@ -83,6 +85,7 @@ _TOP_KEYS = {
     "arm",
     "targets",
     "walls",
+    "mesh",
 }
 
 
@@ -100,7 +103,12 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
             f"{src}: unknown key {brief(unknown[0])}; allowed keys are "
             f"{', '.join(sorted(_TOP_KEYS))}"
         )
-    lo, hi = _parse_box(data, src)
+    walls_mesh: tuple[Solid, ...] = ()
+    if data.get("mesh") is None:
+        lo, hi = _parse_box(data, src)
+    else:
+        lo, hi, solid = parse_walls_mesh(data, src)
+        walls_mesh = (solid,)
     kwargs: dict[str, Any] = {"box_min": lo, "box_max": hi, "source": src}
     kwargs["name"] = str(data.get("name", Path(src).stem))
     kwargs["description"] = str(data.get("description", ""))
@@ -119,7 +127,7 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
         kwargs["start_point"] = to_vector(
             data["start_point"], f"{src}: start_point", limit=MAX_COORD
         )
-    kwargs["obstacles"] = parse_obstacles(data, lo, hi, src)
+    kwargs["obstacles"] = walls_mesh + parse_obstacles(data, lo, hi, src)
     if data.get("baffle") is not None:
         kwargs["baffle"], kwargs["hatch"] = parse_baffle(data, lo, hi, src)
     elif data.get("hatch") is not None:
@@ -131,6 +139,8 @@ def tank_from_mapping(data: Mapping[str, Any], source: str) -> Tank:
     kwargs["targets"] = _parse_targets(data, src)
     tank = Tank(**kwargs)
     _check_points(tank, src)
+    if walls_mesh:
+        _check_panel_in_walls(tank, walls_mesh[0], src)
     return tank
 
 
@@ -223,6 +233,20 @@ def _check_points(tank: Tank, src: str) -> None:
             raise ConfigError(f"{src}: targets[{i}]: {target} is inside {hit.name or 'a solid'}")
 
 
+def _check_panel_in_walls(tank: Tank, walls: Solid, src: str) -> None:
+    """The walls given as a mesh have the panel in their floor, with their inside above it."""
+    c, r = np.array(tank.panel.center), tank.panel.radius
+    ring = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    disc = c + np.c_[0.9 * r * np.cos(ring), 0.9 * r * np.sin(ring), np.zeros(16)]
+    points = np.vstack([c, disc]) + [0.0, 0.0, 1.0]
+    if np.any(walls.signed_distance(points) < 0.5):
+        raise ConfigError(
+            f"{src}: mesh: the walls do not hold the panel: the floor around "
+            f"{format_point(c)} (radius {r:g} cm) must be the mesh's lowest plane, the tank's "
+            "inside above it"
+        )
+
+
 def _start_cell_obstructed(tank: Tank) -> bool:
     """Whether a solid overlaps the start cell, without building the raster (O(solids))."""
     assert tank.cell_size is not None
@@ -270,12 +294,15 @@ def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
     meshes = [
         o for o in data.get("obstacles") or [] if isinstance(o, dict) and o.get("type") == "mesh"
     ]
+    if data.get("mesh") is not None:
+        meshes.append(data)  # the walls: data["mesh"] is the file
     if meshes:
         load_tank(source)  # every mesh checked before anything is copied
         for i, item in enumerate(meshes):
-            name = f"tank_mesh_{i}{Path(str(item['file'])).suffix.lower()}"
-            shutil.copyfile(source.parent / str(item["file"]), Path(run_dir) / name)
-            item["file"] = name
+            key = "mesh" if item is data else "file"
+            name = f"tank_mesh_{i}{Path(str(item[key])).suffix.lower()}"
+            shutil.copyfile(source.parent / str(item[key]), Path(run_dir) / name)
+            item[key] = name
         raw = yaml.safe_dump(data, sort_keys=False).encode()
     with atomic_open(Path(run_dir) / RUN_TANK_FILE, "wb") as fh:
         fh.write(raw)

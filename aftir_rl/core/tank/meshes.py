@@ -32,7 +32,14 @@ from aftir_rl.core.files import atomic_open
 from aftir_rl.core.tank import mesh_kernels
 from aftir_rl.core.tank.solids import Box, Mesh, Shape
 
-__all__ = ["MeshSolid", "read_mesh", "export_tank_mesh", "MAX_MESH_BYTES", "MAX_TRIANGLES"]
+__all__ = [
+    "MeshSolid",
+    "read_mesh",
+    "export_tank_mesh",
+    "is_walls",
+    "MAX_MESH_BYTES",
+    "MAX_TRIANGLES",
+]
 
 _Array = NDArray[np.float64]
 #: Largest mesh file read [bytes], and most triangles in it.
@@ -48,6 +55,11 @@ BAND = 2.0
 #: How far [cm] the grid reaches beyond the mesh and the tank's box.
 GRID_PAD = 6.0
 MESH_SUFFIXES = (".stl", ".obj", ".ply")
+#: Vertices this near [cm] the walls' lowest plane are in their floor.
+FLOOR_EPS = 1e-6
+#: How far below a tank's floor [cm] the grid of its meshes reaches: the panel's opening
+#: continues down as the linear module's guide, where the arm's body is checked too.
+GUIDE_DEPTH = 20.0
 
 
 def _trimesh() -> Any:
@@ -130,7 +142,19 @@ class MeshSolid(Shape):
     source: str = ""
     #: Corners [cm] of a region the distance grid must cover too (the tank's box), or None.
     extent: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    #: The tank's walls: the mesh bounds the tank's inside, and the solid is what lies outside
+    #: it above its floor (its lowest plane, the box's floor, whose triangles are left to the
+    #: box's floor with its panel opening).
+    walls: bool = False
     kind: ClassVar[str] = "mesh"
+
+    @cached_property
+    def surface(self) -> NDArray[np.int64]:
+        """The faces distances, the raster and python-fcl see (the walls' floor left out)."""
+        if not self.walls:
+            return self.faces
+        z = self.vertices[self.faces][..., 2]
+        return self.faces[~np.all(np.abs(z - self.vertices[:, 2].min()) < FLOOR_EPS, axis=1)]
 
     @property
     def stack_key(self) -> int:
@@ -147,16 +171,24 @@ class MeshSolid(Shape):
         lo, hi = self.aabb()
         pad = GRID_PAD
         lo, hi = lo - pad, hi + pad
-        if self.extent is not None:
-            lo = np.minimum(lo, np.array(self.extent[0]) - pad)
+        if self.extent is not None:  # the tank's box, and the panel's guide below its floor
+            lo = np.minimum(lo, np.array(self.extent[0]) - [pad, pad, GUIDE_DEPTH])
             hi = np.maximum(hi, np.array(self.extent[1]) + pad)
         g = GRID_SPACING
         while math.prod(int(math.ceil((hi - lo)[d] / g)) + 1 for d in range(3)) > MAX_GRID_NODES:
             g *= 1.25
+        floor = float(self.vertices[:, 2].min())
+        if self.walls:  # a plane of nodes in the floor: no read above it reaches below
+            lo[2] = floor - math.ceil((floor - lo[2]) / g) * g
         shape = np.array([int(math.ceil((hi - lo)[d] / g)) + 1 for d in range(3)], np.int64)
         band = max(BAND, 1.5 * g)  # every triangle has nodes within its band
-        near, nearest = mesh_kernels.band_distances(self.vertices, self.faces, lo, g, shape, band)
-        inside = mesh_kernels.column_winding(self.vertices, self.faces, lo, g, shape) > 0
+        near, nearest = mesh_kernels.band_distances(self.vertices, self.surface, lo, g, shape, band)
+        winding = mesh_kernels.column_winding(self.vertices, self.faces, lo, g, shape)
+        if self.walls:
+            above = lo[2] + g * np.arange(shape[2]) > floor + FLOOR_EPS  # the floor: the box's
+            inside = (winding <= 0) & above[None, None, :]
+        else:
+            inside = winding > 0
         ndimage = require("scipy.ndimage", "mesh")
         # beyond the band: the nearest node within it hands over its mesh point, then two
         # sweeps hand each node the nearest of its neighbours' points
@@ -195,7 +227,7 @@ class MeshSolid(Shape):
         )
         origin = flat_lo.min(axis=0) if flat_lo.size else np.zeros(3)
         shape = np.round((flat_lo.max(axis=0) - origin) / size).astype(np.int64) + 1
-        cut = mesh_kernels.cells_cut(self.vertices, self.faces, origin, size, shape)
+        cut = mesh_kernels.cells_cut(self.vertices, self.surface, origin, size, shape)
         index = np.round((flat_lo - origin) / size).astype(np.int64)
         return cut[index[:, 0], index[:, 1], index[:, 2]].reshape(np.shape(lo)[:-1])
 
@@ -205,19 +237,20 @@ class MeshSolid(Shape):
 
     def to_json(self) -> dict[str, Any]:
         """Scene-export form (the file it was read from, and its size)."""
-        return {"type": "mesh", "file": self.source, "triangles": len(self.faces)}
+        out = {"type": "mesh", "file": self.source, "triangles": len(self.faces)}
+        return {**out, "walls": True} if self.walls else out
 
     def fcl_objects(self) -> list[Any]:
         """A python-fcl BVH model of the triangles (hollow: see :meth:`contains`)."""
         model = fcl.BVHModel()
-        model.beginModel(len(self.vertices), len(self.faces))
-        model.addSubModel(self.vertices, self.faces)
+        model.beginModel(len(self.vertices), len(self.surface))
+        model.addSubModel(self.vertices, self.surface)
         model.endModel()
         return [fcl.CollisionObject(model, fcl.Transform())]
 
     def mesh(self) -> Mesh:
-        """The mesh itself."""
-        return self.vertices, self.faces
+        """The mesh, outward from the solid (the walls': turned inward, without the floor)."""
+        return (self.vertices, self.surface[:, ::-1]) if self.walls else (self.vertices, self.faces)
 
     def wireframe(self) -> list[_Array]:
         """Its bounding box's edges (a picture of a large mesh draws the mesh, not lines)."""
@@ -247,10 +280,17 @@ def trilinear(points: _Array, lo: _Array, g: float, values: NDArray[np.float32],
     return np.where(inside, out, outside)
 
 
+def is_walls(solid: Any) -> bool:
+    """Whether a tank solid is the tank's walls given as a mesh (:attr:`MeshSolid.walls`)."""
+    return solid.kind == "mesh" and bool(solid.walls)
+
+
 def tank_bodies(tank: Any) -> tuple[_Array, NDArray[np.int64]]:
-    """Every solid of a tank as closed outward bodies in one mesh ``(V, F)``."""
+    """Every solid of a tank as closed outward bodies in one mesh ``(V, F)`` (not its walls)."""
     verts, faces, offset = [], [], 0
     for solid in tank.solids:
+        if is_walls(solid):
+            continue
         bodies = solid.bodies() if solid.kind == "plate" else [solid.mesh()]
         for bv, bf in bodies:
             tri = bv[bf]
@@ -258,38 +298,76 @@ def tank_bodies(tank: Any) -> tuple[_Array, NDArray[np.int64]]:
             verts.append(bv)
             faces.append((bf if volume > 0 else bf[:, ::-1]) + offset)
             offset += len(bv)
+    if not verts:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
     return np.vstack(verts), np.vstack(faces).astype(np.int64)
 
 
-def export_tank_mesh(tank: Any, output: str | Path, yaml_out: str | Path | None = None) -> int:
-    """Write a tank's solids as one mesh file (and a tank YAML that reads it); its triangles."""
+def box_inside_mesh(lo: Any, hi: Any) -> tuple[_Array, NDArray[np.int64]]:
+    """The box ``lo..hi`` as a closed outward mesh (12 triangles): walls around its inside."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    verts = np.array([[(lo, hi)[(i >> d) & 1][d] for d in range(3)] for i in range(8)])
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    faces = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))], np.int64)
+    return verts, faces
+
+
+def export_tank_mesh(
+    tank: Any,
+    output: str | Path,
+    yaml_out: str | Path | None = None,
+    walls_out: str | Path | None = None,
+) -> int:
+    """Write a tank's solids as one mesh file; their triangles.
+
+    ``yaml_out``: also a tank file that reads it back; ``walls_out``: also the box as a walls mesh
+    (:attr:`MeshSolid.walls`), which that tank file then names instead of a box.
+    """
     trimesh = _trimesh()
-    output = Path(output)
-    if output.suffix.lower() not in MESH_SUFFIXES:
-        raise ConfigError(f"-o: expected a {', '.join(MESH_SUFFIXES)} file, got {output.name!r}")
-    verts, faces = tank_bodies(tank)
-    data = trimesh.Trimesh(verts, faces, process=False).export(file_type=output.suffix[1:].lower())
-    with atomic_open(output, "wb" if isinstance(data, bytes) else "w") as fh:
-        fh.write(data)
+    outputs = [Path(output)] + ([Path(walls_out)] if walls_out is not None else [])
+    for path, flag in zip(outputs, ("-o", "--walls")):
+        if path.suffix.lower() not in MESH_SUFFIXES:
+            raise ConfigError(
+                f"{flag}: expected a {', '.join(MESH_SUFFIXES)} file, got {path.name!r}"
+            )
+    if walls_out is not None and not tank.walls:
+        raise ConfigError(f"--walls: {tank.name} has no walls (walls: false)")
+    if any(is_walls(s) for s in tank.solids) and (walls_out or yaml_out) is not None:
+        raise ConfigError(f"{tank.name}'s walls are a mesh already: its own file reads them")
+    meshes = [tank_bodies(tank), box_inside_mesh(tank.box_min, tank.box_max)]
+    for path, (verts, faces) in zip(outputs, meshes):
+        if not len(faces):
+            raise ConfigError(f"{tank.name} has no solids to write")
+        mesh = trimesh.Trimesh(verts, faces, process=False)
+        data = mesh.export(file_type=path.suffix[1:].lower())
+        with atomic_open(path, "wb" if isinstance(data, bytes) else "w") as fh:
+            fh.write(data)
     if yaml_out is not None:
-        _write_mesh_yaml(tank, output, Path(yaml_out))
-    return len(faces)
+        _write_mesh_yaml(tank, outputs, Path(yaml_out))
+    return len(meshes[0][1])
 
 
-def _write_mesh_yaml(tank: Any, mesh_file: Path, yaml_out: Path) -> None:
-    """A tank file with ``tank``'s box, panel, arm and targets, and the mesh as its solids."""
-    rel = os.path.relpath(mesh_file.resolve(), yaml_out.resolve().parent)
-    if rel.startswith(".."):
-        raise ConfigError(f"--yaml {yaml_out}: write it in the mesh file's folder or above it")
+def _write_mesh_yaml(tank: Any, mesh_files: list[Path], yaml_out: Path) -> None:
+    """A tank file with ``tank``'s box (or walls mesh), panel, arm and targets, and its solids."""
+    rel = []
+    for mesh_file in mesh_files:
+        rel.append(os.path.relpath(mesh_file.resolve(), yaml_out.resolve().parent))
+        if rel[-1].startswith(".."):
+            raise ConfigError(f"--yaml {yaml_out}: write it in the mesh files' folder or above it")
+    shape = (
+        {"mesh": rel[1]}
+        if len(rel) > 1
+        else {"box": {"min": list(tank.box_min), "max": list(tank.box_max)}}
+    )
     data = {
         "name": f"{tank.name}_mesh",
-        "description": f"{tank.name} with its solids read from {mesh_file.name}",
-        "box": {"min": list(tank.box_min), "max": list(tank.box_max)},
+        "description": f"{tank.name} with its solids read from {mesh_files[0].name}",
+        **shape,
         "cell_size": tank.cell_size,
         "panel": {"center": list(tank.panel.center), "radius": tank.panel.radius},
         "start_point": list(tank.start_point),
         "walls": tank.walls,
-        "obstacles": [{"type": "mesh", "name": "solids", "file": rel}],
+        "obstacles": [{"type": "mesh", "name": "solids", "file": rel[0]}],
         "arm": {
             "section_length": tank.arm.section_length,
             "max_sections": tank.arm.max_sections,

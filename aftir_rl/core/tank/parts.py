@@ -8,9 +8,11 @@ docs/tanks.md.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -22,6 +24,7 @@ from aftir_rl.core.tank.raster import format_point
 from aftir_rl.core.tank.solids import Box, Cylinder, Solid, Sphere, Vec3
 
 __all__ = [
+    "parse_walls_mesh",
     "MAX_COORD",
     "MAX_CELLS",
     "MAX_OBSTACLES",
@@ -282,6 +285,32 @@ def _parse_hole(item: Any, plate: Plate, where: str) -> Hole:
             f"{format_point(plate.lo)}..{format_point(plate.hi)})"
         )
     return hole
+
+
+def parse_walls_mesh(data: Mapping[str, Any], src: str) -> tuple[Vec3, Vec3, Solid]:
+    """The walls given as a mesh (``mesh: FILE``): the box around it, and its solid.
+
+    The mesh bounds the tank's inside; its lowest plane is the floor. The box is its bounds,
+    grown to whole cells of ``cell_size`` (the floor kept), so nothing else gives one.
+    """
+    from aftir_rl.core.tank.meshes import MeshSolid
+
+    for key in ("box", "taper"):
+        if data.get(key) is not None:
+            raise ConfigError(
+                f"{src}: {key}: a tank whose walls are a mesh takes its shape from the mesh; "
+                f"give mesh or {key}, not both"
+            )
+    if data.get("walls", True) is not True:
+        raise ConfigError(f"{src}: walls: a tank whose walls are a mesh has walls")
+    solid = _parse_mesh(data["mesh"], "walls", f"{src}: mesh", Path(src).parent, None)
+    lo, hi = solid.aabb()
+    cell = data.get("cell_size")
+    if isinstance(cell, int | float) and not isinstance(cell, bool) and 0 < cell < math.inf:
+        hi = lo + np.ceil((hi - lo) / cell - 1e-9) * cell
+    box = (cast(Vec3, tuple(map(float, lo))), cast(Vec3, tuple(map(float, hi))))
+    assert isinstance(solid, MeshSolid)
+    return (*box, dataclasses.replace(solid, extent=box, walls=True))
 
 
 def _parse_mesh(

@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.extras import require
 from aftir_rl.core.tank.geometry import Tank
-from aftir_rl.core.tank.meshes import tank_bodies
+from aftir_rl.core.tank.meshes import is_walls, tank_bodies
 
 __all__ = ["SurfaceSamples", "scene_mesh", "surface_samples", "MAX_SURFACE_SAMPLES"]
 
@@ -42,7 +42,8 @@ class SurfaceSamples:
 def scene_mesh(tank: Tank) -> Any:
     """The tank's solids and walls as one ``trimesh.Trimesh`` (outward faces; not merged)."""
     trimesh = require("trimesh", "mesh")
-    parts = [tank_bodies(tank)] if tank.solids else []
+    parts = [tank_bodies(tank)] if any(not is_walls(s) for s in tank.solids) else []
+    parts += [s.mesh() for s in tank.solids if is_walls(s)]  # facing the inside
     if tank.walls:
         parts += [slab.mesh() for slab in tank.enclosure.slabs()]
     if not parts:
