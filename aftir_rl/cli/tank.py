@@ -8,8 +8,9 @@ A thin command line over :mod:`aftir_rl.core.tank`:
 - ``aftir tank generate --kind wing --bays N --seed S -o wing.yaml`` writes a generated wing
   tank (:func:`~aftir_rl.core.tank.generate.wing_tank`);
 - ``aftir tank export TANK -o tank.stl [--walls walls.stl] [--yaml OUT.yaml]`` writes the
-  tank's solids as one triangle mesh (needs ``aftir_rl[mesh]``), with ``--walls`` its box as a
-  walls mesh, and with ``--yaml`` a tank file that reads them back.
+  tank's solids as one triangle mesh (needs ``aftir_rl[mesh]``), with ``--walls`` its inside
+  (the box, narrowed by its taper) as a walls mesh, and with ``--yaml`` a tank file that reads
+  them back.
 
 A tank that cannot be read or written prints "error: <why>" and exits with status 2.
 """
@@ -53,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     export = sub.add_parser("export", help="the tank's solids as a triangle mesh (STL, OBJ, PLY)")
     export.add_argument("tank", help=_TANK_HELP)
     export.add_argument("-o", "--output", required=True, help="mesh file: .stl, .obj or .ply")
-    export.add_argument("--walls", help="also write the box as a walls mesh (the tank's inside)")
+    export.add_argument("--walls", help="also write the tank's inside as a walls mesh")
     export.add_argument("--yaml", help="also write a tank YAML that reads the mesh files back")
     return parser
 

@@ -11,7 +11,7 @@ from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.robot import Posture
 from aftir_rl.core.tank import load_tank, tank_from_mapping
 from aftir_rl.core.tank.generate import wing_tank
-from aftir_rl.core.tank.meshes import box_inside_mesh, export_tank_mesh, is_walls
+from aftir_rl.core.tank.meshes import box_inside_mesh, export_tank_mesh, inside_mesh, is_walls
 
 trimesh = pytest.importorskip("trimesh")
 
@@ -87,6 +87,12 @@ def test_a_tapered_wing_from_its_walls_mesh_is_the_same_tank(tmp_path):
     free = exact > 0
     assert np.abs(read - exact)[free].max() < 0.5
     assert ((read > 0) == free)[np.abs(exact) > 0.5].all()
+    # export --walls writes that hexahedron, and leaves the taper's wedges out of the solids
+    np.testing.assert_allclose(inside_mesh(tank)[0], verts)
+    export_tank_mesh(tank, tmp_path / "s.stl", tmp_path / "e.yaml", tmp_path / "e.stl")
+    exported = load_tank(tmp_path / "e.yaml")
+    assert np.array_equal(tank.raster.obstructed, exported.raster.obstructed)
+    assert len(exported.obstacles[1].faces) < export_tank_mesh(tank, tmp_path / "all.stl")
 
 
 def test_a_walls_mesh_grows_its_box_to_whole_cells(tmp_path):

@@ -285,11 +285,14 @@ def is_walls(solid: Any) -> bool:
     return solid.kind == "mesh" and bool(solid.walls)
 
 
-def tank_bodies(tank: Any) -> tuple[_Array, NDArray[np.int64]]:
-    """Every solid of a tank as closed outward bodies in one mesh ``(V, F)`` (not its walls)."""
+def tank_bodies(tank: Any, taper: bool = True) -> tuple[_Array, NDArray[np.int64]]:
+    """Every solid of a tank as closed outward bodies in one mesh ``(V, F)``, but its walls.
+
+    With ``taper=False`` its taper's wedges are left out too (:func:`inside_mesh` has them).
+    """
     verts, faces, offset = [], [], 0
     for solid in tank.solids:
-        if is_walls(solid):
+        if is_walls(solid) or (not taper and any(solid is w for w in tank.taper)):
             continue
         bodies = solid.bodies() if solid.kind == "plate" else [solid.mesh()]
         for bv, bf in bodies:
@@ -312,6 +315,19 @@ def box_inside_mesh(lo: Any, hi: Any) -> tuple[_Array, NDArray[np.int64]]:
     return verts, faces
 
 
+def inside_mesh(tank: Any) -> tuple[_Array, NDArray[np.int64]]:
+    """The tank's inside as a closed outward mesh: its box, its far end narrowed by its taper."""
+    lo, hi = np.array(tank.box_min, float), np.array(tank.box_max, float)
+    verts, faces = box_inside_mesh(lo, hi)
+    for wedge in tank.taper:  # named taper_<axis>_<side>; the triangle's corners, far end last
+        c, side = "xyz".index(wedge.name[6]), wedge.name[8:]
+        along = next(i for i in range(3) if i not in (c, wedge.axis))
+        ends = wedge.corners[:, [i for i in range(3) if i != wedge.axis].index(c)]
+        far = (verts[:, along] == hi[along]) & (verts[:, c] == (lo if side == "min" else hi)[c])
+        verts[far, c] = ends.max() if side == "min" else ends.min()
+    return verts, faces
+
+
 def export_tank_mesh(
     tank: Any,
     output: str | Path,
@@ -320,8 +336,9 @@ def export_tank_mesh(
 ) -> int:
     """Write a tank's solids as one mesh file; their triangles.
 
-    ``yaml_out``: also a tank file that reads it back; ``walls_out``: also the box as a walls mesh
-    (:attr:`MeshSolid.walls`), which that tank file then names instead of a box.
+    ``yaml_out``: also a tank file that reads it back; ``walls_out``: also the tank's inside
+    (:func:`inside_mesh`) as a walls mesh (:attr:`MeshSolid.walls`), which that tank file then
+    names instead of a box and taper (whose wedges then stay out of the solids).
     """
     trimesh = _trimesh()
     outputs = [Path(output)] + ([Path(walls_out)] if walls_out is not None else [])
@@ -334,7 +351,8 @@ def export_tank_mesh(
         raise ConfigError(f"--walls: {tank.name} has no walls (walls: false)")
     if any(is_walls(s) for s in tank.solids) and (walls_out or yaml_out) is not None:
         raise ConfigError(f"{tank.name}'s walls are a mesh already: its own file reads them")
-    meshes = [tank_bodies(tank), box_inside_mesh(tank.box_min, tank.box_max)]
+    inside = walls_out is not None
+    meshes = [tank_bodies(tank, taper=not inside), inside_mesh(tank)]
     for path, (verts, faces) in zip(outputs, meshes):
         if not len(faces):
             raise ConfigError(f"{tank.name} has no solids to write")
