@@ -43,12 +43,19 @@ def test_loaded_policy_acts_in_its_env(name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_card_numbers_are_measured_again(name):
-    """The card's ``check`` set, measured now: the deterministic policy gives the same numbers."""
-    check = card(name)["check"]
+    """The card's ``check`` set, measured now: the deterministic policy gives the same numbers
+    on the kind of processor that measured them; on another, rounding in the network's matrix
+    products may turn one episode of the set (seen: Intel Xeon against AMD EPYC)."""
+    from aftir_rl.experiments.bench import machine_facts
+
+    c = card(name)
+    check = c["check"]
     row = evaluate_run(policy_dir(name), draw=(check["targets"], check["seed"]))
-    assert row["success_rate"] == pytest.approx(check["success_rate"], abs=1e-9)
-    assert row["tip_error_cm"] == pytest.approx(check["tip_error_cm"], rel=1e-4)
-    assert row["collision_rate"] == pytest.approx(check["collision_rate"], abs=1e-9)
+    same = c["machine"]["cpu"] == machine_facts()["cpu"]
+    episode = 1e-9 if same else 1.0 / check["targets"] + 1e-9
+    assert row["success_rate"] == pytest.approx(check["success_rate"], abs=episode)
+    assert row["tip_error_cm"] == pytest.approx(check["tip_error_cm"], rel=1e-4 if same else 0.1)
+    assert row["collision_rate"] == pytest.approx(check["collision_rate"], abs=episode)
 
 
 def test_cli_lists_and_shows_cards(capsys):
