@@ -291,15 +291,15 @@ def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
         source = TANK_DIR / f"{text}.yaml"
     raw = read_limited(source, MAX_YAML_BYTES, ConfigError, "tank file", "tank")
     data = read_yaml(source, raw)
+    # (mapping, key) of every mesh file it names: its obstacles' and its walls'
     meshes = [
-        o for o in data.get("obstacles") or [] if isinstance(o, dict) and o.get("type") == "mesh"
-    ]
-    if data.get("mesh") is not None:
-        meshes.append(data)  # the walls: data["mesh"] is the file
+        (o, "file")
+        for o in data.get("obstacles") or []
+        if isinstance(o, dict) and o.get("type") == "mesh"
+    ] + ([(data, "mesh")] if data.get("mesh") is not None else [])
     if meshes:
         load_tank(source)  # every mesh checked before anything is copied
-        for i, item in enumerate(meshes):
-            key = "mesh" if item is data else "file"
+        for i, (item, key) in enumerate(meshes):
             name = f"tank_mesh_{i}{Path(str(item[key])).suffix.lower()}"
             shutil.copyfile(source.parent / str(item[key]), Path(run_dir) / name)
             item[key] = name

@@ -31,6 +31,7 @@ from aftir_rl.core.extras import require
 from aftir_rl.core.files import atomic_open
 from aftir_rl.core.tank import mesh_kernels
 from aftir_rl.core.tank.solids import Box, Mesh, Shape
+from aftir_rl.core.tank.wedge import taper_side
 
 __all__ = [
     "MeshSolid",
@@ -319,12 +320,10 @@ def inside_mesh(tank: Any) -> tuple[_Array, NDArray[np.int64]]:
     """The tank's inside as a closed outward mesh: its box, its far end narrowed by its taper."""
     lo, hi = np.array(tank.box_min, float), np.array(tank.box_max, float)
     verts, faces = box_inside_mesh(lo, hi)
-    for wedge in tank.taper:  # named taper_<axis>_<side>; the triangle's corners, far end last
-        c, side = "xyz".index(wedge.name[6]), wedge.name[8:]
-        along = next(i for i in range(3) if i not in (c, wedge.axis))
-        ends = wedge.corners[:, [i for i in range(3) if i != wedge.axis].index(c)]
+    for wedge in tank.taper:
+        along, c, side, end = taper_side(wedge)
         far = (verts[:, along] == hi[along]) & (verts[:, c] == (lo if side == "min" else hi)[c])
-        verts[far, c] = ends.max() if side == "min" else ends.min()
+        verts[far, c] = end
     return verts, faces
 
 
@@ -351,8 +350,9 @@ def export_tank_mesh(
         raise ConfigError(f"--walls: {tank.name} has no walls (walls: false)")
     if any(is_walls(s) for s in tank.solids) and (walls_out or yaml_out) is not None:
         raise ConfigError(f"{tank.name}'s walls are a mesh already: its own file reads them")
-    inside = walls_out is not None
-    meshes = [tank_bodies(tank, taper=not inside), inside_mesh(tank)]
+    meshes = [tank_bodies(tank, taper=walls_out is None)]
+    if walls_out is not None:
+        meshes.append(inside_mesh(tank))
     for path, (verts, faces) in zip(outputs, meshes):
         if not len(faces):
             raise ConfigError(f"{tank.name} has no solids to write")

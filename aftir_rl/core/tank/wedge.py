@@ -27,7 +27,7 @@ from aftir_rl.core.tank.plate import (
 )
 from aftir_rl.core.tank.solids import Mesh, Primitive
 
-__all__ = ["Wedge", "triangle_distance_2d", "taper_wedges"]
+__all__ = ["Wedge", "triangle_distance_2d", "taper_wedges", "taper_side"]
 
 _Array = NDArray[np.float64]
 
@@ -151,3 +151,14 @@ def taper_wedges(lo: _Array, hi: _Array, along: int, end_lo: _Array, end_hi: _Ar
             out.append(Wedge(extrude_axis, float(lo[extrude_axis]), float(hi[extrude_axis]),
                              tuple(map(float, flat)), f"taper_{'xyz'[c]}_{side}"))  # type: ignore[arg-type]  # fmt: skip
     return out
+
+
+def taper_side(wedge: Wedge) -> tuple[int, int, str, float]:
+    """What :func:`taper_wedges` made ``wedge`` of: ``(along, c, side, end)``.
+
+    The box's ``side`` (``"min"`` or ``"max"``) wall across axis ``c`` reaches ``end`` at the far
+    end along ``along``.
+    """
+    c, side = "xyz".index(wedge.name[6]), wedge.name[8:]  # its name: taper_<c>_<side>
+    ends = wedge.corners[:, plane_axes(wedge.axis).index(c)]
+    return 3 - c - wedge.axis, c, side, float(ends.max() if side == "min" else ends.min())
