@@ -74,7 +74,7 @@ def warm_fields(max_draws: int, **kwargs) -> tuple[int, int, int]:
     ``max_draws``). Returns the fields built, the targets drawn and the last round's new fields.
     """
     venv = gym.make_vec(ENV_ID, num_envs=4096, vectorization_mode="vector_entry_point", **kwargs)
-    fields = venv.unwrapped.batch.fields
+    fields = venv.unwrapped.batch.guide
     before, draws, new = len(fields), 0, -1
     while draws < max_draws and new != 0:
         count = len(fields)

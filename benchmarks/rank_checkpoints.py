@@ -76,7 +76,7 @@ def extreme_targets(kwargs: dict, count: int, seed: int) -> np.ndarray:
     times). Raises :class:`AftirError` when a corner has no such point.
     """
     env = gym.make(ENV_ID, **kwargs).unwrapped
-    lo, hi, clearance = env.region[0], env.region[1], float(env.target_clearance)
+    (lo, hi), clearance = env.sampler.region, float(env.sampler.spec.target_clearance)
     high = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=bool)
     rng = np.random.default_rng(seed)
     out = np.empty((count, 3))

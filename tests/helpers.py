@@ -4,22 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from aftir_rl.envs.ftl.spec import TaskSpec
 from aftir_rl.envs.ftl.state import FTLBatch
 
 
 def ftl_batch(tank, b, **kwargs):
-    """An FTL batch of ``b`` arms with the env's defaults; any keyword overrides one of them."""
-    options = dict(
-        n_sections=tank.arm.max_sections,
-        samples_per_section=10,
-        kappa_step=0.1,
-        push_step=5.0,
-        start_height=10.0,
-        margin=1.0,
-        success_tolerance=2.0,
-        shaping="",
-    )
-    return FTLBatch(tank, batch=b, **{**options, **kwargs})
+    """An FTL batch of ``b`` arms with the env's defaults; any keyword of :class:`TaskSpec`
+    overrides one of them."""
+    return FTLBatch(TaskSpec(tank=tank, **kwargs), b)
 
 
 def random_ftl_batch(tank, rng, b, margin=1.0, **kwargs):

@@ -244,7 +244,7 @@ def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray
     kwargs = dict(run.config.env_kwargs or {})  # the env the model was trained on (spaces)
     env = gym.make(env_id, **kwargs).unwrapped
     # where the env draws its targets: ArmEnv's target_region, the FTL env's (bay) region
-    lo, hi = getattr(env, "target_region", None) or cast("ArmFTLEnv", env).region
+    lo, hi = getattr(env, "target_region", None) or cast("ArmFTLEnv", env).sampler.region
     rows = []
     for name in ("filomat2018", "bay1", "bay2"):
         targets = [t for tank, t in sets.get(name, []) if tank == "b737_center"]

@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.core.collision import CollisionScene
 from aftir_rl.core.errors import ConfigError, PlanningError
 from aftir_rl.envs.ftl.env import ArmFTLEnv
-from aftir_rl.envs.ftl.spec import TRAINING_ONLY_KWARGS
+from aftir_rl.envs.ftl.spec import MOTION_FREE_KWARGS
 from aftir_rl.planning.ftl.plan import SEARCH_VARIANTS, warm_up
 from aftir_rl.planning.ftl.route import RouteSettings, plan_route
 
@@ -52,8 +52,6 @@ MAX_LEAD = 1.0
 EXPERT_SETTINGS: tuple[RouteSettings, ...] = tuple(
     dict.fromkeys(replace(v, slack=0.0, leads=(0.0,)) for v in SEARCH_VARIANTS)
 )
-#: Env keyword arguments that change only the observation or the reward: the replay drops them.
-_SIM_DROPS = ("guide", "near_goal", "shaping", "step_cost", "render_mode", "bay", "target")
 
 
 #: What the env's arm is: the traced route's ``κ`` ``(k + 1, 2)``, the steered section ``k`` and
@@ -162,11 +160,9 @@ class FTLExpert:
         settings: tuple[RouteSettings, ...] = EXPERT_SETTINGS,
         **env_kwargs: Any,
     ):
-        sim_kwargs = {
-            k: v
-            for k, v in env_kwargs.items()
-            if k not in _SIM_DROPS and k not in TRAINING_ONLY_KWARGS
-        }
+        # what the policy sees or aims at and the reward do not move the arm: the replay drops them
+        drop = (*MOTION_FREE_KWARGS, "render_mode")
+        sim_kwargs = {k: v for k, v in env_kwargs.items() if k not in drop}
         self.sim = ArmFTLEnv(**sim_kwargs)
         self.max_seconds = float(max_seconds)
         self.max_steps = int(max_steps)

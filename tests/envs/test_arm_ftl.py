@@ -13,9 +13,10 @@ from aftir_rl.core.errors import AftirError, ConfigError, InvalidActionError, Ta
 from aftir_rl.core.robot import body_points
 from aftir_rl.core.tank import TankDistance
 from aftir_rl.envs.ftl.env import ArmFTLEnv
+from aftir_rl.envs.ftl.fields import field_guide, raster_detour_table
 from aftir_rl.envs.ftl.kernel import CONTACT_PENALTY
 from aftir_rl.envs.ftl.spec import MAX_STEP_COST
-from aftir_rl.envs.ftl.state import ftl_kappa_batch, raster_detour_table
+from aftir_rl.envs.ftl.state import ftl_kappa_batch
 from aftir_rl.planning.ftl.model import Route, ftl_postures, kappa_to_angles, route_points
 
 ENV_ID = "AFTIR-ArmFTL-v0"
@@ -125,7 +126,7 @@ def test_compute_reward_without_infos_is_an_error():
 def test_shaping_rewards_the_way_through_the_hatch():
     env = gym.make(ENV_ID, shaping=True).unwrapped
     target = np.array([[-50.0, 140.0, 90.0]])  # a reference target, far corner of bay 2
-    detour = env._cells
+    detour = env.reward.potential
     # In bay 1, left of the hatch: out to the hatch and back, 2 x 6 cells (x) + 2 x 1 (z: the
     # hatch is at mid height, c = 2, the start and target cells at c = 1 and c = 4) ...
     assert detour(np.array([[-40.0, 0.0, 20.0]]), target)[0] == 20.0 * 12
@@ -141,7 +142,7 @@ def test_field_shaping_pays_the_guide_fields_progress():
     """With ``shaping="field"`` progress plus shaping is the progress along the guide field's
     cost-to-go ``P``: over any rollout the non-terminal rewards sum to ``(P_start − P_end)/10``."""
     env = gym.make(ENV_ID, shaping="field", bay=2, max_episode_steps=40).unwrapped
-    fields = env.batch.fields
+    fields = field_guide(env.tank)  # the reward's: one guide per tank
     rng = np.random.default_rng(3)
     checked = 0
     for seed in range(3):
@@ -291,7 +292,7 @@ def test_detour_bias_draws_more_targets_behind_obstacles():
     again, _ = targets(detour_bias=1.0)
     np.testing.assert_array_equal(biased, again)  # seeded
     raster = env.tank.raster
-    row = raster_detour_table(env.tank)[raster.cell_indices(env.start_tip)]
+    row = raster_detour_table(env.tank)[raster.cell_indices(env.sampler.start_tip)]
     detour = {name: row[raster.cell_indices(t)] for name, t in (("u", plain), ("b", biased))}
     # the expected detour under density ∝ (1 + e), from the uniform draws: E[e(1+e)] / E[1+e]
     expected = (detour["u"] * (1 + detour["u"])).mean() / (1 + detour["u"]).mean()
@@ -405,7 +406,7 @@ def test_failure_bias_draws_targets_where_episodes_fail():
     _, info = plain.reset(seed=50)
     hard = raster.cell_indices(info["target"])[7]
     cells = np.arange(raster.n_cells)
-    rates = biased.failures
+    rates = biased.sampler.failures
     for _ in range(400):
         rates.record(cells, cells != hard)
     assert rates.count == 400 * len(cells)
@@ -445,7 +446,7 @@ def test_failure_bias_records_every_ended_episode(vector):
         successes = sum(s[6]["is_success"] for s in steps)
         env.reset()  # the episode under way when the rollout stopped ends without success
         ended += not (steps[-1][4] or steps[-1][5])
-    rates = env.unwrapped.failures
+    rates = env.unwrapped.sampler.failures
     assert ended > 4 and rates.count == ended and rates.seen.sum() >= 2
     # the rates moved down from 1 only by successes
     assert (rates.fail < 1).sum() <= successes
@@ -569,7 +570,7 @@ def test_reward_reuses_the_observations_guide_queries(monkeypatch):
     # first observations); the potentials at the start (after a reset or a restart) come free
     assert per_step == [(1, False), (1, False), (2, True)] * 2 + [(1, False)]
     tips, targets, to_go = batch.guide_queries[-1]
-    fresh, _ = query(batch.fields, tips, targets, batch.fields.field_ids(targets))
+    fresh, _ = query(batch.guide, tips, targets, batch.guide.field_ids(targets))
     np.testing.assert_array_equal(to_go, fresh)
 
 

@@ -114,7 +114,7 @@ def test_guide_leads_through_the_hatch():
     guide = field_guide(tank)
     rng = np.random.default_rng(0)
     env = ArmFTLEnv(bay=2)
-    targets = draw_targets([rng], env.tank, env.region, 10.0, env.start_tip)
+    targets = draw_targets([rng], env.tank, env.sampler.region, 10.0, env.sampler.start_tip)
     targets = np.concatenate([targets, [[200.0, 120.0, 50.0]]])
     starts = np.array([[100.0, 20.0, 20.0], [0.0, 0.0, 10.0]])
     for target in targets:
@@ -217,15 +217,15 @@ def dijkstra(field):
 def test_draw_targets_are_free_and_reproducible():
     env = ArmFTLEnv(bay=2)
     rngs = [np.random.default_rng(i) for i in range(50)]
-    t = draw_targets(rngs, env.tank, env.region, 10.0, env.start_tip)
+    t = draw_targets(rngs, env.tank, env.sampler.region, 10.0, env.sampler.start_tip)
     assert (point_clearance(env.tank, t) >= 10.0).all()
     assert (t[:, env.tank.baffle.index] > env.tank.baffle.position).all()
     again = draw_targets(
         [np.random.default_rng(i) for i in range(50)],
         env.tank,
-        env.region,
+        env.sampler.region,
         10.0,
-        env.start_tip,
+        env.sampler.start_tip,
     )
     np.testing.assert_array_equal(t, again)
 
@@ -236,7 +236,7 @@ def test_draw_targets_are_the_first_free_candidates(corners):
     from aftir_rl.envs.ftl.targets import corner_candidates
 
     env = ArmFTLEnv(bay=2)
-    lo, hi = env.region
+    lo, hi = env.sampler.region
 
     def reference(rng, clearance):
         corner = corners > 0 and rng.random() < corners
@@ -247,7 +247,7 @@ def test_draw_targets_are_the_first_free_candidates(corners):
                 else rng.uniform(lo, hi, (64, 3))
             )
             ok = point_clearance(env.tank, cand) >= clearance
-            ok &= np.linalg.norm(cand - env.start_tip, axis=1) >= 20.0
+            ok &= np.linalg.norm(cand - env.sampler.start_tip, axis=1) >= 20.0
             if ok.any():
                 return cand[ok.argmax()]
         raise AssertionError("no target")
@@ -256,9 +256,9 @@ def test_draw_targets_are_the_first_free_candidates(corners):
         drawn = draw_targets(
             [np.random.default_rng(i) for i in range(60)],
             env.tank,
-            env.region,
+            env.sampler.region,
             clearance,
-            env.start_tip,
+            env.sampler.start_tip,
             corners=corners,
         )
         expected = [reference(np.random.default_rng(i), clearance) for i in range(60)]

@@ -15,6 +15,7 @@ from aftir_rl.core.kernel.sections import min_clearance
 from aftir_rl.core.kernel.surface import FINEST
 from aftir_rl.core.robot import Posture
 from aftir_rl.core.tank import load_tank
+from aftir_rl.envs.ftl.spec import TaskSpec
 from aftir_rl.envs.ftl.state import FTLBatch
 
 
@@ -49,7 +50,7 @@ def _dense_clearance(batch, rows, per_section=200):
 @pytest.mark.parametrize("name", ["b737_center", pytest.param("wing:3:5", marks=pytest.mark.slow)])
 def test_contact_between_samples_is_found(name):
     tank = load_tank(name)
-    batch = FTLBatch(tank, 12, 5000, 10, 0.1, 5.0, 10.0, 1.0, 2.0, "")
+    batch = FTLBatch(TaskSpec(tank=tank, n_sections=12), 5000)
     scene = CollisionScene(tank)
     spacing = batch.l / 200
     dips = 0

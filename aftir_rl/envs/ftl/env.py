@@ -1,12 +1,14 @@
 """``AFTIR-ArmFTL-v0``: the whole arm deployed by follow-the-leader, goal-conditioned, batched.
 
 :class:`ArmFTLEnv` (one arm) and :class:`ArmFTLVectorEnv` (``num_envs`` arms in one numpy pass,
-``gym.make_vec(..., vectorization_mode="vector_entry_point")``) share :class:`FTLTask` and
-:class:`~aftir_rl.envs.ftl.state.FTLBatch`, so row ``i`` of a vector env seeded ``seed`` has
-exactly the transitions of a single env seeded ``seed + i``. The agent steers the route
-section the tip is tracing and pushes or pulls the linear module; the body follows the traced
-route (:mod:`aftir_rl.planning.ftl.model`). Options: :mod:`aftir_rl.envs.ftl.spec`; state and
-contact: :mod:`~aftir_rl.envs.ftl.state`; reward: :mod:`~aftir_rl.envs.ftl.reward`. The
+``gym.make_vec(..., vectorization_mode="vector_entry_point")``) are thin shells around the
+same parts (:class:`~aftir_rl.envs.ftl.task.FTLParts`): the state
+(:class:`~aftir_rl.envs.ftl.state.FTLBatch`), the reward
+(:class:`~aftir_rl.envs.ftl.reward.FTLReward`) and the target sampler
+(:class:`~aftir_rl.envs.ftl.targets.TargetSampler`), so row ``i`` of a vector env seeded
+``seed`` has exactly the transitions of a single env seeded ``seed + i``. The agent steers the
+route section the tip is tracing and pushes or pulls the linear module; the body follows the
+traced route (:mod:`aftir_rl.planning.ftl.model`). Options: :mod:`aftir_rl.envs.ftl.spec`. The
 model, the collision check and the reward are described in docs/envs/armftl.md.
 """
 
@@ -20,18 +22,25 @@ import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.robot import Posture, body_points
 from aftir_rl.envs.ftl.pool import TankPool, pool_specs
 from aftir_rl.envs.ftl.spec import FTLSpec
-from aftir_rl.envs.ftl.task import FTLTask, check_options
+from aftir_rl.envs.ftl.task import (
+    build_parts,
+    check_action,
+    check_options,
+    goal_clip,
+    observations,
+    spaces_of,
+)
 
 __all__ = ["ArmFTLEnv", "ArmFTLVectorEnv"]
 
 
-class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
+class ArmFTLEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
     """The whole arm, deployed through the panel by follow-the-leader, reaching targets.
 
     ## Description
@@ -154,15 +163,35 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
         #: The goal space's corners shared by a pool's tanks, or None (the tank's own).
         self.goal_bounds = None if self.pool is None else self.pool.goal_bounds
         self._spec, self._tank_index = spec, 0
-        self._configure(spec if self.pool is None else self.pool.spec_for(spec, 0), 1)
+        self._use(spec if self.pool is None else self.pool.spec_for(spec, 0))
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
-        self.action_space, self.observation_space = self._spaces()  # type: ignore[assignment]
+        self.action_space, self.observation_space = spaces_of(self.batch)  # type: ignore[assignment]
         self._tips: list[NDArray[np.float64]] = []
-        #: The shaping's potential at the tip (NaN: not known; see ``_step_reward``).
+        #: The shaping's potential at the tip (NaN: not known; see ``FTLReward.step``).
         self._potential: NDArray[np.float64] | None = np.full(1, np.nan)
         self._achieved = np.zeros((1, 3), dtype=np.float32)
         self._open = False  # an episode has steps and has not ended (for failure_bias)
+        self._renderer: Any = None
+
+    def _use(self, spec: FTLSpec) -> None:
+        """Build the env's parts for ``spec`` (again when a pool's episode draws another tank)."""
+        parts = build_parts(spec, 1, self.goal_bounds)
+        #: The arm's state, the reward and the target sampler (:mod:`aftir_rl.envs.ftl.task`).
+        self.batch, self.reward, self.sampler = parts
+        self.tank = self.batch.tank
+
+    def compute_reward(
+        self, achieved_goal: ArrayLike, desired_goal: ArrayLike, info: Any
+    ) -> NDArray[np.float64] | float:
+        """The step reward itself, so HER relabels with it (``FTLReward.compute_reward``)."""
+        return self.reward.compute_reward(achieved_goal, desired_goal, info)
+
+    def compute_terminated(
+        self, achieved_goal: ArrayLike, desired_goal: ArrayLike, info: Any
+    ) -> NDArray[np.bool_] | bool:
+        """:meth:`~aftir_rl.envs.ftl.reward.FTLReward.compute_terminated`: success or contact."""
+        return self.reward.compute_terminated(achieved_goal, desired_goal, info)
 
     @property
     def target(self) -> NDArray[np.float64]:
@@ -202,22 +231,20 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
         super().reset(seed=seed)
         options = check_options(options, ("target", "tank") if self.pool else ("target",))
         if self._open:  # the last episode ended without success (truncated or left)
-            self._record_outcomes(self.batch.target, [False])
+            self.sampler.record(self.batch.target, [False])
         self._open = False
         if self.pool is not None:  # this episode's tank
             index = self.pool.draw(self.np_random)
             if options.get("tank") is not None:
                 index = self.pool.index(options["tank"])
             if index != self._tank_index:
-                self._configure(self.pool.spec_for(self._spec, index), 1)
+                self._use(self.pool.spec_for(self._spec, index))
                 self._tank_index = index
-                self.__dict__.pop("_renderer", None)  # drawn again in the new tank
+                self._renderer = None  # drawn again in the new tank
         if options.get("target") is not None:
-            target = self._check_target(options["target"])
-        elif self.fixed_target is not None:
-            target = self.fixed_target
+            target = self.batch.check_target(options["target"])
         else:
-            target = self._draw_targets([self.np_random])[0]
+            target = self.sampler.draw([self.np_random])[0]
         self.batch.reset_rows(np.array([0]), target[None])
         self._potential = np.full(1, np.nan)
         self._tips = [self.tip]
@@ -226,7 +253,7 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
             "target": target.copy(),
             "tank": self.tank.source or self.tank.name,
         }
-        rows = self._obs_dict()
+        rows = observations(self.batch)
         self._achieved = rows["achieved_goal"].copy()  # the next step's previous tip, clipped
         return {k: v[0] for k, v in rows.items()}, info
 
@@ -234,23 +261,23 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
         self, action: NDArray[np.float32]
     ) -> tuple[dict[str, NDArray[np.float32]], SupportsFloat, bool, bool, dict[str, Any]]:
         """Steer and push; see the class docstring for rewards and termination."""
-        a = self._check_action(action, self.action_space.shape)
+        a = check_action(action, self.action_space.shape)
         b = self.batch
         b.step(a[None])
         prev = self._achieved  # the previous tip, as the last observation held it
         self._tips.append(self.tip)
-        rows = self._obs_dict()
+        rows = observations(self.batch)
         self._achieved = rows["achieved_goal"].copy()
         contact = b.contact
         # compute_reward's formula on the same float32 goals
-        reward, distance, self._potential = self._step_reward(
+        reward, distance, self._potential = self.reward.step(
             rows["achieved_goal"], rows["desired_goal"], prev, contact, self._potential
         )
         hit = bool(contact[0])
         success = bool(distance[0] < b.success_tolerance) and not hit
         self._open = not (success or hit)
         if not self._open:
-            self._record_outcomes(b.target, [success])
+            self.sampler.record(b.target, [success])
         info: dict[str, Any] = {
             "prev_achieved_goal": prev[0],
             "contact": hit,
@@ -267,14 +294,14 @@ class ArmFTLEnv(FTLTask, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.floa
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode= to make()")
             return None
-        if getattr(self, "_renderer", None) is None:
+        if self._renderer is None:
             from aftir_rl.viz.plotting import PathRenderer
 
             self._renderer = PathRenderer(self.tank, title="AFTIR-ArmFTL")
         return self._renderer.render(np.array(self._tips), self.target, arms=[self.body()])
 
 
-class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], Any]):
+class ArmFTLVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], Any]):
     """``num_envs`` :class:`ArmFTLEnv` s stepped together in numpy (autoreset: next step).
 
     Same arguments as :class:`ArmFTLEnv` plus ``num_envs``, ``max_episode_steps``
@@ -320,7 +347,10 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
                 "a tank pool (wing:BAYS:FIRST-LAST) has one tank per group of rows: "
                 "ArmFTLPoolVectorEnv, or gym.make_vec('AFTIR-ArmFTL-v0', n, tank=...)"
             )
-        self._configure(spec, self.num_envs)
+        parts = build_parts(spec, self.num_envs, goal_bounds)
+        #: The arms' state, the reward and the target sampler (:mod:`aftir_rl.envs.ftl.task`).
+        self.batch, self.reward, self.sampler = parts
+        self.tank = self.batch.tank
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -330,23 +360,32 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
         if self.autoreset_mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
             raise ConfigError("autoreset_mode must be 'NextStep' or 'SameStep'")
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
-        self.single_action_space, self.single_observation_space = self._spaces()
+        self.single_action_space, self.single_observation_space = spaces_of(self.batch)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self._rngs = [seeding.np_random()[0] for _ in range(self.num_envs)]
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self.prev_done = np.zeros(self.num_envs, dtype=bool)
-        #: The shaping's potential at each row's tip (NaN: not known; see ``_step_reward``).
+        #: The shaping's potential at each row's tip (NaN: not known; see ``FTLReward.step``).
         self._potential = np.full(self.num_envs, np.nan)
         self._targets_option: NDArray[np.float64] | None = None
+
+    def compute_reward(
+        self, achieved_goal: ArrayLike, desired_goal: ArrayLike, info: Any
+    ) -> NDArray[np.float64] | float:
+        """:meth:`~aftir_rl.envs.ftl.reward.FTLReward.compute_reward`, vectorised over rows."""
+        return self.reward.compute_reward(achieved_goal, desired_goal, info)
+
+    def compute_terminated(
+        self, achieved_goal: ArrayLike, desired_goal: ArrayLike, info: Any
+    ) -> NDArray[np.bool_] | bool:
+        """:meth:`~aftir_rl.envs.ftl.reward.FTLReward.compute_terminated`, vectorised over rows."""
+        return self.reward.compute_terminated(achieved_goal, desired_goal, info)
 
     def _new_targets(self, rows: NDArray[np.int64]) -> NDArray[np.float64]:
         if self._targets_option is not None:
             return self._targets_option[rows]
-        if self.fixed_target is not None:
-            return np.repeat(self.fixed_target[None], len(rows), axis=0)
-        rngs = [self._rngs[i] for i in rows]
-        return self._draw_targets(rngs)
+        return self.sampler.draw([self._rngs[i] for i in rows])
 
     def reset(
         self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
@@ -365,14 +404,14 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
             rows = t.reshape(-1, 3) if t.size % 3 == 0 else t
             if rows.ndim != 2 or len(rows) not in (1, self.num_envs):
                 raise TargetError(f"target must be (3,) or ({self.num_envs}, 3), got {t.shape}")
-            checked = np.array([self._check_target(r) for r in rows])
+            checked = np.array([self.batch.check_target(r) for r in rows])
             self._targets_option = np.broadcast_to(checked, (self.num_envs, 3)).copy()
         every = np.arange(self.num_envs)
         self.batch.reset_rows(every, self._new_targets(every))
         self._potential = np.full(self.num_envs, np.nan)
         self.steps[:] = 0
         self.prev_done[:] = False
-        return self._obs_dict(), {"target": self.batch.target.copy()}
+        return observations(self.batch), {"target": self.batch.target.copy()}
 
     def step(
         self, actions: NDArray[np.float32]
@@ -384,7 +423,7 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
         dict[str, Any],
     ]:
         """Step every row; rows that ended on the previous step are reset instead."""
-        a = self._check_action(actions, self.action_space.shape)
+        a = check_action(actions, self.action_space.shape)
         b = self.batch
         done_rows = np.flatnonzero(self.prev_done)
         if len(done_rows):
@@ -393,12 +432,12 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
             # (their rewards are 0 this step; their potentials at the new start follow from it)
         prev_tip = b.step(a)
         prev_tip[done_rows] = b.tip[done_rows]
-        obs = self._obs_dict()
-        prev = self._goal_clip(prev_tip)
+        obs = observations(self.batch)
+        prev = goal_clip(self.batch, prev_tip)
         contact = b.contact.copy()
         info: dict[str, Any] = {"prev_achieved_goal": prev, "contact": contact}
         # compute_reward's formula on the same float32 goals
-        reward, distance, potential = self._step_reward(
+        reward, distance, potential = self.reward.step(
             obs["achieved_goal"], obs["desired_goal"], prev, contact, self._potential
         )
         if potential is not None:  # the next step's potentials at its previous tips
@@ -419,7 +458,7 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
         )
         done = terminated | truncated
         ended = np.flatnonzero(done)
-        self._record_outcomes(b.target[ended], success[ended])
+        self.sampler.record(b.target[ended], success[ended])
         if self.autoreset_mode is AutoresetMode.NEXT_STEP:
             self.prev_done = done
         elif done.any():  # SAME_STEP: the last observations go to info, the rows start again
@@ -429,6 +468,8 @@ class ArmFTLVectorEnv(FTLTask, VectorEnv[dict[str, NDArray[np.float32]], NDArray
             self._potential[rows] = np.nan
             self.steps[rows] = 0
             obs = {k: v.copy() for k, v in obs.items()}
-            for key, value in self._obs_dict(rows).items():  # only the rows that started again
+            for key, value in observations(
+                self.batch, rows
+            ).items():  # only the rows that started again
                 obs[key][rows] = value
         return obs, reward, terminated, truncated, info

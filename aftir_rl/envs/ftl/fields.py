@@ -4,8 +4,9 @@ The exact clearances come from :mod:`aftir_rl.core.kernel.clearance` (shared wit
 
 - :class:`FieldGuide`: the free-space distance-to-go fields of the targets seen so far (the
   motion planner's guide field), read for every tip at once.
-- :func:`raster_distance_table`: all-pairs 6-connected distances through the raster, for the
-  reward's shaping term.
+- :func:`raster_distance_table`: all-pairs 6-connected distances through the raster, and
+  :func:`raster_detour_table`, their detours beyond Manhattan, for the reward's shaping term and
+  the sampler's ``detour_bias``.
 
 How the bounds work: docs/envs/armftl.md.
 """
@@ -19,11 +20,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.core import kernel
+from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.tank import Tank
 
 __all__ = [
     "FieldGuide",
     "field_guide",
+    "raster_detour_table",
     "raster_distance_table",
 ]
 
@@ -83,6 +86,28 @@ def raster_distance_table(tank: Tank) -> NDArray[np.int32]:
 
 
 _TABLES: weakref.WeakKeyDictionary[Tank, NDArray[np.int32]] = weakref.WeakKeyDictionary()
+
+
+def raster_detour_table(tank: Tank) -> NDArray[np.int32]:
+    """Detour ``e[c, g]`` [cells] of the shortest 6-connected raster path beyond Manhattan.
+
+    ``e = D − |c − g|₁ ≥ 0`` with ``D`` the all-pairs BFS distances of
+    :func:`raster_distance_table` (unreachable pairs: the largest
+    distance plus one). Shape ``(cells, cells)``, flat cell indices; cached with the table.
+    """
+    cached = _DETOUR_CACHE.get(tank)
+    if cached is not None:
+        return cached
+    dist = raster_distance_table(tank)
+    cells = np.indices(tank.raster.shape).reshape(3, -1).T
+    manhattan = np.abs(cells[:, None, :] - cells[None, :, :]).sum(-1)
+    detour = np.clip(dist - manhattan, 0, None).astype(np.int32)
+    detour.setflags(write=False)
+    _DETOUR_CACHE[tank] = detour
+    return detour
+
+
+_DETOUR_CACHE: weakref.WeakKeyDictionary[Tank, NDArray[np.int32]] = weakref.WeakKeyDictionary()
 
 
 class FieldGuide:
@@ -256,9 +281,19 @@ class FieldGuide:
 _GUIDES: weakref.WeakKeyDictionary[Tank, FieldGuide] = weakref.WeakKeyDictionary()
 
 
-def field_guide(tank: Tank) -> FieldGuide:
-    """The :class:`FieldGuide` of a tank, shared by every env of it (its fields are kept)."""
+def field_guide(tank: Tank, rows: int = 0) -> FieldGuide:
+    """The :class:`FieldGuide` of a tank, shared by every env of it (its fields are kept).
+
+    Raises:
+        ConfigError: the guide keeps too few target fields for ``rows`` envs (two each).
+
+    """
     guide = _GUIDES.get(tank)
     if guide is None:
         guide = _GUIDES[tank] = FieldGuide(tank)
+    if guide.capacity < 2 * rows:
+        raise ConfigError(
+            f"the guide keeps {guide.capacity} target fields of this tank's grid, too "
+            f"few for {rows} envs; use fewer envs or guide=False"
+        )
     return guide

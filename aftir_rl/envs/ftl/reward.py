@@ -1,26 +1,60 @@
 """The reward of ``AFTIR-ArmFTL-v0``: progress, shaping, success, contact, a cost per step.
 
-One formula (:meth:`GoalReward.compute_reward`, compiled in
-:func:`~aftir_rl.envs.ftl.kernel.goal_reward`) serves the envs' steps and HER's relabelling.
+:class:`RewardSpec` holds the reward's options and :class:`FTLReward`, built from it and the
+env's state, is the one formula (:meth:`FTLReward.compute_reward`, compiled in
+:func:`~aftir_rl.envs.ftl.kernel.goal_reward`) that serves the envs' steps and HER's
+relabelling. A new term is a field here, its use in :meth:`FTLReward.step` (and the kernel).
 The terms and the two shaping potentials are described in docs/envs/armftl.md.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.core.errors import AftirError
-from aftir_rl.core.tank import Tank
+from aftir_rl.core.errors import AftirError, ConfigError
 from aftir_rl.envs.ftl import kernel
+from aftir_rl.envs.ftl.fields import field_guide, raster_detour_table
 from aftir_rl.envs.ftl.kernel import PROGRESS_PER_CM
 from aftir_rl.envs.ftl.state import FTLBatch
 
-__all__ = ["GoalReward"]
+__all__ = ["MAX_STEP_COST", "SHAPING_KINDS", "FTLReward", "RewardSpec"]
+
+#: The largest ``step_cost``: 300 steps of it stay below the contact penalty, so ending an
+#: episode on contact never pays better than waiting.
+MAX_STEP_COST = 0.03
+#: The ``shaping`` values and the potential each one adds.
+SHAPING_KINDS = {False: "", True: "raster", "raster": "raster", "field": "field"}
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardSpec:
+    """The reward's options: the potential term (``shaping``) and a cost per step."""
+
+    shaping: bool | str = False
+    step_cost: float = 0.0
+
+    @property
+    def shaping_kind(self) -> str:
+        """``""``, ``"raster"`` or ``"field"`` (``True`` is the raster)."""
+        return SHAPING_KINDS[self.shaping]
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.shaping, bool | str) and self.shaping in SHAPING_KINDS):
+            raise ConfigError(
+                f"shaping must be false, true, 'raster' or 'field', got {self.shaping!r}"
+            )
+        step_cost = self.step_cost
+        if not (
+            isinstance(step_cost, int | float)
+            and not isinstance(step_cost, bool)
+            and 0 <= step_cost <= MAX_STEP_COST
+        ):
+            raise ConfigError(f"step_cost must be in [0, {MAX_STEP_COST:g}], got {step_cost!r}")
 
 
 def _distance(a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
@@ -65,16 +99,28 @@ def _info_arrays(info: Any, size: int) -> tuple[NDArray[np.float64], NDArray[np.
     return prev, contact
 
 
-class GoalReward:
-    """The goal-conditioned reward, terminations and goal space both FTL envs share.
+class FTLReward:
+    """The goal-conditioned reward and terminations of an FTL env's ``batch``.
 
-    A base class (as Gymnasium-Robotics' ``GoalEnv``): :meth:`compute_reward` is vectorised and
-    is the step reward itself, so HER relabels with the same function.
+    :meth:`compute_reward` is vectorised and is the step reward itself, so HER relabels with the
+    same function (the envs expose it as Gymnasium-Robotics' ``GoalEnv`` does). Success is the
+    tip within ``success_tolerance`` of the target (the batch's, which training's ``slack``
+    tightens) without contact.
+
+    Raises:
+        ConfigError: a shaping that needs the tank's raster in a tank without one, or a
+            ``"field"`` shaping for more envs than the guide keeps fields for.
+
     """
 
-    batch: FTLBatch
-    tank: Tank
-    step_cost: float
+    def __init__(self, spec: RewardSpec, batch: FTLBatch) -> None:
+        self.spec, self.batch, self.tank = spec, batch, batch.tank
+        #: ``""``, ``"raster"`` or ``"field"``: the potential term.
+        self.shaping = spec.shaping_kind
+        if self.shaping and self.tank.cell_size is None:
+            raise ConfigError("shaping needs a tank with a raster (cell_size)")
+        self._detour = raster_detour_table(self.tank) if self.shaping == "raster" else None
+        self._fields = field_guide(self.tank, batch.b) if self.shaping == "field" else None
 
     def compute_reward(
         self, achieved_goal: ArrayLike, desired_goal: ArrayLike, info: Any
@@ -86,10 +132,10 @@ class GoalReward:
         """
         shape, a2, g2 = _goal_rows(achieved_goal, desired_goal)
         prev, contact = _info_arrays(info, len(a2))
-        out = self._step_reward(a2, g2, prev, contact)[0].reshape(shape)
+        out = self.step(a2, g2, prev, contact)[0].reshape(shape)
         return float(out) if out.ndim == 0 else out
 
-    def _step_reward(
+    def step(
         self,
         a: ArrayLike,
         g: ArrayLike,
@@ -116,13 +162,12 @@ class GoalReward:
             prev,
             np.asarray(contact, dtype=np.bool_),
             self.batch.success_tolerance,
-            self.step_cost,
+            float(self.spec.step_cost),
             reward,
             d,
         )
-        if not self.batch.shaping:
+        if not self.shaping:
             return reward, d, None
-        detour = self._cells if self.batch.shaping == "raster" else self._field_detour
         if prev_potential is None:
             stale = np.arange(len(a2))
             before = np.empty(len(a2))
@@ -131,22 +176,32 @@ class GoalReward:
             before = np.array(prev_potential, dtype=np.float64)
         # an env's observations have asked the guide both already: the new tips just now, the
         # stale rows' starts when they restarted (_field_detour reuses those answers)
-        potential = detour(a2, g2)
+        potential = self.potential(a2, g2)
         if len(stale):
-            before[stale] = detour(prev[stale], g2[stale])
+            before[stale] = self.potential(prev[stale], g2[stale])
         reward += PROGRESS_PER_CM * (before - potential)
         return reward, d, potential
 
+    def potential(self, p: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The shaping's potential [cm] of tips ``p`` for targets ``g`` (both ``(R, 3)``).
+
+        The raster detour (``"raster"``) or the guide field's detour (``"field"``); the reward
+        adds ``PROGRESS_PER_CM`` times its decrease.
+        """
+        if self.shaping == "raster":
+            return self._cells(p, g)
+        return self._field_detour(p, g)
+
     def _cells(self, p: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
         """``cell · e(p, g)`` [cm]: the raster detour from ``p``'s cell to ``g``'s."""
-        assert self.batch.detour is not None
+        assert self._detour is not None
         raster = self.tank.raster
-        cells = self.batch.detour[raster.cell_indices(p), raster.cell_indices(g)]
-        return self.tank.raster.cell_size * cells.astype(np.float64)
+        cells = self._detour[raster.cell_indices(p), raster.cell_indices(g)]
+        return raster.cell_size * cells.astype(np.float64)
 
     def _field_detour(self, p: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
         """``P(p, g) − |p − g|`` [cm]: the guide field's cost-to-go beyond the straight line."""
-        fields = self.batch.fields
+        fields = self._fields
         assert fields is not None
         for tips, targets, to_go in reversed(self.batch.guide_queries):
             if tips.shape == p.shape and np.array_equal(tips, p) and np.array_equal(targets, g):
@@ -168,21 +223,3 @@ class GoalReward:
         _, contact = _info_arrays(info, len(d))
         out = ((d < self.batch.success_tolerance) | contact).reshape(shape)
         return bool(out) if out.ndim == 0 else out
-
-    def _goal_bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The goal space's corners [cm]: ``goal_bounds`` if set, else the tank's box + 1 m."""
-        shared = self.__dict__.get("goal_bounds")
-        if shared is not None:
-            return shared
-        return np.array(self.tank.box_min) - 100.0, np.array(self.tank.box_max) + 100.0
-
-    def _goal_space(self) -> spaces.Box:
-        lo, hi = self._goal_bounds()
-        return spaces.Box(lo.astype(np.float32), hi.astype(np.float32), (3,), np.float32)
-
-    def _goal_clip(self, points: NDArray[np.float64]) -> NDArray[np.float32]:
-        """Points as the goal space holds them: clipped to its bounds, float32."""
-        bounds = self.__dict__.get("_bounds")
-        if bounds is None:
-            bounds = self.__dict__["_bounds"] = self._goal_bounds()
-        return np.minimum(np.maximum(points, bounds[0]), bounds[1]).astype(np.float32)

@@ -1,30 +1,91 @@
 """The follow-the-leader arm of ``AFTIR-ArmFTL-v0`` as a batch: state, dynamics, sensing.
 
-:class:`FTLBatch` holds ``B`` routes (a ``κ`` history each,
-:class:`~aftir_rl.planning.ftl.model.Route`
-with ``lead = 0``) and tip arc lengths, and steps them in one numpy pass: shift-and-copy
-(:func:`ftl_kappa_batch`), batched forward kinematics, exact body clearances
-(:class:`~aftir_rl.core.kernel.clearance.ClearanceGrid`), sensing rays and, optionally, the
-goal-aware guide (:class:`~aftir_rl.envs.ftl.fields.FieldGuide`). No gymnasium here:
-:mod:`aftir_rl.envs.ftl.env` wraps it as the single and the vector env.
+:class:`FTLBatch` holds ``B`` routes (a ``κ`` history each, a
+:class:`~aftir_rl.planning.ftl.model.Route` with ``lead = 0``) and tip arc lengths, and steps
+them in one numpy pass: shift-and-copy (:func:`ftl_kappa_batch`), batched forward kinematics,
+exact body clearances (:class:`~aftir_rl.core.kernel.clearance.ClearanceGrid`), sensing rays
+and, optionally, the goal-aware guide (:class:`~aftir_rl.envs.ftl.fields.FieldGuide`). No
+gymnasium here: :mod:`aftir_rl.envs.ftl.env` holds it, with the reward and the target sampler,
+as the single and the vector env.
 """
 
 from __future__ import annotations
 
-import weakref
+import dataclasses
+import math
 from collections import deque
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.core import kernel as core_kernel
-from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.collision import point_clearance
+from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.kernel.clearance import clearance_grid, kernel_grid
-from aftir_rl.core.tank import Tank
+from aftir_rl.core.tank import Tank, load_tank
 from aftir_rl.envs.ftl import kernel
-from aftir_rl.envs.ftl.fields import LOOKAHEAD_HOPS, field_guide, raster_distance_table
+from aftir_rl.envs.ftl.fields import LOOKAHEAD_HOPS, field_guide
 
-__all__ = ["FTLBatch", "ftl_kappa_batch", "raster_detour_table", "RAY_DISTANCES", "NEAR_GOAL_RANGE"]
+__all__ = [
+    "NEAR_GOAL_RANGE",
+    "RAY_DISTANCES",
+    "STEER_MODES",
+    "FTLBatch",
+    "TaskSpec",
+    "ftl_kappa_batch",
+    "observation_size",
+]
+
+#: What the two steering actions may command: a change of the steered ``κ``, or ``κ`` itself.
+STEER_MODES = ("increment", "target")
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _motion_free(default: Any) -> Any:
+    """A task field that changes what the policy observes or aims at, never how the arm moves."""
+    return dataclasses.field(default=default, metadata={"motion_free": True})
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskSpec:
+    """The tank, the arm, the task and what the policy observes (lengths in cm, angles in rad)."""
+
+    tank: str | Path | Tank = "b737_center"
+    n_sections: int | None = None
+    target: Sequence[float] | None = _motion_free(None)
+    bay: int | None = _motion_free(None)
+    success_tolerance: float = 2.0
+    margin: float = 1.0
+    kappa_step: float = 0.1
+    push_step: float = 5.0
+    start_height: float = 10.0
+    samples_per_section: int = 10
+    steer: str = "increment"
+    guide: bool = _motion_free(False)
+    near_goal: bool = _motion_free(False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.near_goal, bool | np.bool_):
+            raise ConfigError(f"near_goal must be true or false, got {self.near_goal!r}")
+        if self.steer not in STEER_MODES:
+            raise ConfigError(f"steer must be 'increment' or 'target', got {self.steer!r}")
+        for name in ("kappa_step", "push_step", "success_tolerance"):
+            value = getattr(self, name)
+            if not 0 < value < math.inf:
+                raise ConfigError(f"{name} must be positive and finite, got {value}")
+        if not (_number(self.margin) and 0 <= self.margin < 20):
+            raise ConfigError(f"margin must be in [0, 20) cm, got {self.margin!r}")
+        if self.samples_per_section < 2:
+            raise ConfigError(
+                f"samples_per_section must be at least 2, got {self.samples_per_section}"
+            )
+
 
 #: Directions of the sensing rays from the tip: the tip's heading, then ±x, ±y, ±z.
 _RAY_AXES = np.array(
@@ -42,10 +103,9 @@ def ftl_kappa_batch(
 ) -> NDArray[np.float64]:
     """Bending vectors ``(B, N, 2)`` of the arm sections for a batch of routes.
 
-    Row ``b`` is :func:`aftir_rl.planning.ftl.model.ftl_postures` of ``Route(0, kappa[b, :k[b] + 1],
-    l)``
-    with the tip at arc length ``s[b]`` [cm] (the same padded interpolation, vectorised over
-    routes of different lengths).
+    Row ``b`` is :func:`aftir_rl.planning.ftl.model.ftl_postures` of the route
+    ``Route(0, kappa[b, :k[b] + 1], l)`` with the tip at arc length ``s[b]`` [cm] (the same
+    padded interpolation, vectorised over routes of different lengths).
 
     Args:
         kappa: route ``κ`` per env, ``(B, N, 2)`` [rad]; entries past ``k`` are ignored.
@@ -70,80 +130,71 @@ def ftl_kappa_batch(
     return (1.0 - f) * padded(j) + f * padded(j + 1)
 
 
-def raster_detour_table(tank: Tank) -> NDArray[np.int32]:
-    """Detour ``e[c, g]`` [cells] of the shortest 6-connected raster path beyond Manhattan.
-
-    ``e = D − |c − g|₁ ≥ 0`` with ``D`` the all-pairs BFS distances of
-    :func:`~aftir_rl.envs.ftl.fields.raster_distance_table` (unreachable pairs: the largest
-    distance plus one). Shape ``(cells, cells)``, flat cell indices; cached with the table.
-    """
-    cached = _DETOUR_CACHE.get(tank)
-    if cached is not None:
-        return cached
-    dist = raster_distance_table(tank)
-    cells = np.indices(tank.raster.shape).reshape(3, -1).T
-    manhattan = np.abs(cells[:, None, :] - cells[None, :, :]).sum(-1)
-    detour = np.clip(dist - manhattan, 0, None).astype(np.int32)
-    detour.setflags(write=False)
-    _DETOUR_CACHE[tank] = detour
-    return detour
-
-
-_DETOUR_CACHE: weakref.WeakKeyDictionary[Tank, NDArray[np.int32]] = weakref.WeakKeyDictionary()
-
-
 #: The distance [cm] within which the ``near_goal`` columns give the target's offset itself.
 NEAR_GOAL_RANGE = 10.0
 
 
+def observation_size(n_sections: int, guide: bool, near_goal: bool) -> int:
+    """The length of the observation vector (the columns: ``ArmFTLEnv``'s docstring).
+
+    ``dis``, ``k``, the steered ``κ`` (2), ``θ`` per section, ``sin φ`` and ``cos φ`` per section,
+    the tip (3), its heading (3), the body's clearance (1), the rays' clearances (7 × 3) and the
+    heights of the last three section ends (3); the guide's 10 + 3 per lookahead point; the
+    near-goal offset's 3.
+    """
+    size = 2 + 2 + 3 * n_sections + 3 + 3 + 1 + (len(_RAY_AXES) + 1) * len(RAY_DISTANCES) + 3
+    size += 10 + 3 * len(LOOKAHEAD_HOPS) if guide else 0
+    return size + (3 if near_goal else 0)
+
+
 class FTLBatch:
-    """State and dynamics of ``B`` FTL arms in one tank, stepped in one numpy pass.
+    """State, dynamics and sensing of ``B`` FTL arms in one tank, stepped in one numpy pass.
+
+    Built from the task spec whole: its tank (:func:`~aftir_rl.core.tank.load_tank`), arm
+    (``n_sections``, default the tank arm's maximum), steps, start, margin, sensing
+    (``samples_per_section``, ``guide``, ``near_goal``) and steering mode; the options are
+    described in :class:`~aftir_rl.envs.ftl.env.ArmFTLEnv`. The batch also makes the goal
+    space and the observation dicts both envs return.
 
     Args:
-        tank: the tank.
-        n_sections: arm sections ``N``.
+        task: the task spec.
         batch: ``B``.
-        samples_per_section: backbone samples per section for contact and clearance.
-        kappa_step: largest change of the steered ``κ`` per step [rad].
-        push_step: largest insertion or retraction per step [cm].
-        start_height: the tip's height above the floor at reset [cm].
-        margin: clearance the arm's surface keeps; less is a contact [cm].
-        success_tolerance: tip-to-target distance of a success [cm].
-        shaping: the reward's potential term: ``""`` (none), ``"raster"`` (the raster's detour)
-            or ``"field"`` (the guide field's detour).
-        guide: whether the observation holds the goal-dependent guide (see :class:`ArmFTLEnv`).
-        steer: ``"increment"`` (actions change the steered ``κ``) or ``"target"`` (they name the
-            bend ``κ`` approaches at ``kappa_step`` per component and step).
-        near_goal: whether the observation ends with the target's offset at a fine scale
-            (:meth:`near_goal_columns`).
+        slack: training's ``slack`` [cm]: the margin kept is ``margin + slack`` and a success
+            needs the tip within ``success_tolerance − slack``.
+        goal_bounds: the goal space's corners [cm] (shared by a pool's tanks), or None: the
+            tank's box grown by 1 m.
+
+    Raises:
+        ConfigError: the task does not fit the tank's arm, or the guide keeps too few fields.
 
     """
 
     def __init__(
         self,
-        tank: Tank,
-        n_sections: int,
+        task: TaskSpec,
         batch: int,
-        samples_per_section: int,
-        kappa_step: float,
-        push_step: float,
-        start_height: float,
-        margin: float,
-        success_tolerance: float,
-        shaping: str,
-        guide: bool = False,
-        steer: str = "increment",
-        near_goal: bool = False,
+        slack: float = 0.0,
+        goal_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
     ) -> None:
-        self.tank, self.arm = tank, tank.arm
-        self.n, self.b, self.k_samples = int(n_sections), int(batch), int(samples_per_section)
-        self.l = float(self.arm.section_length)
-        self.kappa_step, self.push_step = float(kappa_step), float(push_step)
-        self.start_height, self.margin = float(start_height), float(margin)
-        self.success_tolerance, self.shaping = float(success_tolerance), str(shaping)
+        self.tank = tank = load_tank(task.tank)
+        self.arm = arm = tank.arm
+        n = arm.max_sections if task.n_sections is None else int(task.n_sections)
+        if not 1 <= n <= arm.max_sections:
+            raise ConfigError(f"n_sections must be in 1..{arm.max_sections}, got {task.n_sections}")
+        if task.push_step > arm.section_length:
+            raise ConfigError(f"push_step must be at most the section length, got {task.push_step}")
+        if not 0 <= task.start_height < arm.section_length:
+            raise ConfigError(f"start_height must be in [0, {arm.section_length:g}) cm")
+        self.n, self.b, self.k_samples = n, int(batch), int(task.samples_per_section)
+        self.l = float(arm.section_length)
+        self.kappa_step, self.push_step = float(task.kappa_step), float(task.push_step)
+        self.start_height = float(task.start_height)
+        #: The clearance the arm's surface keeps [cm]; less is a contact.
+        self.margin = float(task.margin) + float(slack)
+        #: The tip-to-target distance of a success [cm].
+        self.success_tolerance = float(task.success_tolerance) - float(slack)
         self.s_max = self.n * self.l
-        self.steer = str(steer)
-        self.detour = raster_detour_table(tank) if shaping == "raster" else None
+        self.steer = str(task.steer)
         self.grid = clearance_grid(tank)
         self._kernel_tank = kernel_grid(tank)
         self._deep = tank.box_min[2] - tank.panel.radius - 1.0
@@ -151,27 +202,47 @@ class FTLBatch:
         self.k = np.zeros(self.b, dtype=np.int64)
         self.s = np.full(self.b, self.start_height)
         self.target = np.zeros((self.b, 3))
-        self.obs_size = 14 + 3 * self.n + (len(_RAY_AXES) + 1) * len(RAY_DISTANCES)
-        #: The guide's fields, for the observation or the ``"field"`` shaping.
-        self.fields = field_guide(tank) if guide or shaping == "field" else None
-        self.guide = self.fields if guide else None
+        if goal_bounds is None:
+            goal_bounds = (np.array(tank.box_min) - 100.0, np.array(tank.box_max) + 100.0)
+        #: The goal space's corners [cm].
+        self.goal_bounds = goal_bounds
+        #: The guide's fields, for the observation's goal-aware columns (None without them).
+        self.guide = field_guide(tank, self.b) if task.guide else None
         self.guide_ids = np.zeros(self.b, dtype=np.int64)
         #: The observations' latest guide queries (every row's or some rows'), newest last: tips,
         #: targets (both ``(R, 3)``) and their distance-to-go ``(R,)``, for the reward to reuse.
         self.guide_queries: deque[
             tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
         ] = deque(maxlen=3)
-        self._guide_generation = self.fields.generation if self.fields is not None else 0
-        if self.fields is not None and self.fields.capacity < 2 * self.b:
-            raise ConfigError(
-                f"the guide keeps {self.fields.capacity} target fields of this tank's grid, too "
-                f"few for {self.b} envs; use fewer envs or guide=False"
-            )
-        self._guide_start = self.obs_size
-        self.obs_size += 10 + 3 * len(LOOKAHEAD_HOPS) if guide else 0
-        self.near_goal = bool(near_goal)
-        self.obs_size += 3 if near_goal else 0
+        self._guide_generation = self.guide.generation if self.guide is not None else 0
+        self.near_goal = bool(task.near_goal)
+        #: The length of the observation vector.
+        self.obs_size = observation_size(n, task.guide, self.near_goal)
+        self._guide_start = observation_size(n, False, False)
         self.refresh()
+
+    def check_target(self, target: object) -> NDArray[np.float64]:
+        """``target`` as a point [cm] the tip may reach: in the tank's box, clear of surfaces.
+
+        Raises:
+            TargetError: not three finite numbers inside the box, or closer to the tank's
+                surfaces than the arm's radius and the margin.
+
+        """
+        try:
+            t = np.asarray(target, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            t = np.zeros(0)
+        if t.shape != (3,) or not np.all(np.isfinite(t)) or not self.tank.contains_point(t):
+            raise TargetError(f"target {target!r} is not a point (x, y, z) inside the tank box")
+        clear = float(point_clearance(self.tank, t[None])[0])
+        need = self.arm.radius + self.margin
+        if clear < need:
+            raise TargetError(
+                f"target {target!r} lies {clear:.1f} cm from the tank's surfaces; the tip needs "
+                f"at least {need:g} cm (radius + margin)"
+            )
+        return t
 
     # -- geometry
     def postures(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -286,10 +357,10 @@ class FTLBatch:
 
     def target_fields(self) -> NDArray[np.int64]:
         """The guide's field ids of the targets, ``(B,)`` (asked again after a restart)."""
-        assert self.fields is not None
-        if self._guide_generation != self.fields.generation:  # the cache started again
-            self.guide_ids = self.fields.field_ids(self.target)
-            self._guide_generation = self.fields.generation
+        assert self.guide is not None
+        if self._guide_generation != self.guide.generation:  # the cache started again
+            self.guide_ids = self.guide.field_ids(self.target)
+            self._guide_generation = self.guide.generation
         return self.guide_ids
 
     def steering_frames(self, rows: NDArray[np.int64] | None = None) -> NDArray[np.float64]:
@@ -318,12 +389,12 @@ class FTLBatch:
         # kept as float32 values, as the goal space holds them: the observation's guide and the
         # reward ask about the same point
         self.target[rows] = np.asarray(targets, dtype=np.float32)
-        if self.fields is not None:
-            generation = self.fields.generation
-            self.guide_ids[rows] = self.fields.field_ids(self.target[rows])
-            if self.fields.generation != generation:  # other rows' ids are void: ask again
-                self.guide_ids = self.fields.field_ids(self.target)
-                self._guide_generation = self.fields.generation
+        if self.guide is not None:
+            generation = self.guide.generation
+            self.guide_ids[rows] = self.guide.field_ids(self.target[rows])
+            if self.guide.generation != generation:  # other rows' ids are void: ask again
+                self.guide_ids = self.guide.field_ids(self.target)
+                self._guide_generation = self.guide.generation
         if refresh:
             self.refresh(None if len(rows) == self.b else rows)
 

@@ -1,13 +1,18 @@
 """Where ``AFTIR-ArmFTL-v0`` draws its targets: a bay, clear of surfaces, optionally biased.
 
-:func:`draw_targets` draws uniform free targets (the compiled clearance check settles them
-exactly), optionally weighted (``detour_bias``, ``failure_bias`` with :class:`FailureRates`) or
-in the region's corners (``corner_bias``).
+:class:`TargetSampler`, built from the task's ``bay`` and ``target`` and the
+:class:`TrainingSpec`, is the part of an env that picks each episode's target and owns the
+training-only biases and the failure rates they learn. :func:`draw_targets` draws uniform free
+targets (the compiled clearance check settles them exactly), optionally weighted
+(``detour_bias``, ``failure_bias`` with :class:`FailureRates`) or in the region's corners
+(``corner_bias``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -17,8 +22,122 @@ from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.kernel import KernelTank
 from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.tank import Tank
+from aftir_rl.envs.ftl.fields import raster_detour_table
 
-__all__ = ["CORNER_DEPTH", "FailureRates", "bay_region", "corner_candidates", "draw_targets"]
+if TYPE_CHECKING:
+    from aftir_rl.envs.ftl.state import FTLBatch, TaskSpec
+
+__all__ = [
+    "CORNER_DEPTH",
+    "FailureRates",
+    "TargetSampler",
+    "TrainingSpec",
+    "bay_region",
+    "corner_candidates",
+    "draw_targets",
+]
+
+
+def _number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainingSpec:
+    """Training-only options: how targets are drawn and how strictly they are judged.
+
+    Evaluations drop them (:data:`~aftir_rl.envs.ftl.spec.TRAINING_ONLY_KWARGS`). ``slack`` is
+    read by the envs (it tightens the margin and the tolerance); the rest by
+    :class:`TargetSampler`.
+    """
+
+    target_clearance: float = 10.0
+    detour_bias: float = 0.0
+    corner_bias: float = 0.0
+    failure_bias: float = 0.0
+    slack: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (_number(self.target_clearance) and 0 <= self.target_clearance < 100):
+            raise ConfigError(
+                f"target_clearance must be in [0, 100) cm, got {self.target_clearance!r}"
+            )
+        for name in ("detour_bias", "corner_bias", "failure_bias"):
+            value = getattr(self, name)
+            if not (_number(value) and 0 <= value <= 1):
+                raise ConfigError(f"{name} must be in [0, 1], got {value!r}")
+        for name in ("corner_bias", "failure_bias"):
+            if getattr(self, name) > 0 and self.detour_bias > 0:
+                raise ConfigError(f"give detour_bias or {name}, not both")
+
+
+class TargetSampler:
+    """Each episode's target: ``task.target`` if set, else drawn by the training spec.
+
+    Targets are drawn in ``task.bay`` (the whole tank if None), ``target_clearance`` from every
+    surface and 20 cm from the start (:func:`draw_targets`), with the spec's ``detour_bias``,
+    ``corner_bias`` or ``failure_bias``. With ``failure_bias`` the sampler keeps
+    :attr:`failures`, which :meth:`record` feeds with the ended episodes. A default
+    :class:`TrainingSpec` draws uniformly, as evaluations do.
+
+    Raises:
+        ConfigError: a bias that needs the tank's raster in a tank without one.
+        TargetError: ``task.target`` is not a free point of the tank
+            (:meth:`~aftir_rl.envs.ftl.state.FTLBatch.check_target`).
+
+    """
+
+    def __init__(self, batch: FTLBatch, task: TaskSpec, training: TrainingSpec) -> None:
+        self.tank = tank = batch.tank
+        if (training.detour_bias > 0 or training.failure_bias > 0) and tank.cell_size is None:
+            raise ConfigError("detour_bias and failure_bias need a tank with a raster (cell_size)")
+        self.spec = training
+        #: The corners [cm] of the region targets are drawn in.
+        self.region = bay_region(tank, task.bay)
+        #: Where the tip starts [cm]; targets keep 20 cm from it.
+        self.start_tip = np.array([0.0, 0.0, float(task.start_height)])
+        #: The target of every episode, or None (drawn).
+        self.fixed_target = None if task.target is None else batch.check_target(task.target)
+        #: The failure rates ``failure_bias`` draws by (None without it).
+        self.failures = FailureRates(tank.raster.n_cells) if training.failure_bias > 0 else None
+
+    def draw(self, rngs: Sequence[np.random.Generator]) -> NDArray[np.float64]:
+        """One target per generator ``(len(rngs), 3)`` [cm] (the fixed one, if set)."""
+        if self.fixed_target is not None:
+            return np.repeat(self.fixed_target[None], len(rngs), axis=0)
+        spec = self.spec
+        weight: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
+        biased = 0.0
+        if self.failures is not None:
+            biased, weight = spec.failure_bias, self._failure_weight
+        elif spec.detour_bias > 0:
+            biased, weight = spec.detour_bias, self._detour_weight
+        return draw_targets(
+            rngs,
+            self.tank,
+            self.region,
+            spec.target_clearance,
+            self.start_tip,
+            biased,
+            weight,
+            spec.corner_bias,
+        )
+
+    def record(self, targets: NDArray[np.float64], success: ArrayLike) -> None:
+        """Give ended episodes (their targets and successes) to :attr:`failures`, if kept."""
+        if self.failures is not None and len(targets):
+            self.failures.record(self.tank.raster.cell_indices(targets), success)
+
+    def _failure_weight(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`FailureRates.weight` of the points' raster cells."""
+        assert self.failures is not None
+        return self.failures.weight(self.tank.raster.cell_indices(points))
+
+    def _detour_weight(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``(1 + e) / (1 + e_max)``: ``e`` the raster detour [cells] from the start's cell."""
+        raster = self.tank.raster
+        row = raster_detour_table(self.tank)[raster.cell_indices(self.start_tip)]
+        return (1.0 + row[raster.cell_indices(points)]) / (1.0 + row.max())
 
 
 def bay_region(tank: Tank, bay: int | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
