@@ -1,12 +1,13 @@
 """``AFTIR-TankGoal-v0``: the tank grid world as a goal-conditioned env (targets drawn per episode).
 
-The dynamics, rewards and rendering are :class:`~aftir_rl.envs.tank_grid.TankGridEnv`'s (a
-subclass that points the base env's model at each episode's goal); the interface follows the
-goal-conditioned convention of Gymnasium-Robotics that SB3's ``HerReplayBuffer`` relies on: a
-``Dict`` observation ``{"observation", "achieved_goal", "desired_goal"}`` of ``MultiDiscrete``
-cells, and vectorised :meth:`TankGoalEnv.compute_reward`, :meth:`TankGoalEnv.compute_terminated`
-and :meth:`TankGoalEnv.compute_truncated`. A hit is ``info["hit"]``, so it keeps its −100 under
-any relabelled goal (pass ``replay_buffer_kwargs={"copy_info_dict": True}`` to HER). Goals are
+The dynamics, rewards and rendering are those of the grid world it holds
+(:attr:`TankGoalEnv.grid`, a :class:`~aftir_rl.envs.tank_grid.TankGridEnv` whose model it points
+at each episode's goal); the interface follows the goal-conditioned convention of
+Gymnasium-Robotics that SB3's ``HerReplayBuffer`` relies on: a ``Dict`` observation
+``{"observation", "achieved_goal", "desired_goal"}`` of ``MultiDiscrete`` cells, and vectorised
+:meth:`TankGoalEnv.compute_reward`, :meth:`TankGoalEnv.compute_terminated` and
+:meth:`TankGoalEnv.compute_truncated`. A hit is ``info["hit"]``, so it keeps its −100 under any
+relabelled goal (pass ``replay_buffer_kwargs={"copy_info_dict": True}`` to HER). Goals are
 drawn among :attr:`TankGoalEnv.goal_cells` or set by ``reset(options=...)``; registered with
 ``max_episode_steps=100``. Why each choice: docs/design.md §8.
 """
@@ -15,13 +16,16 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any, SupportsFloat, cast
 
+import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.errors import TargetError
+from aftir_rl.core.tank import Tank, load_tank
 from aftir_rl.envs.tank_grid import TankGridEnv, step_reward, target_options
 
 __all__ = ["TankGoalEnv", "GoalObs"]
@@ -30,7 +34,7 @@ __all__ = ["TankGoalEnv", "GoalObs"]
 GoalObs = dict[str, NDArray[np.int64]]
 
 
-class TankGoalEnv(TankGridEnv):
+class TankGoalEnv(gym.Env[GoalObs, int]):
     """Goal-conditioned ``AFTIR-Tank-v0``: reach a target cell drawn per episode.
 
     ## Description
@@ -68,36 +72,48 @@ class TankGoalEnv(TankGridEnv):
     - ``tank``: tank name in ``configs/tanks`` or a YAML path (default ``"b737_center"``).
     - ``target`` (cm) or ``target_cell``: a fixed goal for every episode; default random goals.
     - ``step_penalty``: reward subtracted on every move into a free cell (default 0).
-    - ``render_mode``: ``"ansi"`` or ``"rgb_array"``, as the base env.
+    - ``render_mode``: ``"ansi"`` or ``"rgb_array"``, as the grid world.
 
     ## Version History
 
     - v0: initial version.
     """
 
-    def _init_target(
-        self, target: tuple[float, float, float] | None, target_cell: Sequence[int] | None
+    metadata = TankGridEnv.metadata
+
+    def __init__(
+        self,
+        tank: str | Path | Tank = "b737_center",
+        target: tuple[float, float, float] | None = None,
+        target_cell: tuple[int, int, int] | None = None,
+        step_penalty: float = 0.0,
+        render_mode: str | None = None,
     ) -> None:
-        """Find the goals, and set the constructor's fixed goal or a placeholder one."""
-        reach = self.tank.reachable
+        loaded = load_tank(tank)
+        reach = loaded.reachable
         #: Every goal a random episode can draw: reachable free cells but the start, shape (G, 3),
         #: in flat-index order.
         self.goal_cells: NDArray[np.int64] = np.argwhere(reach > 0).astype(np.int64)
         if len(self.goal_cells) == 0:
-            raise TargetError(f"tank {self.tank.name}: no free cell is reachable from the start")
+            raise TargetError(f"tank {loaded.name}: no free cell is reachable from the start")
         #: Flat state index of each of :attr:`goal_cells`.
         self.goal_states: NDArray[np.int64] = cast(  # numpy types it a scalar (a tuple of Any)
             NDArray[np.int64], np.ravel_multi_index(tuple(self.goal_cells.T), reach.shape)
         ).astype(np.int64)
-        self._fixed_goal = target is not None or target_cell is not None
-        if not self._fixed_goal:
+        #: The constructor's goal ``(target, target_cell)``, or None: drawn per episode.
+        self._fixed = None if target is None and target_cell is None else (target, target_cell)
+        if self._fixed is None:
             a, b, c = (int(v) for v in self.goal_cells[0])
             target_cell = (a, b, c)  # replaced at every reset
-        super()._init_target(target, target_cell)
-        self._fixed = (self.target_point.copy(), self.target_cell)
-        shape = self.raster.shape
-        cell_space = spaces.MultiDiscrete(np.array(shape, dtype=np.int64), dtype=np.int64)
-        self.observation_space = spaces.Dict(
+        #: The grid world the tip moves in (dynamics, rewards, rendering), aimed at the goal.
+        self.grid = TankGridEnv(loaded, target, target_cell, step_penalty, render_mode)
+        self.tank, self.raster = self.grid.tank, self.grid.raster
+        self.step_penalty, self.render_mode = self.grid.step_penalty, render_mode
+        self.start_cell, self.start_state = self.grid.start_cell, self.grid.start_state
+        self.action_space = self.grid.action_space
+        cell_space = spaces.MultiDiscrete(np.array(self.raster.shape, dtype=np.int64), np.int64)
+        # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
+        self.observation_space = spaces.Dict(  # type: ignore[assignment]
             {
                 "observation": cell_space,
                 "achieved_goal": copy.deepcopy(cell_space),
@@ -105,6 +121,21 @@ class TankGoalEnv(TankGridEnv):
             }
         )
         self._dynamics: tuple[NDArray[np.int64], NDArray[np.bool_]] | None = None
+
+    @property
+    def target_cell(self) -> tuple[int, int, int]:
+        """The episode's goal cell ``(a, b, c)``."""
+        return self.grid.target_cell
+
+    @property
+    def target_point(self) -> NDArray[np.float64]:
+        """The episode's goal [cm]: the point given, or the goal cell's centre."""
+        return self.grid.target_point
+
+    @property
+    def target_state(self) -> int:
+        """The flat state index of the goal cell."""
+        return self.grid.target_state
 
     # ---------------------------------------------------------------- observations
     def _obs(self, state: int) -> GoalObs:
@@ -116,7 +147,7 @@ class TankGoalEnv(TankGridEnv):
         }
 
     # ---------------------------------------------------------------- Gymnasium API
-    def reset(  # type: ignore[override]
+    def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[GoalObs, dict[str, Any]]:
         """Put the tip in the start cell and choose the episode's goal.
@@ -135,26 +166,32 @@ class TankGoalEnv(TankGridEnv):
             ValueError: an unknown option.
 
         """
-        state, info = super().reset(seed=seed)  # seeds np_random; the tip to the start cell
+        super().reset(seed=seed)  # seeds np_random, which draws the goals
+        state, info = self.grid.reset()  # the tip to the start cell
         target, target_cell = target_options(options)
         if target is not None or target_cell is not None:
-            self._set_target(target, target_cell)
-        elif self._fixed_goal:
-            self._set_target(None, self._fixed[1])
-            self.target_point = self._fixed[0].copy()
+            self.grid.set_target(target, target_cell)
+        elif self._fixed is not None:
+            self.grid.set_target(*self._fixed)
         else:
             i = int(self.np_random.integers(len(self.goal_cells)))
-            self._set_target(None, tuple(int(c) for c in self.goal_cells[i]))
+            self.grid.set_target(None, tuple(int(c) for c in self.goal_cells[i]))
         info["target_cell"] = self.target_cell
         return self._obs(int(state)), info
 
-    def step(  # type: ignore[override]
-        self, action: int
-    ) -> tuple[GoalObs, SupportsFloat, bool, bool, dict[str, Any]]:
-        """Move the tip one cell (the base env's step); ``info`` adds ``"hit"``."""
-        state, reward, terminated, truncated, info = super().step(action)
+    def step(self, action: int) -> tuple[GoalObs, SupportsFloat, bool, bool, dict[str, Any]]:
+        """Move the tip one cell (the grid world's step); ``info`` adds ``"hit"``."""
+        state, reward, terminated, truncated, info = self.grid.step(action)
         info["hit"] = bool(terminated and not info["is_success"])
         return self._obs(int(state)), reward, terminated, truncated, info
+
+    def render(self) -> str | NDArray[np.uint8] | None:
+        """The tank and the tip's path so far, as the grid world renders them."""
+        return self.grid.render()
+
+    def path_cells(self) -> list[tuple[int, int, int]]:
+        """Cells visited by the tip in this episode, start first."""
+        return self.grid.path_cells()
 
     # ---------------------------------------------------------------- goal-conditioned API
     def compute_reward(
@@ -210,7 +247,7 @@ class TankGoalEnv(TankGridEnv):
     def dynamics(self) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
         """Goal-independent model: ``next_state[s, a]`` and ``hit[s, a]``, shape ``(n_cells, 6)``.
 
-        Read off the base env's tabulated model (``next_state``, ``terminal_table``) for two
+        Read off the grid world's tabulated model (``next_state``, ``terminal_table``) for two
         different goals, on shallow copies so this env's own model is untouched: a row is goal
         independent except the goal's own (absorbing) row, which the other goal's model supplies.
         The tip stays where it is on a hit. Rows of obstructed cells (never occupied) read
@@ -219,8 +256,8 @@ class TankGoalEnv(TankGridEnv):
         if self._dynamics is None:
             tables = []
             for cell in (self.goal_cells[0], self.goal_cells[-1]):
-                probe = copy.copy(self)
-                probe._set_target(None, tuple(int(c) for c in cell))
+                probe = copy.copy(self.grid)
+                probe.set_target(None, tuple(int(c) for c in cell))
                 nxt = probe.next_state.copy()
                 hit = probe.terminal_table & (nxt != probe.target_state)
                 tables.append((nxt, hit, probe.target_state))

@@ -106,8 +106,7 @@ class TankGridEnv(gym.Env[int, int]):
     """
 
     metadata = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
-    # gymnasium types a Discrete space as Space[np.int64] while the states here are plain ints,
-    # and TankGoalEnv's observation space is a Dict of cells.
+    # gymnasium types a Discrete space as Space[np.int64] while the states here are plain ints.
     observation_space: spaces.Space[Any]
     action_space: spaces.Space[Any]
 
@@ -134,24 +133,24 @@ class TankGridEnv(gym.Env[int, int]):
         self.start_state = self.raster.index(self.start_cell)
         self._model_target: int | None = None
         self._P: dict[int, dict[int, list[tuple[float, int, float, bool]]]] | None = None
-        self._init_target(target, target_cell)
-        self._state = self.start_state
-        self._path: list[int] = [self.start_state]
-
-    # ---------------------------------------------------------------- target and model
-    def _init_target(
-        self, target: tuple[float, float, float] | None, target_cell: Sequence[int] | None
-    ) -> None:
-        """Set the constructor's target: by default the tank's first reference target."""
         if target is None and target_cell is None:
             if not self.tank.targets:
                 raise TargetError(f"tank {self.tank.name} has no reference target; pass target=")
             target = self.tank.targets[0]
-        self._set_target(target, target_cell)
+        self.set_target(target, target_cell)
+        self._state = self.start_state
+        self._path: list[int] = [self.start_state]
 
-    def _set_target(
-        self, target: tuple[float, float, float] | None, target_cell: Sequence[int] | None
-    ) -> None:
+    # ---------------------------------------------------------------- target and model
+    def set_target(self, target: Sequence[float] | None, target_cell: Sequence[int] | None) -> None:
+        """Aim at the point ``target`` [cm] or the cell ``target_cell`` (one of them).
+
+        The model (:attr:`next_state`, :attr:`P`, ...) is tabulated again for a new target cell.
+
+        Raises:
+            TargetError: both given, or the point or cell is outside the tank or obstructed.
+
+        """
         if target is not None and target_cell is not None:
             raise TargetError("give either target (a point in cm) or target_cell, not both")
         if target_cell is not None:
@@ -218,7 +217,7 @@ class TankGridEnv(gym.Env[int, int]):
         super().reset(seed=seed)
         target, target_cell = target_options(options)
         if target is not None or target_cell is not None:
-            self._set_target(target, target_cell)
+            self.set_target(target, target_cell)
         self._state = self.start_state
         self._path = [self.start_state]
         return self.start_state, {"prob": 1.0, "target_cell": self.target_cell}

@@ -71,7 +71,7 @@ def test_spaces_and_registration(goal_env):
     obs, info = goal_env.reset(seed=0)
     assert tuple(obs["observation"]) == START and tuple(obs["achieved_goal"]) == START
     assert tuple(obs["desired_goal"]) == info["target_cell"]
-    assert isinstance(goal_env.unwrapped, TankGridEnv)
+    assert isinstance(goal_env.unwrapped.grid, TankGridEnv)
 
 
 def test_goals_drawn_from_reachable_cells_with_np_random(goal_env, bfs_dist):
