@@ -2,15 +2,19 @@
 
 A thin command line over :func:`aftir_rl.experiments.execution.export_motion`: the run's
 ``trajectory.json`` with its timing, in joints (``dis`` and the bending vectors) or in cables
-(``dis`` and each cable's length change), written atomically.
+(``dis`` and each cable's length change), written atomically. The motion is first checked as
+``aftir check`` checks it (``--margin``, default 1 cm); one that fails is not written unless
+``--unchecked`` is given, and the file then says it was not checked.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
+from pathlib import Path
 
-from aftir_rl.cli.args import OneLineParser
+from aftir_rl.cli.args import OneLineParser, add_margin_option, check_margin
 from aftir_rl.cli.guard import cli
 from aftir_rl.experiments.execution import FORMATS, SPACES
 
@@ -39,18 +43,36 @@ def build_parser() -> argparse.ArgumentParser:
         help="joints: dis [cm] and each section's bending vector kx, ky [rad] (default); "
         "cables: dis and each cable's length change [cm]",
     )
+    parser.add_argument(
+        "--tank", help="tank name or YAML to check in (default: the tank the run names)"
+    )
+    add_margin_option(parser, "the clearance [cm] the motion must keep to be written (default 1)")
+    parser.add_argument(
+        "--unchecked",
+        action="store_true",
+        help="write the motion without checking it (the file says so)",
+    )
     return parser
 
 
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``aftir export``."""
-    from aftir_rl.core.files import atomic_open
-    from aftir_rl.experiments.execution import export_motion, read_timed
+    from aftir_rl.core.files import atomic_open, check_outputs
+    from aftir_rl.experiments.execution import check_motion, export_motion, timed_run_tank
 
     args = build_parser().parse_args(argv)
-    run = read_timed(args.run)
-    text = export_motion(run, args.format, args.space)
+    check_margin(args.margin)
+    run_dir = Path(args.run).parent if Path(args.run).is_file() else Path(args.run)
+    check_outputs([args.output], [run_dir])
+    run, tank = timed_run_tank(args.run, args.tank)
+    if not args.unchecked:
+        problems = check_motion(run, tank, args.margin)
+        if problems:
+            print(f"error: {args.run}: {problems[0]}; not written (--unchecked writes it)",
+                  file=sys.stderr)  # fmt: skip
+            return 1
+    text = export_motion(run, args.format, args.space, None if args.unchecked else args.margin)
     with atomic_open(args.output) as out:
         out.write(text)
     print(f"wrote {args.output} ({len(run.dis)} points, {run.timing.duration:.2f} s, {args.space})")

@@ -45,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``aftir record``."""
+    from aftir_rl.core.files import check_outputs
     from aftir_rl.experiments.rollout import record_frames
     from aftir_rl.rl.sb3 import load_run
     from aftir_rl.viz.plotting import save_gif
@@ -52,7 +53,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if not args.output.lower().endswith(".gif"):
         raise ConfigError(f"-o {args.output}: write a .gif")
-    _, config, env_id, model = load_run(policy_run(args))
+    run = policy_run(args)
+    check_outputs([args.output], [run])
+    _, config, env_id, model = load_run(run)
     env_kwargs = policy_env_kwargs(args, config.env_kwargs)
     frames = []
     targets = policy_targets(args, env_id, env_kwargs)

@@ -29,7 +29,7 @@ from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import atomic_open
 from aftir_rl.core.tank.generate import MAX_BAYS, wing_tank
-from aftir_rl.core.tank.loading import load_tank, tank_from_mapping
+from aftir_rl.core.tank.loading import load_tank, tank_files, tank_from_mapping
 
 __all__ = ["build_parser", "main"]
 
@@ -74,8 +74,10 @@ def _generate(args: argparse.Namespace) -> None:
 
 
 def _export(args: argparse.Namespace) -> None:
+    from aftir_rl.core.files import check_outputs
     from aftir_rl.core.tank.meshes import export_tank_mesh
 
+    check_outputs([args.output, args.walls, args.yaml], tank_files(args.tank))
     tank = load_tank(args.tank)
     triangles = export_tank_mesh(tank, args.output, args.yaml, args.walls)
     also = [name for name in (args.walls, args.yaml) if name]

@@ -51,10 +51,14 @@ def build_parser() -> argparse.ArgumentParser:
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.cli.view`` (and ``aftir view``)."""
+    from aftir_rl.core.files import check_outputs
+    from aftir_rl.core.tank import tank_files
     from aftir_rl.viz.page import write_view
 
     args = build_parser().parse_args(argv)
     try:
+        tank_inputs = tank_files(args.tank) if args.tank else []
+        check_outputs([args.output], [*args.run_dirs, *tank_inputs])
         out = write_view(args.run_dirs, args.output, tank=args.tank, max_frames=args.max_frames)
     except AftirError as exc:
         print(f"error: {exc}", file=sys.stderr)

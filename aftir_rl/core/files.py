@@ -1,7 +1,10 @@
 """Files: atomic writes, bounded JSON reads, writable output folders, failed writes named.
 
 A write goes to a temporary file beside the target and is renamed over it, so a crash or an
-error mid-write leaves the old file (or none), never half of a new one. A full disk or an I/O
+error mid-write leaves the old file (or none), never half of a new one. It replaces only a
+regular file (keeping its mode) or nothing: a device, FIFO, socket, directory or symbolic link
+at the target is refused in one line (:func:`check_output`), and :func:`check_outputs` refuses
+an output that is one of the command's inputs. A full disk or an I/O
 error is a :class:`WriteError` naming the file; a run directory being written keeps what it
 holds then (:func:`staged_dir`). JSON read from a run directory is size-limited
 (:data:`MAX_JSON_BYTES`).
@@ -13,8 +16,9 @@ import errno
 import json
 import os
 import shutil
+import stat
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
@@ -27,6 +31,8 @@ __all__ = [
     "MAX_JSON_BYTES",
     "WriteError",
     "atomic_open",
+    "check_output",
+    "check_outputs",
     "describe_write_error",
     "check_writable_dir",
     "staged_dir",
@@ -102,17 +108,88 @@ def describe_write_error(exc: OSError) -> str:
     return text
 
 
+_KINDS = (
+    (stat.S_ISLNK, "a symbolic link"),
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def check_output(path: str | os.PathLike[str]) -> int | None:
+    """The mode of the regular file at ``path`` (None: nothing there) that a write may replace.
+
+    Raises:
+        ConfigError: something else is there (a device, FIFO, socket, directory or symbolic
+            link), which a write would destroy.
+
+    """
+    try:
+        info = os.lstat(path)
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot write there ({exc.strerror or exc})") from None
+    if stat.S_ISREG(info.st_mode):
+        return stat.S_IMODE(info.st_mode)
+    kind = next((name for test, name in _KINDS if test(info.st_mode)), "not a regular file")
+    raise ConfigError(f"{path}: is {kind}, not a regular file; refusing to replace it")
+
+
+def check_outputs(
+    outputs: Iterable[str | os.PathLike[str] | None],
+    inputs: Iterable[str | os.PathLike[str] | None],
+) -> None:
+    """Refuse outputs that would replace an input, another output, or a non-regular file.
+
+    An input that is a folder (a run directory) protects every file in it (a new file there is
+    fine); an input file protects itself. ``None`` entries are skipped.
+
+    Raises:
+        ConfigError: one line naming the output and what it would replace.
+
+    """
+    seen: dict[Path, str] = {}
+    given = [Path(p) for p in inputs if p is not None]
+    for out in (Path(p) for p in outputs if p is not None):
+        check_output(out)
+        where = out.resolve()
+        if where in seen:
+            raise ConfigError(f"{out}: given as two outputs ({seen[where]} and {out})")
+        seen[where] = str(out)
+        if not where.exists():
+            continue
+        for source in given:
+            home = source.resolve()
+            if where == home or (home.is_dir() and home in where.parents):
+                what = "it is" if where == home else f"it is in {source}, which is"
+                raise ConfigError(
+                    f"{out}: {what} an input of this command; write the output elsewhere"
+                )
+
+
 @contextmanager
 def atomic_open(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO[Any]]:
-    """Open a temporary file that replaces ``path`` when the block exits without error."""
+    """Open a temporary file that replaces ``path`` when the block exits without error.
+
+    Raises:
+        ConfigError: ``path`` is not a regular file (:func:`check_output`).
+
+    """
     path = Path(path)
+    keep = check_output(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        # mkstemp makes 0600; a file written in place would get 0666 less the umask (0644).
-        umask = os.umask(0o022)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)
+        # mkstemp makes 0600; a file written in place keeps its mode, a new one gets 0666
+        # less the umask (0644).
+        if keep is None:
+            umask = os.umask(0o022)
+            os.umask(umask)
+            keep = 0o666 & ~umask
+        os.fchmod(fd, keep)
         with os.fdopen(fd, mode, encoding=None if "b" in mode else "utf-8") as fh:
             yield fh
         os.replace(tmp, path)

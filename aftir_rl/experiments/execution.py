@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from aftir_rl.core.actuation import ActuatorLimits
 from aftir_rl.core.cables import cable_names
 from aftir_rl.core.collision import CollisionScene
+from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import CheckpointError
 from aftir_rl.core.robot import Posture, body_points
 from aftir_rl.core.tank import Tank, load_tank, resolve_run_tank
@@ -185,7 +186,7 @@ def _limit_problems(run: TimedRun) -> list[str]:
     return problems
 
 
-def _geometry_problems(run: TimedRun, tank: Tank) -> list[str]:
+def _geometry_problems(run: TimedRun, tank: Tank, margin: float) -> list[str]:
     """Joint limits, dense entries, and python-fcl clearance with the panel rule at each entry."""
     if np.abs(run.theta).max() > tank.arm.theta_max + 1e-9:
         return [f"a section bends past theta_max ({tank.arm.theta_max:g} rad)"]
@@ -203,21 +204,25 @@ def _geometry_problems(run: TimedRun, tank: Tank) -> list[str]:
     scene = CollisionScene(tank, links_per_section=20)
     for i in range(len(run.dis)):
         report = scene.check(Posture(run.dis[i], tuple(run.theta[i]), tuple(run.phi[i])))
-        if not report.panel_ok or report.clearance_cm < run.margin_cm:
+        if not report.panel_ok or report.clearance_cm < margin:
             what = (
                 "breaks the panel rule"
                 if not report.panel_ok
                 else f"keeps {report.clearance_cm:.3f} cm"
             )
-            return problems + [f"entry {i} {what} (margin {run.margin_cm:g} cm)"]
+            return problems + [f"entry {i} {what} (margin {margin:g} cm)"]
     return problems
 
 
-def check_motion(run: TimedRun, tank: Tank) -> list[str]:
-    """What is wrong with a timed motion (empty: it passes), each as one line."""
+def check_motion(run: TimedRun, tank: Tank, margin: float = DEFAULT_MARGIN) -> list[str]:
+    """What is wrong with a timed motion (empty: it passes), each as one line.
+
+    The clearance is judged against ``margin`` [cm], the caller's: never the margin the run's
+    file states (:attr:`TimedRun.margin_cm`, which a file may set to anything).
+    """
     if len(run.timing.t) != len(run.dis):
         return ["the timing and the motion have different lengths"]
-    return _time_problems(run) + _limit_problems(run) + _geometry_problems(run, tank)
+    return _time_problems(run) + _limit_problems(run) + _geometry_problems(run, tank, margin)
 
 
 def _rows(run: TimedRun, space: str) -> tuple[list[str], list[NDArray[np.float64]]]:
@@ -230,11 +235,20 @@ def _rows(run: TimedRun, space: str) -> tuple[list[str], list[NDArray[np.float64
     return ["dis"] + cable_names(n), [np.concatenate(pair, axis=1) for pair in zip(dis, cables)]
 
 
-def export_motion(run: TimedRun, fmt: str, space: str = "joints") -> str:
-    """The motion as ``jointtrajectory-json`` (ROS field names and layout) or ``csv`` text."""
+def export_motion(
+    run: TimedRun, fmt: str, space: str = "joints", checked_margin: float | None = DEFAULT_MARGIN
+) -> str:
+    """The motion as ``jointtrajectory-json`` (ROS field names and layout) or ``csv`` text.
+
+    ``checked_margin``: the margin [cm] :func:`check_motion` found the motion to keep, or None
+    for a motion exported without that check, which the file then says (the JSON's
+    ``checked_margin_cm`` is null; a CSV starts with a ``#`` line).
+    """
     names, (pos, vel, acc) = _rows(run, space)
     if fmt == "csv":
         out = io.StringIO()
+        if checked_margin is None:
+            out.write("# not checked: exported with --unchecked; run aftir check first\n")
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(
             [
@@ -270,11 +284,12 @@ def export_motion(run: TimedRun, fmt: str, space: str = "joints") -> str:
             }
         )
     header = {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "panel"}
-    return json.dumps({"header": header, "joint_names": names, "points": points}, indent=1) + "\n"
+    data = {"header": header, "joint_names": names, "points": points}
+    return json.dumps({**data, "checked_margin_cm": checked_margin}, indent=1) + "\n"
 
 
 def check_tour(tank: Tank, tour: Any) -> list[str]:
     """:func:`check_motion` of a planned tour (a :class:`~aftir_rl.planning.ftl.tour.Tour`)."""
     dis, theta, phi = tour.motion
-    return check_motion(TimedRun(dis, theta, phi, tour.timing, tour.section_length,
-                                 tour.margin_cm), tank)  # fmt: skip
+    run = TimedRun(dis, theta, phi, tour.timing, tour.section_length, tour.margin_cm)
+    return check_motion(run, tank, tour.margin_cm)  # the margin the tour was planned with

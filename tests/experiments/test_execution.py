@@ -6,6 +6,7 @@ import csv
 import json
 import math
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -151,3 +152,53 @@ def test_export_and_check_agree_in_the_library(run_dir, tank):
     run = read_timed(run_dir / "trajectory.json")
     assert check_motion(run, tank) == []
     assert export_motion(run, "csv").count("\n") == len(run.timing.t) + 1
+
+
+def test_the_check_trusts_the_command_line_not_the_files_margin(run_dir, tmp_path, capsys, tank):
+    """A file that states a negative margin for a motion through the wall still fails."""
+
+    def lying(data):
+        _into_the_wall(data)
+        data["margin_cm"] = -50.0
+
+    broken = _edited(run_dir, tmp_path, lying)
+    assert check_cli.main([str(broken)]) == 1
+    last = len(read_timed(run_dir).dis) - 1
+    problems = check_motion(read_timed(broken), tank)
+    assert any(p.startswith(f"entry {last} keeps") and "(margin 1 cm)" in p for p in problems)
+    # the margin is the command line's: a planned motion fails a margin it was not planned for
+    capsys.readouterr()
+    stated = tmp_path / "stated"
+    shutil.copytree(run_dir, stated)
+    data = json.loads((stated / "trajectory.json").read_text())
+    (stated / "trajectory.json").write_text(json.dumps({**data, "margin_cm": -50.0}))
+    assert check_cli.main([str(stated), "--margin", "15"]) == 1
+    assert "keeps" in capsys.readouterr().out
+    # the file's own margin is reported beside the one used, never used
+    assert check_cli.main([str(stated)]) == 0
+    assert "margin 1 cm; the file states -50 cm" in capsys.readouterr().out
+    assert check_cli.main([str(stated), "--margin", "-1"]) == 2
+
+
+def test_export_writes_only_a_motion_that_passes_the_check(run_dir, tmp_path, capsys):
+    broken = _edited(run_dir, tmp_path, _into_the_wall)
+    out = tmp_path / "out.json"
+    assert export_cli.main([str(broken), "-o", str(out)]) == 1
+    assert "not written" in capsys.readouterr().err and not out.exists()
+    assert export_cli.main([str(broken), "-o", str(out), "--unchecked"]) == 0
+    assert json.loads(out.read_text())["checked_margin_cm"] is None
+    csv_out = tmp_path / "out.csv"
+    assert export_cli.main([str(broken), "-o", str(csv_out), "--unchecked", "--format", "csv"]) == 0
+    assert csv_out.read_text().startswith("# not checked")
+    assert export_cli.main([str(run_dir), "-o", str(out)]) == 0
+    assert json.loads(out.read_text())["checked_margin_cm"] == 1.0
+
+
+def test_export_never_writes_over_its_input_or_a_device(run_dir, tmp_path, capsys):
+    before = (run_dir / "trajectory.json").read_bytes()
+    for target in (run_dir / "trajectory.json", "/dev/full", tmp_path):
+        assert export_cli.main([str(run_dir), "-o", str(target)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and ("input of this command" in err or "not a regular" in err)
+    assert (run_dir / "trajectory.json").read_bytes() == before
+    assert Path("/dev/full").is_char_device()

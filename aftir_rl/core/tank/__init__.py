@@ -25,6 +25,7 @@ from aftir_rl.core.tank.loading import (
     keep_run_tank,
     load_tank,
     resolve_run_tank,
+    tank_files,
     tank_from_mapping,
 )
 from aftir_rl.core.tank.raster import Raster
@@ -48,6 +49,7 @@ __all__ = [
     "load_tank",
     "resolve_run_tank",
     "keep_run_tank",
+    "tank_files",
     "RUN_TANK_FILE",
     "tank_from_mapping",
     "available_tanks",

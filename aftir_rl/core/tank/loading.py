@@ -55,6 +55,7 @@ from aftir_rl.core.tank.solids import Solid, Vec3
 __all__ = [
     "TANK_DIR",
     "RUN_TANK_FILE",
+    "tank_files",
     "load_tank",
     "available_tanks",
     "resolve_run_tank",
@@ -277,6 +278,41 @@ _SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})")
 _POOL_SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})-([0-9]{1,10})")
 
 
+_Source = tuple[Path, bytes, dict[str, Any], list[tuple[dict[str, Any], str]]]
+
+
+def _source_yaml(tank: str | Path) -> _Source | None:
+    """The YAML a tank reads, its bytes, its mapping, ``(mapping, key)`` of its meshes.
+
+    The meshes are its obstacles' and its walls'. None for a shipped name or a generator spec.
+    """
+    text, source = str(tank), Path(tank)
+    if (text in available_tanks() or names_generated(text)) and not source.exists():
+        return None
+    if not (source.suffix in (".yaml", ".yml") or source.exists()):
+        source = TANK_DIR / f"{text}.yaml"
+    raw = read_limited(source, MAX_YAML_BYTES, ConfigError, "tank file", "tank")
+    data = read_yaml(source, raw)
+    meshes = [
+        (o, "file")
+        for o in data.get("obstacles") or []
+        if isinstance(o, dict) and o.get("type") == "mesh"
+    ] + ([(data, "mesh")] if data.get("mesh") is not None else [])
+    return source, raw, data, meshes
+
+
+def tank_files(tank: str | Path) -> list[Path]:
+    """The files loading ``tank`` reads: its YAML and the meshes it names.
+
+    None for a shipped name or a generator spec; a command refuses to write over them.
+    """
+    found = _source_yaml(tank)
+    if found is None:
+        return []
+    source, _, _, meshes = found
+    return [source] + [source.parent / str(item[key]) for item, key in meshes]
+
+
 def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
     """What a run directory records as its tank: a shipped name or a spec, else ``tank.yaml``.
 
@@ -284,19 +320,10 @@ def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
     mesh files it names beside it, so the run stays readable wherever it is moved and
     :func:`resolve_run_tank` never leaves it.
     """
-    text, source = str(tank), Path(tank)
-    if (text in available_tanks() or names_generated(text)) and not source.exists():
-        return text
-    if not (source.suffix in (".yaml", ".yml") or source.exists()):
-        source = TANK_DIR / f"{text}.yaml"
-    raw = read_limited(source, MAX_YAML_BYTES, ConfigError, "tank file", "tank")
-    data = read_yaml(source, raw)
-    # (mapping, key) of every mesh file it names: its obstacles' and its walls'
-    meshes = [
-        (o, "file")
-        for o in data.get("obstacles") or []
-        if isinstance(o, dict) and o.get("type") == "mesh"
-    ] + ([(data, "mesh")] if data.get("mesh") is not None else [])
+    found = _source_yaml(tank)
+    if found is None:
+        return str(tank)
+    source, raw, data, meshes = found
     if meshes:
         load_tank(source)  # every mesh checked before anything is copied
         for i, (item, key) in enumerate(meshes):
