@@ -5,8 +5,10 @@ in it would print Python's traceback. These entry points install a handler befor
 nothing has started yet, so it prints ``interrupted`` and exits 130 at once. Each command's own
 handler (:mod:`aftir_rl.cli.guard`: stop after the current step, save, say how to resume)
 replaces it while the command runs. This module lives outside the package because importing
-anything inside it runs the package's ``__init__`` first; that ``__init__`` calls
-:func:`take_signals` too when it is imported by ``python -m aftir_rl...``.
+anything inside it runs the package's ``__init__`` first, and that ``__init__`` cannot take the
+signals itself for a console script: a program that merely imports the package looks the same
+to it, and must keep its own handlers. Under ``python -m aftir_rl...`` it can tell (``sys.argv``
+is ``["-m"]`` while the module is located), and calls :func:`take_signals` from here.
 """
 
 from __future__ import annotations

@@ -30,7 +30,6 @@ from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import write_json
 from aftir_rl.experiments.bench import (
-    OLD_SET_NAMES,
     SETS,
     Row,
     format_table,
@@ -56,7 +55,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--sets",
         nargs="+",
-        type=lambda name: OLD_SET_NAMES.get(name, name),
         choices=SETS,
         default=list(SETS),
         help="target sets to run, named after the papers (aftir_rl.core.papers) and the two bays "
@@ -113,8 +111,6 @@ def _check_numbers(parser: argparse.ArgumentParser, args: argparse.Namespace) ->
         parser.error("--bridge-seconds must be a finite 0 or more")
     if not 0 <= args.margin <= 20:
         parser.error("--margin must be between 0 and 20 cm")
-    if not 0 <= args.seed < 2**32:
-        parser.error("--seed must be from 0 to 2**32 - 1")
 
 
 def _run_benchmark(args: argparse.Namespace) -> list[Row]:

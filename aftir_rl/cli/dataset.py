@@ -23,6 +23,7 @@ from aftir_rl.cli.args import (
 )
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import ConfigError
+from aftir_rl.envs.registration import ARM_FTL, bare_env_id
 
 __all__ = ["build_parser", "main"]
 
@@ -80,8 +81,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     check_dataset_id(args.id)
     config = with_overrides(load_sb3_config(args.config, "ppo"), "ppo", args.env_kwargs)
-    if config.env_id.removeprefix("aftir_rl:") != "AFTIR-ArmFTL-v0":
-        raise ConfigError(f"--config: the expert plays AFTIR-ArmFTL-v0, not {config.env_id}")
+    if bare_env_id(config.env_id) != ARM_FTL:
+        raise ConfigError(f"--config: the expert plays {ARM_FTL}, not {config.env_id}")
     start = time.perf_counter()
     bars: list[tqdm] = []  # made at the first episode, once every argument has been checked
 

@@ -118,6 +118,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: :func:`evaluate_run`'s parameter -> the flag that gives it.
+FLAGS = {"tank": "--tank", "policy_seed": "--stochastic"}
+
+
 def _evaluate_runs(
     args: argparse.Namespace, targets: list[np.ndarray] | None, draw: tuple[int, int] | None
 ) -> dict[str, dict[str, Any]]:
@@ -146,12 +150,17 @@ def _evaluate_runs(
                 policy_seed=args.stochastic,
             )
         return {_row_name(r): row for r, row in zip(args.runs, rows)}
-    return {
-        _row_name(r): evaluate_run(
-            r, targets, args.motion, args.margin, draw, args.tank, args.stochastic
-        )
-        for r in args.runs
-    }
+    try:
+        return {
+            _row_name(r): evaluate_run(
+                r, targets, args.motion, args.margin, draw, args.tank, args.stochastic
+            )
+            for r in args.runs
+        }
+    except ConfigError as exc:  # a value the run refuses: say which flag gave it
+        if exc.param not in FLAGS:
+            raise
+        raise ConfigError(f"{FLAGS[exc.param]}: {exc}") from None
 
 
 def _print_table(results: dict[str, dict[str, Any]]) -> None:

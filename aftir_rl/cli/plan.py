@@ -16,6 +16,7 @@ from aftir_rl.cli.args import OneLineParser, add_margin_option, add_target_optio
 from aftir_rl.cli.guard import cli, exit_with
 from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import AftirError, PlanningError
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.planning.posture.context import PlannedPosture
 from aftir_rl.planning.posture.planner import Planner
 from aftir_rl.planning.posture.registry import AUTO, METHOD_NAMES, REGISTRY
@@ -56,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_target_option(
         parser, "target point in cm (frame S: origin at the access panel)", required=True
     )
-    parser.add_argument("--tank", default="b737_center", help="tank name or YAML path")
+    parser.add_argument("--tank", default=DEFAULT_TANK, help="tank name or YAML path")
     parser.add_argument(
         "--method",
         default=AUTO,

@@ -28,7 +28,9 @@ from aftir_rl.cli.args import (
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import check_writable_dir, write_json
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank.loading import keep_run_tank
+from aftir_rl.envs.registration import bare_env_id
 
 __all__ = [
     "build_parser",
@@ -144,9 +146,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     env_kwargs = policy_env_kwargs(args, config.env_kwargs)
     targets = policy_targets(args, env_id, env_kwargs)
     out = check_writable_dir(args.output, "--output")
-    tank = env_kwargs.get("tank") or gym.spec(env_id.split(":")[-1]).kwargs.get(
-        "tank", "b737_center"
-    )
+    tank = env_kwargs.get("tank") or gym.spec(bare_env_id(env_id)).kwargs.get("tank", DEFAULT_TANK)
     reached = 0
     for i, target in enumerate(targets):
         folder = out / _name(target)

@@ -28,6 +28,7 @@ from aftir_rl.cli.args import OneLineParser, add_int_option
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import atomic_open
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank.generate import MAX_BAYS, wing_tank
 from aftir_rl.core.tank.loading import load_tank, tank_files, tank_from_mapping
 
@@ -60,7 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_show_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--tank", default="b737_center", help=_TANK_HELP)
+    parser.add_argument("--tank", default=DEFAULT_TANK, help=_TANK_HELP)
     parser.add_argument("--json", action="store_true", help="print the scene export as JSON")
 
 

@@ -9,9 +9,9 @@ tank), and prints the tour's duration as a share of one deployment per target.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,6 +26,10 @@ from aftir_rl.cli.args import (
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.config import DEFAULT_MARGIN
 from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.shipped import DEFAULT_TANK
+
+if TYPE_CHECKING:
+    from aftir_rl.core.tank import Tank
 
 __all__ = ["MAX_TOUR_TARGETS", "build_parser", "main"]
 
@@ -59,14 +63,14 @@ def build_parser() -> argparse.ArgumentParser:
                         help="--coverage: spacing of the candidate viewpoints (30)")  # fmt: skip
     add_int_option(parser, "--samples", (100, 50_000), "--coverage: surface samples (3000)", 3000)
     add_seed_option(parser, "seed of --random (default 0)")
-    parser.add_argument("--tank", default="b737_center", help="tank name or YAML (b737_center)")
+    parser.add_argument("--tank", default=DEFAULT_TANK, help=f"tank name or YAML ({DEFAULT_TANK})")
     add_margin_option(parser, f"clearance the arm keeps (default {DEFAULT_MARGIN:g} cm)")
     add_seconds_option(parser, "--solver-seconds", 2.0, "OR-Tools' time for the order (2)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     return parser
 
 
-def _targets(args: argparse.Namespace, tank: Any) -> np.ndarray:
+def _targets(args: argparse.Namespace, tank: Tank) -> np.ndarray:
     """The tour's targets: from ``--targets`` or drawn by ``--random``."""
     from aftir_rl.core.config import read_yaml, to_float
     from aftir_rl.core.tank.loading import MAX_COORD
@@ -136,7 +140,7 @@ def _write(out: Path, tank_name: str, tour: Any, extra: dict[str, Any] | None = 
     write_json(out / "summary.json", {"tank": name, "method": "ftl-tour"})
 
 
-def _coverage(args: argparse.Namespace, tank: Any, say: Any) -> int:
+def _coverage(args: argparse.Namespace, tank: Tank, say: Callable[[str], None] | None) -> int:
     """``--coverage``: plan the viewpoints' tour, measure what it sees, write the run."""
     import sys
 

@@ -13,7 +13,15 @@ class AftirError(Exception):
 
 
 class ConfigError(AftirError, ValueError):
-    """A YAML configuration (tank, agent) is malformed: unknown key, bad value, missing file."""
+    """A YAML configuration (tank, agent) is malformed: unknown key, bad value, missing file.
+
+    ``param``: the parameter of the call whose value the message is about, if one is (a
+    command line puts the name of the flag that gave it before the message).
+    """
+
+    def __init__(self, message: str = "", param: str | None = None) -> None:
+        super().__init__(message)
+        self.param = param
 
 
 class TargetError(AftirError, ValueError):

@@ -1,4 +1,4 @@
-"""The configs shipped with the package, found by name wherever it is installed.
+"""The configs shipped with the package, found by name wherever it is installed; the default tank.
 
 ``--config ppo_ftl``, ``--config ppo_ftl.yaml`` and ``--config configs/ppo_ftl.yaml`` all name
 ``configs/ppo_ftl.yaml`` of the package (inside the wheel, or the checkout's ``configs/``); a
@@ -13,7 +13,10 @@ from pathlib import Path
 from aftir_rl.core.config import CONFIG_DIR, brief
 from aftir_rl.core.errors import ConfigError
 
-__all__ = ["find_config", "shipped_configs"]
+__all__ = ["DEFAULT_TANK", "find_config", "shipped_configs"]
+
+#: The shipped tank every env, planner and command uses unless given another.
+DEFAULT_TANK = "b737_center"
 
 _SUFFIXES = (".yaml", ".yml")
 

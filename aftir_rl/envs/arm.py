@@ -15,6 +15,7 @@ from aftir_rl.core.collision import CollisionScene, panel_violation
 from aftir_rl.core.errors import InvalidActionError, TargetError
 from aftir_rl.core.kernel import fk_points
 from aftir_rl.core.robot import Posture
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank import Tank, load_tank
 from aftir_rl.envs.ftl.targets import bay_region, draw_targets
 
@@ -84,7 +85,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     def __init__(
         self,
-        tank: str | Path | Tank = "b737_center",
+        tank: str | Path | Tank = DEFAULT_TANK,
         n_sections: int = 3,
         target: tuple[float, float, float] | None = None,
         target_region: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None,

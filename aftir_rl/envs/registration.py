@@ -16,7 +16,21 @@ import gymnasium as gym
 from aftir_rl.core.config import shorten
 from aftir_rl.core.errors import ConfigError
 
-__all__ = ["ENV_IDS", "REACH_REGION", "REGISTRATIONS", "register_envs", "registered_env_id"]
+__all__ = [
+    "ARM_FTL",
+    "ENV_IDS",
+    "PREFIX",
+    "REACH_REGION",
+    "REGISTRATIONS",
+    "bare_env_id",
+    "register_envs",
+    "registered_env_id",
+]
+
+#: The follow-the-leader arm env (:mod:`aftir_rl.envs.ftl`): the one that takes a tank or pool.
+ARM_FTL = "AFTIR-ArmFTL-v0"
+#: The prefix of an env id that ``gym.make`` imports this package by (``aftir_rl:ID``).
+PREFIX = "aftir_rl:"
 
 #: Bay-1 reach task: targets in front of the panel that 2 sections reach, drawn per episode.
 REACH_REGION = ((-40.0, -40.0, 20.0), (60.0, 40.0, 90.0))
@@ -44,7 +58,7 @@ REGISTRATIONS: dict[str, dict[str, Any]] = {
         "max_episode_steps": 300,
         "kwargs": {"n_sections": 12, "free_targets": True},
     },
-    "AFTIR-ArmFTL-v0": {
+    ARM_FTL: {
         "entry_point": f"{_FTL}:ArmFTLEnv",
         "vector_entry_point": "aftir_rl.envs.ftl.pool_vector:make_vector_env",
         "max_episode_steps": 300,
@@ -77,10 +91,15 @@ def registered_env_id(value: Any, where: str, allowed: Iterable[str] | None = No
     ids = tuple(allowed) if allowed is not None else tuple(ENV_IDS)
     if not isinstance(value, str) or len(value) > 200:
         raise ConfigError(f"{where}: env_id must be one of {', '.join(ids)}")
-    bare = value[len("aftir_rl:") :] if value.startswith("aftir_rl:") else value
+    bare = bare_env_id(value)
     if bare not in ids:
         raise ConfigError(
             f"{where}: env_id {shorten(repr(value), 80)} is not one of {', '.join(ids)} "
-            "(optionally prefixed 'aftir_rl:'); no other module is imported"
+            f"(optionally prefixed {PREFIX!r}); no other module is imported"
         )
     return bare
+
+
+def bare_env_id(env_id: str) -> str:
+    """``env_id`` without the :data:`PREFIX` that ``gym.make`` imports this package by."""
+    return env_id.removeprefix(PREFIX)

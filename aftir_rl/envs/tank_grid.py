@@ -14,6 +14,7 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.errors import InvalidActionError, TargetError
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank import Tank, load_tank
 
 __all__ = ["Action", "TankGridEnv", "step_reward", "target_options"]
@@ -112,7 +113,7 @@ class TankGridEnv(gym.Env[int, int]):
 
     def __init__(
         self,
-        tank: str | Path | Tank = "b737_center",
+        tank: str | Path | Tank = DEFAULT_TANK,
         target: tuple[float, float, float] | None = None,
         target_cell: tuple[int, int, int] | None = None,
         step_penalty: float = 0.0,

@@ -26,6 +26,7 @@ import numpy as np
 from aftir_rl.core import papers
 from aftir_rl.core.config import DEFAULT_BRIDGE_SECONDS, DEFAULT_MARGIN
 from aftir_rl.core.extras import require
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank.raster import format_point
 from aftir_rl.experiments.outcomes import Outcome, Planners, Row, method_outcome, needs_ompl
 from aftir_rl.experiments.outcomes import sb3_outcomes as sb3_outcomes
@@ -45,13 +46,6 @@ __all__ = [
 
 POSTURE_METHODS = tuple(REGISTRY)
 SETS = ("jace", "icra2014", "st2014", "filomat2018", "bay1", "bay2")
-# The sets' former names (by the papers' file numbers), still accepted, not shown.
-OLD_SET_NAMES = {
-    "seed004": "jace",
-    "seed000": "icra2014",
-    "seed001": "st2014",
-    "seed002": "filomat2018",
-}
 PIPELINES = {
     "q_table+ftl": ("filomat2018", "bay1", "bay2"),
     "q_table+postures": ("filomat2018", "bay1", "bay2"),
@@ -88,11 +82,11 @@ def target_sets(n_random: int = 10, seed: int = 7) -> dict[str, list[tuple[str, 
         "jace": points("open_space", [r.target for r in papers.JACE_TABLE2]),
         "icra2014": [(tank, np.array(papers.ICRA2014_TARGET)) for tank in papers.ICRA2014_TANKS],
         "st2014": points("single_cabin", st2014),
-        "filomat2018": points("b737_center", [r.target for r in papers.FILOMAT2018_TABLE2]),
+        "filomat2018": points(DEFAULT_TANK, [r.target for r in papers.FILOMAT2018_TABLE2]),
     }
-    drawn = random_free_targets(Planner("b737_center"), n_random, seed)
-    sets["bay1"] = [("b737_center", t) for t in drawn["bay1"]]
-    sets["bay2"] = [("b737_center", t) for t in drawn["bay2"]]
+    drawn = random_free_targets(Planner(DEFAULT_TANK), n_random, seed)
+    sets["bay1"] = [(DEFAULT_TANK, t) for t in drawn["bay1"]]
+    sets["bay2"] = [(DEFAULT_TANK, t) for t in drawn["bay2"]]
     return sets
 
 

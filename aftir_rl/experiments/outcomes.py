@@ -25,6 +25,7 @@ from aftir_rl.core.config import CONFIG_DIR, DEFAULT_BRIDGE_SECONDS, DEFAULT_MAR
 from aftir_rl.core.errors import AftirError, PlanningError
 from aftir_rl.core.extras import require
 from aftir_rl.core.robot import Posture
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.experiments.runs import load_q_table_config, load_sb3_run
 from aftir_rl.planning.posture.registry import get_method
 from aftir_rl.rl.tabular.paths import learn_cells
@@ -247,7 +248,7 @@ def sb3_outcomes(run_dir: str | Path, sets: dict[str, list[tuple[str, np.ndarray
     lo, hi = getattr(env, "target_region", None) or cast("ArmFTLEnv", env).sampler.region
     rows = []
     for name in ("filomat2018", "bay1", "bay2"):
-        targets = [t for tank, t in sets.get(name, []) if tank == "b737_center"]
+        targets = [t for tank, t in sets.get(name, []) if tank == DEFAULT_TANK]
         if not targets:
             continue
         row = Row(name, f"{run.algo} ({run.config.env_id})")

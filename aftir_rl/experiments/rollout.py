@@ -13,13 +13,16 @@ from __future__ import annotations
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.rl.sb3.evaluation import arm_clearance, evaluation_env_kwargs, sampling
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
 
 __all__ = ["rollout", "record_frames"]
 
@@ -39,7 +42,7 @@ def _episode(
 
 
 def rollout(
-    model: Any,
+    model: BaseAlgorithm,
     env_id: str,
     env_kwargs: dict[str, Any] | None,
     target: Any,
@@ -91,7 +94,7 @@ def rollout(
 
 
 def record_frames(
-    model: Any,
+    model: BaseAlgorithm,
     env_id: str,
     env_kwargs: dict[str, Any] | None,
     target: Any,

@@ -26,12 +26,19 @@ import numpy as np
 from aftir_rl.core.config import DEFAULT_MARGIN, from_mapping, read_yaml
 from aftir_rl.core.errors import CheckpointError, ConfigError
 from aftir_rl.core.files import run_file
-from aftir_rl.core.shipped import find_config
+from aftir_rl.core.shipped import DEFAULT_TANK, find_config
 from aftir_rl.core.tank.loading import resolve_run_tank
+from aftir_rl.envs.registration import ARM_FTL, bare_env_id
 from aftir_rl.rl.tabular.paths import greedy_cells
 
 if TYPE_CHECKING:
+    import gymnasium as gym
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
     from aftir_rl.envs.tank_grid import TankGridEnv
+    from aftir_rl.rl.sb3.config import SB3Config
+    from aftir_rl.rl.tabular.q_table import QLearning
+    from aftir_rl.rl.tabular.q_table_goal import GoalQLearning
 
 __all__ = [
     "QTableRun",
@@ -66,8 +73,8 @@ class QTableRun:
     """A ``q_table`` run: the agent in the env of the target it was trained for."""
 
     run_dir: Path
-    agent: Any
-    env: Any
+    agent: QLearning
+    env: gym.Env
     target: list[float]
 
 
@@ -76,8 +83,8 @@ class GoalRun:
     """A ``q_table_goal`` run: one goal-conditioned agent for every reachable cell."""
 
     run_dir: Path
-    agent: Any
-    env: Any
+    agent: GoalQLearning
+    env: gym.Env
 
 
 @dataclass
@@ -86,9 +93,9 @@ class SB3Run:
 
     run_dir: Path
     algo: str
-    config: Any
+    config: SB3Config
     env_id: str
-    model: Any
+    model: BaseAlgorithm
 
 
 def run_kind(run_dir: str | Path) -> str | None:
@@ -137,7 +144,7 @@ def load_q_table_run(run_dir: str | Path) -> QTableRun:
         raise CheckpointError(f"{run_dir}: the Q-table has no target in its metadata")
     env = gym.make(
         meta.get("env_id", "AFTIR-Tank-v0"),
-        tank=resolve_run_tank(meta.get("tank", "b737_center"), run_dir),
+        tank=resolve_run_tank(meta.get("tank", DEFAULT_TANK), run_dir),
         target=tuple(target),
     )
     return QTableRun(Path(run_dir), QLearning.load(path, env), env, list(target))
@@ -153,7 +160,7 @@ def load_goal_run(run_dir: str | Path) -> GoalRun:
     _, _, meta = GoalQLearning.read_checkpoint(path)
     config = meta.get("config")
     tank = meta.get("tank") or (config.get("tank") if isinstance(config, dict) else None)
-    env = gym.make("AFTIR-TankGoal-v0", tank=resolve_run_tank(tank or "b737_center", run_dir))
+    env = gym.make("AFTIR-TankGoal-v0", tank=resolve_run_tank(tank or DEFAULT_TANK, run_dir))
     return GoalRun(Path(run_dir), GoalQLearning.load(path, env), env)
 
 
@@ -218,8 +225,10 @@ def _evaluate_sb3(
 
     kwargs = dict(run.config.env_kwargs or {})  # the env the model was trained on (spaces)
     if tank is not None:
-        if run.env_id.split(":")[-1] != "AFTIR-ArmFTL-v0":
-            raise ConfigError(f"--tank: {run.env_id} takes no tank; AFTIR-ArmFTL-v0 runs do")
+        if bare_env_id(run.env_id) != ARM_FTL:
+            raise ConfigError(
+                f"{tank}: {run.env_id} takes no tank; {ARM_FTL} runs do", param="tank"
+            )
         kwargs["tank"] = tank
     if not targets:
         count, seed = draw or (run.config.eval_targets, EVAL_SEED)
@@ -257,14 +266,19 @@ def evaluate_run(
     Raises:
         CheckpointError: not a run directory this knows, or unreadable files.
         ConfigError: ``tank`` or ``policy_seed`` for a Q-table run, or ``tank`` for a run
-            whose env takes none.
+            whose env takes none (its ``param`` names which).
 
     """
     run = load_run(run_dir, ("q_table", "sb3"))
     if isinstance(run, QTableRun):
         if tank is not None:
-            raise ConfigError(f"--tank: {run_dir} is a Q-table run, evaluated in its own tank")
+            raise ConfigError(
+                f"{tank}: {run_dir} is a Q-table run, evaluated in its own tank", param="tank"
+            )
         if policy_seed is not None:
-            raise ConfigError(f"--stochastic: {run_dir} is a Q-table run, evaluated greedily")
+            raise ConfigError(
+                f"seed {policy_seed}: {run_dir} is a Q-table run, evaluated greedily",
+                param="policy_seed",
+            )
         return _evaluate_q_table(run, motion, margin)
     return _evaluate_sb3(cast(SB3Run, run), targets, draw, tank, policy_seed)

@@ -67,7 +67,7 @@ def _number(value: Any, where: str, integer: bool) -> float | int:
     return number
 
 
-def _dimension(key: str, spec: Any, where: str) -> Dimension:
+def _dimension(key: str, spec: object, where: str) -> Dimension:
     if not isinstance(spec, dict) or len(spec) != 1:
         raise ConfigError(
             f"{where}: expected one distribution ({', '.join(DISTRIBUTIONS)}), e.g. "

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import atomic_open, write_json
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank import Tank, load_tank
 from aftir_rl.core.tank.generate import WingRanges, wing_tank
 from aftir_rl.core.tank.meshes import export_tank_mesh
@@ -35,8 +36,8 @@ __all__ = ["SCENES", "CLEARANCE", "SuiteRow", "scene_tanks", "suite_targets", "r
 
 #: Scene name -> how to make it: a tank name or spec, or (how, argument) for the built ones.
 SCENES: dict[str, Any] = {
-    "b737_center": "b737_center",
-    "b737_center_mesh": ("mesh_of", "b737_center"),
+    "b737_center": DEFAULT_TANK,
+    "b737_center_mesh": ("mesh_of", DEFAULT_TANK),
     "wing_2bay": "wing:2:1",
     "wing_3bay": "wing:3:2",
     "wing_4bay": "wing:4:3",

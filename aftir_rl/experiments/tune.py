@@ -25,13 +25,18 @@ import time
 from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from aftir_rl.core import interrupts
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import UNFINISHED, atomic_open, check_writable_dir, write_json
 from aftir_rl.experiments.distributed import kill_local_workers
 from aftir_rl.experiments.search_space import DISTRIBUTIONS, Dimension, load_search_space
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
+    from aftir_rl.rl.sb3.config import SB3Config
 
 __all__ = [
     "DISTRIBUTIONS",
@@ -102,7 +107,9 @@ def _train_trial(params: dict[str, Any], algo: str, base: Any, logdir: str, seed
     config = dataclasses.replace(base, hyperparameters=hyper)
     total = config.total_timesteps
 
-    def metrics_of(model: Any, metrics: dict[str, float], run_dir: Path) -> dict[str, Any]:
+    def metrics_of(
+        model: BaseAlgorithm, metrics: dict[str, float], run_dir: Path
+    ) -> dict[str, Any]:
         return {
             **{f"eval/{k}": float(v) for k, v in metrics.items()},
             "timesteps": int(model.num_timesteps),
@@ -111,7 +118,8 @@ def _train_trial(params: dict[str, Any], algo: str, base: Any, logdir: str, seed
 
     last: dict[str, Any] = {}
 
-    def report(model: Any, metrics: dict[str, float]) -> None:
+    def report(model: BaseAlgorithm, metrics: dict[str, float]) -> None:
+        assert model.logger.dir is not None  # train_sb3 logs into the run's folder
         partial = Path(model.logger.dir)
         if model.num_timesteps >= total:  # the last one: reported once the run is complete
             last.update(metrics_of(model, metrics, _final_name(partial)))
@@ -370,7 +378,7 @@ def _or_inf(value: float) -> float:
     return math.inf if math.isnan(value) else value
 
 
-def write_config_yaml(path: Path, config: Any, algo: str, trial: dict[str, Any]) -> None:
+def write_config_yaml(path: Path, config: SB3Config, algo: str, trial: dict[str, Any]) -> None:
     """Write ``config`` as a YAML that ``aftir train ALGO --config`` reads."""
     import yaml
 

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError
+from aftir_rl.envs.registration import ARM_FTL
 
 __all__ = ["DATASET_ID", "check_dataset_id", "write_dataset"]
 
@@ -78,7 +79,7 @@ def _planner(workers: int, env_kwargs: dict[str, Any], max_seconds: float) -> It
 
 
 def _targets(env_kwargs: dict[str, Any], first_seed: int) -> Iterator[tuple[int, Any]]:
-    env = gym.make("AFTIR-ArmFTL-v0", **env_kwargs)
+    env = gym.make(ARM_FTL, **env_kwargs)
     seed = first_seed
     while True:
         _, info = env.reset(seed=seed)
@@ -155,7 +156,7 @@ def _resume_point(
         return 0, seed
     old = minari.load_dataset(dataset_id)
     made = old.spec.env_spec.kwargs if old.spec.env_spec is not None else None
-    spec = gym.make("AFTIR-ArmFTL-v0", **env_kwargs).spec
+    spec = gym.make(ARM_FTL, **env_kwargs).spec
     if spec is None or made != spec.kwargs:
         raise ConfigError(
             f"{dataset_id}: made with other env arguments ({made}); resume it "
@@ -216,7 +217,7 @@ def write_dataset(
     os.environ["MINARI_DATASETS_PATH"] = str(Path(root).resolve())
     done, next_seed = _resume_point(minari, dataset_id, env_kwargs, seed)
     skipped = 0
-    env = gym.make("AFTIR-ArmFTL-v0", **env_kwargs)
+    env = gym.make(ARM_FTL, **env_kwargs)
     jobs = _targets(env_kwargs, next_seed)
     steps = 0
     with _planner(workers, env_kwargs, max_seconds) as imap:

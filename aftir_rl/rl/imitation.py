@@ -12,14 +12,21 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError
+
+if TYPE_CHECKING:
+    from gymnasium import Space
+    from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+
+    from aftir_rl.rl.sb3.config import SB3Config
 
 __all__ = ["Demos", "clone", "load_demos", "pretrainer"]
 
@@ -90,7 +97,7 @@ def load_demos(path: str | os.PathLike[str], gamma: float) -> Demos:
 
 
 def clone(
-    model: Any,
+    model: OnPolicyAlgorithm,
     demos: Demos,
     epochs: int = 10,
     batch_size: int = 1024,
@@ -110,13 +117,7 @@ def clone(
     import torch.nn.functional as F
 
     policy = model.policy
-    space = policy.observation_space
-    for key, value in demos.observations.items():
-        if key not in space.spaces or space[key].shape != value.shape[1:]:
-            raise ConfigError(
-                f"the demonstrations' observation {key!r} {value.shape[1:]} does not fit the "
-                f"policy's {space.spaces.get(key)}; make both with the same env_kwargs"
-            )
+    _check_observations(policy.observation_space, demos)
     start = time.perf_counter()
     rng = np.random.default_rng(seed)
     device = policy.device
@@ -141,7 +142,7 @@ def clone(
             loss.backward()
             opt.step()
             with torch.no_grad():
-                mean = policy.get_distribution(o).distribution.mean
+                mean = policy.get_distribution(o).mode()  # the Gaussian's mean
                 amse = F.mse_loss(mean.clamp(-1, 1), acts[pick])
             w = len(pick)
             sums += w * np.array([nll.item(), vloss.item(), amse.item()])
@@ -150,7 +151,23 @@ def clone(
     return {"epochs": epochs, "steps": n, **stats, "seconds": time.perf_counter() - start}
 
 
-def pretrainer(path: str | os.PathLike[str], config: Any, epochs: int = 20, seed: int = 0) -> Any:
+def _check_observations(space: Space[Any], demos: Demos) -> None:
+    """A :class:`ConfigError` unless ``demos``' observations fit a policy observing ``space``."""
+    from gymnasium import spaces
+
+    if not isinstance(space, spaces.Dict):
+        raise ConfigError(f"the policy observes {space}, not the demonstrations' dict of arrays")
+    for key, value in demos.observations.items():
+        if key not in space.spaces or space[key].shape != value.shape[1:]:
+            raise ConfigError(
+                f"the demonstrations' observation {key!r} {value.shape[1:]} does not fit the "
+                f"policy's {space.spaces.get(key)}; make both with the same env_kwargs"
+            )
+
+
+def pretrainer(
+    path: str | os.PathLike[str], config: SB3Config, epochs: int = 20, seed: int = 0
+) -> Callable[[OnPolicyAlgorithm], dict[str, float]]:
     """``pretrain(model)`` for :func:`~aftir_rl.rl.sb3.train.train_sb3`: clone ``path``'s demos.
 
     Raises:
@@ -168,7 +185,7 @@ def pretrainer(path: str | os.PathLike[str], config: Any, epochs: int = 20, seed
             "their actions would mean something else"
         )
 
-    def pretrain(model: Any) -> dict[str, float]:
+    def pretrain(model: OnPolicyAlgorithm) -> dict[str, float]:
         return {"episodes": float(demos.episodes), **clone(model, demos, epochs, seed=seed)}
 
     return pretrain

@@ -25,6 +25,7 @@ from typing import Any
 from aftir_rl.core.errors import CheckpointError
 from aftir_rl.core.extras import require
 from aftir_rl.core.files import atomic_open
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank import Tank, load_tank, resolve_run_tank
 from aftir_rl.viz.figure import DEFAULT_MAX_FRAMES, build_figure, tank_traces
 from aftir_rl.viz.runs import RUN_FILES, RunData, read_run, unique_names
@@ -45,7 +46,7 @@ def _resolve_tank(tank: str | Path | Tank | None, runs: list[RunData]) -> Tank:
         return load_tank(tank)
     named = [r for r in runs if r.tank]
     if not named:
-        return load_tank("b737_center")
+        return load_tank(DEFAULT_TANK)
     return load_tank(resolve_run_tank(named[0].tank, named[0].path))
 
 

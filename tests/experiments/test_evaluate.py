@@ -7,6 +7,8 @@ import sys
 import pytest
 
 from aftir_rl.cli import evaluate, rollout, train
+from aftir_rl.core.errors import ConfigError
+from aftir_rl.experiments.runs import evaluate_run
 from aftir_rl.rl.pretrained import load, policy_dir
 
 
@@ -53,7 +55,13 @@ def test_compare_q_table_and_ppo_runs(tmp_path, capsys):
     # a Q-table run is greedy: sampling it is refused in one line, nothing logged
     q_run = str(q_dir)
     assert evaluate.main([q_run, "--stochastic", "--logdir", str(tmp_path / "no")]) == 2
-    assert "evaluated greedily" in capsys.readouterr().err
+    assert "error: --stochastic: seed 0: " in capsys.readouterr().err
+    assert evaluate.main([q_run, "--tank", "open_space", "--logdir", str(tmp_path / "no")]) == 2
+    assert "error: --tank: open_space: " in capsys.readouterr().err
+    # the library says what is wrong with the value; the flag is the command line's word
+    with pytest.raises(ConfigError, match="evaluated greedily") as refused:
+        evaluate_run(q_run, policy_seed=0)
+    assert refused.value.param == "policy_seed" and "--" not in str(refused.value)
     assert not list((tmp_path / "no").glob("evaluate__*"))
     clearance = float(row.split("|")[7])
     assert clearance == pytest.approx(trajectory["min_clearance_cm"], abs=0.01) and clearance >= 1

@@ -33,6 +33,7 @@ from aftir_rl.core.config import (
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import atomic_open
 from aftir_rl.core.robot import ArmSpec
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank.generate import wing_tank
 from aftir_rl.core.tank.geometry import Panel, Tank
 from aftir_rl.core.tank.parts import (
@@ -378,7 +379,7 @@ def names_generated(text: str) -> bool:
     return generated_spec(text) is not None or _POOL_SPEC.fullmatch(text) is not None
 
 
-def load_tank(tank: str | Path | Tank = "b737_center") -> Tank:
+def load_tank(tank: str | Path | Tank = DEFAULT_TANK) -> Tank:
     """Load a tank by name (``configs/tanks/NAME.yaml``), path, or spec ``wing:BAYS:SEED``.
 
     A spec is :func:`~aftir_rl.core.tank.generate.wing_tank`'s tank, read no file. The last few

@@ -19,7 +19,7 @@ import os
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, cast
 
 import fcl
 import numpy as np
@@ -31,7 +31,11 @@ from aftir_rl.core.extras import require
 from aftir_rl.core.files import atomic_open
 from aftir_rl.core.tank import mesh_kernels
 from aftir_rl.core.tank.solids import Box, Mesh, Shape
-from aftir_rl.core.tank.wedge import taper_side
+from aftir_rl.core.tank.wedge import Wedge, taper_side
+
+if TYPE_CHECKING:
+    from aftir_rl.core.tank.geometry import Tank
+    from aftir_rl.core.tank.plate import Plate
 
 __all__ = [
     "MeshSolid",
@@ -286,7 +290,7 @@ def is_walls(solid: Any) -> bool:
     return solid.kind == "mesh" and bool(solid.walls)
 
 
-def tank_bodies(tank: Any, taper: bool = True) -> tuple[_Array, NDArray[np.int64]]:
+def tank_bodies(tank: Tank, taper: bool = True) -> tuple[_Array, NDArray[np.int64]]:
     """Every solid of a tank as closed outward bodies in one mesh ``(V, F)``, but its walls.
 
     With ``taper=False`` its taper's wedges are left out too (:func:`inside_mesh` has them).
@@ -295,7 +299,7 @@ def tank_bodies(tank: Any, taper: bool = True) -> tuple[_Array, NDArray[np.int64
     for solid in tank.solids:
         if is_walls(solid) or (not taper and any(solid is w for w in tank.taper)):
             continue
-        bodies = solid.bodies() if solid.kind == "plate" else [solid.mesh()]
+        bodies = cast("Plate", solid).bodies() if solid.kind == "plate" else [solid.mesh()]
         for bv, bf in bodies:
             tri = bv[bf]
             volume = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum()
@@ -316,19 +320,19 @@ def box_inside_mesh(lo: Any, hi: Any) -> tuple[_Array, NDArray[np.int64]]:
     return verts, faces
 
 
-def inside_mesh(tank: Any) -> tuple[_Array, NDArray[np.int64]]:
+def inside_mesh(tank: Tank) -> tuple[_Array, NDArray[np.int64]]:
     """The tank's inside as a closed outward mesh: its box, its far end narrowed by its taper."""
     lo, hi = np.array(tank.box_min, float), np.array(tank.box_max, float)
     verts, faces = box_inside_mesh(lo, hi)
     for wedge in tank.taper:
-        along, c, side, end = taper_side(wedge)
+        along, c, side, end = taper_side(cast("Wedge", wedge))  # a taper holds wedges
         far = (verts[:, along] == hi[along]) & (verts[:, c] == (lo if side == "min" else hi)[c])
         verts[far, c] = end
     return verts, faces
 
 
 def export_tank_mesh(
-    tank: Any,
+    tank: Tank,
     output: str | Path,
     yaml_out: str | Path | None = None,
     walls_out: str | Path | None = None,
@@ -365,7 +369,7 @@ def export_tank_mesh(
     return len(meshes[0][1])
 
 
-def _write_mesh_yaml(tank: Any, mesh_files: list[Path], yaml_out: Path) -> None:
+def _write_mesh_yaml(tank: Tank, mesh_files: list[Path], yaml_out: Path) -> None:
     """A tank file with ``tank``'s box (or walls mesh), panel, arm and targets, and its solids."""
     rel = []
     for mesh_file in mesh_files:

@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.core.collision import CollisionReport, CollisionScene, point_clearance
 from aftir_rl.core.errors import ConfigError, PlanningError
 from aftir_rl.core.robot import Posture
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank import Tank, load_tank
 from aftir_rl.core.tank.raster import format_point
 
@@ -98,7 +99,7 @@ class PlanningContext:
 
     def __init__(
         self,
-        tank: str | Tank = "b737_center",
+        tank: str | Tank = DEFAULT_TANK,
         num: int = 9,
         dtheta: float = math.radians(1.0),
         zone: float = 0.5,

@@ -8,20 +8,29 @@ at once), and :func:`optimality` compares the lengths with the BFS optimum.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["greedy_rollout", "greedy_walk", "greedy_lengths", "optimality"]
+__all__ = ["Predictor", "greedy_rollout", "greedy_walk", "greedy_lengths", "optimality"]
+
+
+class Predictor(Protocol):
+    """An agent with SB3's ``predict``: ``(action, state)`` for an observation."""
+
+    def predict(self, observation: Any, deterministic: bool = True) -> tuple[Any, Any]:
+        """The action for ``observation`` (greedy with ``deterministic``) and a state."""
+        ...
+
 
 #: A deterministic model: ``next_state[s, a]`` and ``hit[s, a]``.
 Dynamics = tuple[NDArray[np.int64], NDArray[np.bool_]]
 
 
 def greedy_rollout(
-    agent: Any,
+    agent: Predictor,
     env: gym.Env,
     max_steps: int = 1000,
     options: dict[str, Any] | None = None,

@@ -14,12 +14,16 @@ import os
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.rl.tabular.checkpoint import HYPERPARAMETER_BOUNDS, npz_path, write_npz
+
+if TYPE_CHECKING:
+    import gymnasium as gym
 
 __all__ = ["QLearningConfig", "TabularAgent", "episode_bar"]
 
@@ -48,7 +52,7 @@ class QLearningConfig:
     """
 
     env_id: str = "AFTIR-Tank-v0"
-    tank: str = "b737_center"
+    tank: str = DEFAULT_TANK
     episodes: int = 2000
     learning_rate: float = 1.0
     gamma: float = 0.95
@@ -107,7 +111,7 @@ class TabularAgent(ABC):
 
     def __init__(
         self,
-        env: Any,
+        env: gym.Env,
         learning_rate: float = 1.0,
         gamma: float = 0.95,
         exploration_initial_eps: float = 1.0,
@@ -130,7 +134,7 @@ class TabularAgent(ABC):
         self._setup(env)
 
     @abstractmethod
-    def _setup(self, env: Any) -> None:
+    def _setup(self, env: gym.Env) -> None:
         """Make the table (and the random generator) for ``env``."""
 
     @classmethod
@@ -139,7 +143,9 @@ class TabularAgent(ABC):
         return [*HYPERPARAMETER_BOUNDS, *cls.INTEGER_HYPERPARAMETERS]
 
     @classmethod
-    def from_config(cls: type[A], env: Any, config: QLearningConfig, seed: int | None = None) -> A:
+    def from_config(
+        cls: type[A], env: gym.Env, config: QLearningConfig, seed: int | None = None
+    ) -> A:
         """An untrained agent with the hyperparameters of a :class:`QLearningConfig`."""
         return cls(env, seed=seed, **{key: getattr(config, key) for key in cls._keywords()})
 
@@ -228,7 +234,7 @@ class TabularAgent(ABC):
         """
 
     @classmethod
-    def load(cls: type[A], path: str | os.PathLike[str], env: Any) -> A:
+    def load(cls: type[A], path: str | os.PathLike[str], env: gym.Env) -> A:
         """Load a checkpoint for ``env``; training can then resume with ``learn``.
 
         Raises:

@@ -18,6 +18,8 @@ from aftir_rl.planning.ftl.plan import motion_summary
 from aftir_rl.rl.common import target_tag
 
 if TYPE_CHECKING:
+    import gymnasium as gym
+
     from aftir_rl.envs.tank_grid import TankGridEnv
 
 __all__ = ["MotionOptions", "log_greedy_path"]
@@ -35,7 +37,7 @@ class MotionOptions:
 
 def log_greedy_path(
     logger: Any,
-    env: Any,
+    env: gym.Env,
     summary: dict[str, Any],
     target: Sequence[float],
     seed: int,
@@ -87,7 +89,7 @@ def log_greedy_path(
 
 
 def _log_motion(
-    logger: Any, env: Any, summary: dict[str, Any], target: Sequence[float], margin: float
+    logger: Any, env: TankGridEnv, summary: dict[str, Any], target: Sequence[float], margin: float
 ) -> Any:
     """A follow-the-leader motion along the learned cells: logged, pictured, summarised."""
     from stable_baselines3.common.logger import Image
@@ -123,7 +125,7 @@ def _log_motion(
 
 def _log_trajectory(
     logger: Any,
-    env: Any,
+    env: TankGridEnv,
     points: np.ndarray,
     target: Sequence[float],
     summary: dict[str, Any],

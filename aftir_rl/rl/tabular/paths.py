@@ -9,12 +9,17 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 if TYPE_CHECKING:
+    import gymnasium as gym
+
+    from aftir_rl.core.tank import Tank
     from aftir_rl.envs.tank_grid import TankGridEnv
+    from aftir_rl.rl.tabular.learning import QLearningConfig
+    from aftir_rl.rl.tabular.q_table import QLearning
 
 __all__ = ["greedy_cells", "learn_cells", "path_summary"]
 
 
-def greedy_cells(agent: Any, env: Any, max_steps: int = 1000) -> tuple[list[Any], bool]:
+def greedy_cells(agent: QLearning, env: gym.Env, max_steps: int = 1000) -> tuple[list[Any], bool]:
     """The raster cells of a Q-table's greedy path (start first), and whether it reaches."""
     from aftir_rl.rl.tabular.q_table import greedy_rollout
 
@@ -23,7 +28,9 @@ def greedy_cells(agent: Any, env: Any, max_steps: int = 1000) -> tuple[list[Any]
     return [raster.cell(s) for s in states], reached
 
 
-def learn_cells(tank: Any, target: ArrayLike, config: Any, seed: int = 0) -> tuple[list[Any], bool]:
+def learn_cells(
+    tank: Tank, target: ArrayLike, config: QLearningConfig, seed: int = 0
+) -> tuple[list[Any], bool]:
     """Q-learning on ``target`` in ``tank`` with ``config``; its greedy cells and success.
 
     Raises:
@@ -40,9 +47,11 @@ def learn_cells(tank: Any, target: ArrayLike, config: Any, seed: int = 0) -> tup
     return greedy_cells(agent, env)
 
 
-def path_summary(agent: Any, env: Any, target: Sequence[float], max_steps: int) -> dict[str, Any]:
+def path_summary(
+    agent: QLearning, env: gym.Env, target: Sequence[float], max_steps: int
+) -> dict[str, Any]:
     """The greedy path of a trained agent as ``path.json`` holds it, with its BFS optimum."""
-    base = env.unwrapped
+    base = cast("TankGridEnv", env.unwrapped)
     cells, success = greedy_cells(agent, env, max_steps=max_steps)
     points = np.array([base.raster.cell_center(c) for c in cells])
     optimum = int(base.tank.reachable[base.target_cell])

@@ -27,8 +27,10 @@ from aftir_rl.rl.tabular.path_logs import MotionOptions, log_greedy_path
 from aftir_rl.rl.tabular.paths import path_summary
 
 if TYPE_CHECKING:
+    import gymnasium as gym
+
     from aftir_rl.envs.tank_grid import TankGridEnv
-    from aftir_rl.rl.tabular.learning import TabularAgent
+    from aftir_rl.rl.tabular.learning import QLearningConfig, TabularAgent
     from aftir_rl.rl.tabular.q_table import QLearning
     from aftir_rl.rl.tabular.q_table_goal import GoalQLearning
 
@@ -39,7 +41,7 @@ GOAL_TABLE = "q_table_goal.npz"
 
 
 def train_q_table(
-    config: Any,
+    config: QLearningConfig,
     targets: Sequence[Sequence[float]],
     seed: int = 0,
     logdir: str | Path = "runs",
@@ -100,7 +102,7 @@ def train_q_table(
     return summaries
 
 
-def _make_target_envs(config: Any, targets: Sequence[Sequence[float]]) -> list[Any]:
+def _make_target_envs(config: QLearningConfig, targets: Sequence[Sequence[float]]) -> list[gym.Env]:
     """Make one ``AFTIR-Tank-v0`` env per target (which validates every target)."""
     import gymnasium as gym
 
@@ -182,7 +184,9 @@ def resumed_config(resume: str | Path, all_targets: bool = False) -> Any | None:
     return dataclasses.replace(config, tank=resolve_run_tank(meta.get("tank"), path.parent))
 
 
-def _make_agent(config: Any, env: Any, checkpoint: Path | None, seed: int) -> QLearning:
+def _make_agent(
+    config: QLearningConfig, env: gym.Env, checkpoint: Path | None, seed: int
+) -> QLearning:
     """A fresh agent, or the checkpoint's after checking it was trained for this target and tank.
 
     Raises:
@@ -221,8 +225,8 @@ def _run_start(agent: TabularAgent, checkpoint: Path | None) -> int:
 
 def _train_target_run(
     agent: QLearning,
-    env: Any,
-    config: Any,
+    env: gym.Env,
+    config: QLearningConfig,
     target: Sequence[float],
     seed: int,
     start: int,
@@ -286,8 +290,8 @@ def _keep_learnt(
 
 def _learn_target(
     agent: QLearning,
-    env: Any,
-    config: Any,
+    env: gym.Env,
+    config: QLearningConfig,
     target: Sequence[float],
     seed: int,
     logger: Any,
@@ -328,7 +332,9 @@ def _has_goal_table(partial: Path) -> bool:
     return (partial / GOAL_TABLE).is_file()
 
 
-def _checkpoint_extra(env: Any, config: Any, target: Sequence[float]) -> dict[str, Any]:
+def _checkpoint_extra(
+    env: gym.Env, config: QLearningConfig, target: Sequence[float]
+) -> dict[str, Any]:
     """What a target's ``q_table.npz`` holds besides the agent's own metadata."""
     base = cast("TankGridEnv", env.unwrapped)
     return {
@@ -361,7 +367,7 @@ def _save_target_run(
 
 
 def train_q_table_all_targets(
-    config: Any,
+    config: QLearningConfig,
     seed: int = 0,
     logdir: str | Path = "runs",
     progress_bar: bool = True,
@@ -419,7 +425,9 @@ def train_q_table_all_targets(
     return summary
 
 
-def _goal_agent(config: Any, seed: int, resume: str | Path | None) -> tuple[GoalQLearning, int]:
+def _goal_agent(
+    config: QLearningConfig, seed: int, resume: str | Path | None
+) -> tuple[GoalQLearning, int]:
     """A new goal-conditioned agent, or ``resume``'s; and the episode count its run starts from.
 
     Raises:
