@@ -25,6 +25,7 @@ from aftir_rl.core import kernel as core_kernel
 from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.kernel.clearance import clearance_grid, kernel_grid
+from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank import Tank, load_tank
 from aftir_rl.envs.ftl import kernel
 from aftir_rl.envs.ftl.fields import LOOKAHEAD_HOPS, field_guide
@@ -56,7 +57,7 @@ def _motion_free(default: Any) -> Any:
 class TaskSpec:
     """The tank, the arm, the task and what the policy observes (lengths in cm, angles in rad)."""
 
-    tank: str | Path | Tank = "b737_center"
+    tank: str | Path | Tank = DEFAULT_TANK
     n_sections: int | None = None
     target: Sequence[float] | None = _motion_free(None)
     bay: int | None = _motion_free(None)
