@@ -102,6 +102,9 @@ def test_hostile_meshes_are_one_line_errors(tmp_path, make, message):
 def test_mesh_files_that_are_not_meshes(tmp_path):
     text = tmp_path / "walls.stl"
     text.write_bytes(b"\x00\x01garbage" * 100)
+    with pytest.raises(ConfigError, match="not a valid binary STL: its header says"):
+        read_mesh(text, "w")
+    text.write_bytes(b"solid x\nfacet normal garbage\n" * 10)
     with pytest.raises(ConfigError, match="not a readable mesh|holds no triangles"):
         read_mesh(text, "w")
     with pytest.raises(ConfigError, match="expected a .stl, .obj, .ply file"):
@@ -112,13 +115,46 @@ def test_mesh_files_that_are_not_meshes(tmp_path):
         read_mesh(fifo, "w")
 
 
+def test_a_mesh_reads_no_other_file(tmp_path):
+    """An OBJ's mtllib is never opened: a FIFO there would block, a huge file would be read."""
+    tri = box_triangles()
+    verts = tri.reshape(-1, 3)
+    lines = ["mtllib fifo.mtl", "usemtl a"] + [f"v {x} {y} {z}" for x, y, z in verts]
+    lines += [f"f {3 * i + 1} {3 * i + 2} {3 * i + 3}" for i in range(len(tri))]
+    (tmp_path / "box.obj").write_text("\n".join(lines) + "\n")
+    os.mkfifo(tmp_path / "fifo.mtl")
+    v, f = read_mesh(tmp_path / "box.obj", "w")
+    assert len(f) == len(tri) and len(v) == 8
+
+
+def test_counts_are_checked_before_parsing(tmp_path):
+    """A header or line count above the cap is refused without parsing the file."""
+    from aftir_rl.core.tank.meshes import MAX_TRIANGLES
+
+    n = MAX_TRIANGLES + 1
+    stl = tmp_path / "big.stl"
+    with stl.open("wb") as fh:  # a sparse binary STL whose header and size agree
+        fh.write(b"\0" * 80 + np.uint32(n).tobytes())
+        fh.truncate(84 + 50 * n)
+    with pytest.raises(ConfigError, match="1,000,001 triangles, more than"):
+        read_mesh(stl, "w")
+    ply = tmp_path / "big.ply"
+    ply.write_bytes(
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+        b"property float y\nproperty float z\nelement face 999999999\n"
+        b"property list uchar int vertex_indices\nend_header\n"
+    )
+    with pytest.raises(ConfigError, match="999,999,999 triangles, more than"):
+        read_mesh(ply, "w")
+
+
 def test_a_mesh_too_large_is_refused_unread(tmp_path, monkeypatch):
     from aftir_rl.core.tank import meshes
 
     path = tmp_path / "big.stl"
     write_stl(path, box_triangles())
     monkeypatch.setattr(meshes, "MAX_MESH_BYTES", 100)
-    with pytest.raises(ConfigError, match="more than 100"):
+    with pytest.raises(ConfigError, match="larger than 100 bytes"):
         read_mesh(path, "w")
 
 

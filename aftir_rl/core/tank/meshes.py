@@ -14,6 +14,7 @@ python-fcl gets a BVH model, hollow, so the collision check adds the inside test
 
 from __future__ import annotations
 
+import io
 import math
 import os
 from dataclasses import dataclass, field
@@ -26,6 +27,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
+from aftir_rl.core.config import read_limited
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.extras import require
 from aftir_rl.core.files import atomic_open
@@ -71,27 +73,74 @@ def _trimesh() -> Any:
     return require("trimesh", "mesh")
 
 
+def _counted(data: bytes, suffix: str, where: str) -> int:
+    """The triangles (or faces) a mesh file's bytes declare, before any parsing.
+
+    A binary STL's header count must match its size; a PLY's header names its elements; an
+    ASCII STL and an OBJ are counted by their facet and face lines (an OBJ polygon of ``k``
+    corners is ``k − 2`` triangles: its corners are counted too). Vertices are bounded as well.
+
+    Raises:
+        ConfigError: a count above :data:`MAX_TRIANGLES`, or a binary STL whose header and size
+            disagree.
+
+    """
+    faces, vertices = 0, 0
+    declared = int(np.frombuffer(data[80:84], dtype="<u4")[0]) if len(data) >= 84 else -1
+    binary = len(data) == 84 + 50 * declared  # an ASCII STL starts "solid"; a binary may too
+    if suffix == ".stl" and not (data[:5].lower() == b"solid" and not binary):
+        if len(data) < 84:
+            raise ConfigError(f"{where}: not a binary STL (shorter than its 84-byte header)")
+        faces = declared
+        if not binary:
+            raise ConfigError(
+                f"{where}: not a valid binary STL: its header says {faces:,} triangles "
+                f"({84 + 50 * faces:,} bytes), the file holds {len(data):,} bytes"
+            )
+    elif suffix == ".stl":
+        faces = data.count(b"endfacet")
+    elif suffix == ".ply":
+        header = data[: data.find(b"end_header")] if b"end_header" in data else b""
+        for line in header.decode("latin-1").splitlines():
+            words = line.split()
+            if len(words) == 3 and words[0] == "element" and words[2].isdigit():
+                count = int(words[2][:12])
+                faces += count if words[1] == "face" else 0
+                vertices += count if words[1] == "vertex" else 0
+    else:  # .obj: each face line's corners beyond two are triangles
+        lines = data.replace(b"\r", b"\n").split(b"\n")
+        corners = [len(line.split()) - 1 for line in lines if line.startswith(b"f ")]
+        faces = sum(max(k - 2, 1) for k in corners)
+        vertices = sum(1 for line in lines if line.startswith(b"v "))
+    if faces > MAX_TRIANGLES or vertices > 3 * MAX_TRIANGLES:
+        count = f"{faces:,} triangles" if faces > MAX_TRIANGLES else f"{vertices:,} vertices"
+        raise ConfigError(f"{where}: {count}, more than {MAX_TRIANGLES:,} triangles allow")
+    return faces
+
+
 def read_mesh(path: str | Path, where: str) -> tuple[_Array, NDArray[np.int64]]:
     """Vertices ``(V, 3)`` [cm] and faces ``(F, 3)`` of a closed, outward mesh file.
+
+    Only this one file is read, at most :data:`MAX_MESH_BYTES`, its counts checked from its
+    bytes (:func:`_counted`) before it is parsed: no material, texture or other file it names
+    is ever opened (an OBJ's ``mtllib`` is ignored).
 
     Raises:
         ConfigError: naming ``where`` and what is wrong (never the file's content).
 
     """
     path = Path(path)
-    if path.suffix.lower() not in MESH_SUFFIXES:
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
         raise ConfigError(f"{where}: expected a {', '.join(MESH_SUFFIXES)} file, got {path.name!r}")
-    try:
-        if not path.is_file():
-            raise ConfigError(f"{where}: {path} is not a regular file")
-        size = path.stat().st_size
-    except OSError as exc:
-        raise ConfigError(f"{where}: cannot read {path}: {exc.strerror}") from None
-    if size > MAX_MESH_BYTES:
-        raise ConfigError(f"{where}: {path.name} is {size:,} bytes, more than {MAX_MESH_BYTES:,}")
+    data = read_limited(path, MAX_MESH_BYTES, ConfigError, "mesh file", "mesh")
+    _counted(data, suffix, f"{where}: {path.name}")
     trimesh = _trimesh()
+    options = {"skip_materials": True} if suffix == ".obj" else {}
     try:
-        mesh = trimesh.load_mesh(str(path), process=False)
+        mesh = trimesh.load_mesh(
+            io.BytesIO(data), file_type=suffix[1:], process=False, resolver=None, **options
+        )
     except Exception as exc:  # noqa: BLE001 - any parser failure is one line
         raise ConfigError(
             f"{where}: {path.name} is not a readable mesh ({type(exc).__name__})"
