@@ -152,3 +152,64 @@ def test_results_page_is_what_the_benchmark_json_gives():
         text=True,
     )
     assert run.returncode == 0, run.stderr
+
+
+# --- docs/design.md against the package -------------------------------------------------------
+
+
+def _layer_table() -> dict[str, list[str]]:
+    """docs/design.md §1's layer table: ``"N name"`` -> its modules cell, row by row."""
+    text = (ROOT / "docs" / "design.md").read_text()
+    section = text[text.index("## 1. Layers") : text.index("## 2.")]
+    rows = [line.split("|")[1:-1] for line in section.splitlines() if line.startswith("| ")]
+    return {cells[0].strip(): cells[1] for cells in rows[1:]}
+
+
+def _listed_modules(cell: str) -> tuple[list[str], list[str]]:
+    """The dotted modules one row names, and the sub-packages it refers to another section for.
+
+    The cell opens with its layer's package (```aftir_rl.core```); then a name is a module of
+    the package opened last, ```name/``` a sub-package, followed by its modules in parentheses
+    or by ``(§N)``, the section that lists them; a dotted ```aftir_rl...``` name stands alone.
+    """
+    tokens = re.findall(r"`([^`]+)`|(\(§\d+\))|([()])", cell)
+    prefix = [tokens[0][0]]
+    listed, elsewhere, last = [tokens[0][0]], [], ""
+    for name, section, paren in tokens[1:]:
+        if section:
+            elsewhere.append(last)
+        elif paren == "(":
+            prefix.append(last)
+        elif paren == ")":
+            prefix.pop()
+        elif name.startswith("aftir_rl"):
+            listed.append(name)
+        else:
+            last = f"{prefix[-1]}.{name.rstrip('/')}"
+            listed.append(last)
+    return listed, elsewhere
+
+
+def test_design_layer_table_lists_every_module_of_the_package():
+    """§1's table names each module once, nothing that does not exist, in the layers
+    tests/test_layers.py checks the imports against."""
+    from tests.test_layers import LAYERS, _layer
+
+    package = ROOT / "aftir_rl"
+    modules = {
+        ".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+        for p in package.rglob("*.py")
+        if p.name != "__main__.py"
+    }
+    table = _layer_table()
+    assert list(table) == [f"{n} {name}" for name, n in sorted(LAYERS.items(), key=lambda x: x[1])]
+    listed: list[str] = []
+    for row, cell in table.items():
+        names, elsewhere = _listed_modules(cell)
+        layer = int(row.split()[0])
+        assert all(_layer(m) == layer for m in names), row
+        listed += names
+        modules -= {m for m in modules for p in elsewhere if m.startswith(f"{p}.")}
+    assert len(listed) == len(set(listed)), "a module listed twice"
+    assert sorted(set(listed) - modules) == [], "listed, but no module of the package"
+    assert sorted(modules - set(listed)) == [], "modules the table leaves out"

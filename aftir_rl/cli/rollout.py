@@ -1,11 +1,10 @@
 """``aftir rollout RUN_DIR --target X Y Z -o DIR``: a policy's motions, drawn like the planner's.
 
-A thin command line over :func:`aftir_rl.experiments.rollout.rollout`: for each target, the
-policy of an SB3 run (loaded without unpickling; its mean actions, or sampled with
-``--stochastic``) runs once and
-``DIR/<target>/trajectory.json`` (the planner's contract) and ``summary.json`` (tank, env, result)
-are written, so ``aftir view DIR/<target>`` shows the arm moving, beside a planner's run if given
-too. ``--random N`` draws N targets with the run's env instead (seeds from ``--seed``).
+A thin command line over :func:`aftir_rl.experiments.rollout.rollout`: for each target, the policy
+of an SB3 run (loaded without unpickling; its mean actions, or sampled with ``--stochastic``) runs
+once and ``DIR/<target>/trajectory.json`` (the planner's contract) and ``summary.json`` (tank, env,
+result) are written, so ``aftir view DIR/<target>`` shows the arm moving, beside a planner's run if
+given too. ``--random N`` draws N targets with the run's env instead (seeds from ``--seed``).
 """
 
 from __future__ import annotations

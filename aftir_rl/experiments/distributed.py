@@ -312,8 +312,7 @@ def benchmark_on_ray(
 
     Needs a connected Ray (:func:`ray_session`). The rows come in the serial order with the same
     outcomes (:func:`aftir_rl.experiments.bench.method_outcome` restarts OMPL's seed for every item,
-    so no
-    result depends on what ran before it in a process); each SB3 run directory is one task. A
+    so no result depends on what ran before it in a process); each SB3 run directory is one task. A
     task that fails is an outcome (or, for a run directory, a row) whose note holds its error.
 
     Args:

@@ -1,8 +1,7 @@
 """One benchmarked method on one target: what ``python -m aftir_rl.bench`` tabulates.
 
 :func:`method_outcome` runs a posture method of :data:`aftir_rl.planning.posture.registry.REGISTRY`,
-the
-Q-learning pipelines (``q_table+postures``, ``q_table+ftl``) or RRT-Connect (``rrt_connect``) on
+the Q-learning pipelines (``q_table+postures``, ``q_table+ftl``) or RRT-Connect (``rrt_connect``) on
 one target; :func:`sb3_outcomes` an SB3 run's policy on the reference tank's targets. The methods
 and the target sets are described in :mod:`aftir_rl.experiments.bench`.
 """

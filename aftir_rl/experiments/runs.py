@@ -138,7 +138,7 @@ def load_q_table_run(run_dir: str | Path) -> QTableRun:
     from aftir_rl.rl.tabular.q_table import QLearning
 
     path = run_file(run_dir, RUN_FILES["q_table"])
-    _, meta = QLearning.read_checkpoint(path)  # the env id checked (agents.checkpoint)
+    _, meta = QLearning.read_checkpoint(path)  # the env id checked (rl.tabular.checkpoint)
     target = meta.get("target")
     if target is None:
         raise CheckpointError(f"{run_dir}: the Q-table has no target in its metadata")

@@ -1,12 +1,11 @@
 """Compiled kernels of the posture search in the bending plane: tips, MDS and clearance.
 
-What :mod:`aftir_rl.planning.posture.planar` defines in numpy (the arm with every ``φ_i`` equal,
-a point ``(ρ, z)`` in its plane), one loop per candidate posture: the tips (:func:`planar_tips`;
-over a search grid, :func:`planar_grid`),
-the distance summation to the reference segment (:func:`planar_mds`), the search's
-feasibility check in a frame of the tank (:func:`planar_clear`, the panel rule and the exact
-clearance, pruned by the clearance grid) and the Gauss–Newton refinement of a tip's ``ρ``
-(:func:`planar_refine`). Tested equal to numpy in
+What :mod:`aftir_rl.planning.posture.planar` defines in numpy (the arm with every ``φ_i`` equal, a
+point ``(ρ, z)`` in its plane), one loop per candidate posture: the tips (:func:`planar_tips`; over
+a search grid, :func:`planar_grid`), the distance summation to the reference segment
+(:func:`planar_mds`), the search's feasibility check in a frame of the tank (:func:`planar_clear`,
+the panel rule and the exact clearance, pruned by the clearance grid) and the Gauss–Newton
+refinement of a tip's ``ρ`` (:func:`planar_refine`). Tested equal to numpy in
 ``tests/planning/test_posture_kernels.py``.
 """
 

@@ -5,8 +5,9 @@ into arrays and evaluates each kind's :meth:`~aftir_rl.core.tank.solids.Box.dist
 of them at once: one call is a few dozen numpy operations whatever the number of solids.
 :class:`TankDistance` adds the walls (:class:`~aftir_rl.core.tank.geometry.Enclosure`: the floor's
 round opening continued as the guide tube below it). It is the one signed distance of the
-package: :attr:`Tank.distance <aftir_rl.core.tank.geometry.Tank.distance>`,
-:func:`aftir_rl.core.collision.point_clearance` and the FTL env's contact check are all this class.
+package: :attr:`Tank.distance <aftir_rl.core.tank.geometry.Tank.distance>` and
+:func:`aftir_rl.core.collision.point_clearance` are this class, and the compiled kernels (the FTL
+env's contact check among them) evaluate its formulas (:func:`aftir_rl.core.kernel.geometry.sdf`).
 """
 
 from __future__ import annotations

@@ -340,10 +340,10 @@ def keep_run_tank(tank: str | Path, run_dir: str | Path) -> str:
 def resolve_run_tank(name: object, run_dir: str | Path) -> str:
     """The tank a run directory names, as :func:`load_tank` takes it, checked before any read.
 
-    A run may name a shipped tank (``b737_center``), a generator spec (``wing:3:7``) or a YAML
-    file inside its own directory
-    (:data:`RUN_TANK_FILE`); an absolute path, ``..``, or a symlink that leads out of the
-    directory is refused unread, so a run handed over by someone else opens no other file.
+    A run may name a shipped tank (``b737_center``), a generator spec (``wing:3:7``) or a YAML file
+    inside its own directory (:data:`RUN_TANK_FILE`); an absolute path, ``..``, or a symlink that
+    leads out of the directory is refused unread, so a run handed over by someone else opens no
+    other file.
 
     Raises:
         ConfigError: anything else (the message names the field, never a file's content).

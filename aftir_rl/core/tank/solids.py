@@ -1,6 +1,7 @@
 """The solids of a tank (boxes, axis-aligned cylinders, spheres) and what each one knows.
 
-Every solid carries its own geometry, so no caller switches on its type:
+Every solid carries its own geometry, which the raster, the distance, the collision scene and the
+pictures ask of every kind alike (the few places that switch on ``kind``: docs/design.md §3):
 
 - bounds, overlap with cells and point containment (:meth:`~Box.aabb`, :meth:`~Box.overlaps`,
   :meth:`~Box.contains`), which build the raster;

@@ -1,13 +1,12 @@
 """A whole follow-the-leader motion for one target, checked, in the ``trajectory.json`` contract.
 
 :func:`plan_motion` plans a route (:func:`aftir_rl.planning.ftl.route.plan_route`, guided by the
-learned
-cells when given), deploys it by follow-the-leader (:func:`aftir_rl.planning.ftl.model.ftl_motion`)
-and
-checks the whole dense motion independently of the search: every entry's backbone, sampled
-2.5 cm apart, must keep the margin from the tank (entries are less than 1 cm of backbone movement
-apart). A route whose deployment misses the margin is replaced by the next search setting; a
-target that no setting reaches is ``complete: false`` with the reason.
+learned cells when given), deploys it by follow-the-leader
+(:func:`aftir_rl.planning.ftl.model.ftl_motion`) and checks the whole dense motion independently of
+the search: every entry's backbone, sampled 2.5 cm apart, must keep the margin from the tank
+(entries are less than 1 cm of backbone movement apart). A route whose deployment misses the margin
+is replaced by the next search setting; a target that no setting reaches is ``complete: false`` with
+the reason.
 """
 
 from __future__ import annotations

@@ -1,14 +1,14 @@
 """Inspection tours: one deployment that visits many targets, retracting only where routes part.
 
-:func:`plan_tour` grows a tree of follow-the-leader routes (:mod:`~aftir_rl.planning.ftl.tree`:
-a target's route continues a prefix of another's where it can), so the arm at one target retracts
-only to where the next target's route departs from its own. The
-cost of going from target ``i`` to ``j`` is the time-optimal duration of retracting ``i`` to
-their common prefix plus deploying ``j`` from it (:mod:`aftir_rl.planning.timing`, each leg from
-rest to rest); the visiting order is a travelling-salesman tour over those costs from the panel
-and back, solved by OR-Tools (the ``robot`` extra). A target near another may instead be visited
-by a side trip from it (:mod:`~aftir_rl.planning.ftl.side_trip`: the last sections bend there and
-back). docs/robot.md has the details and measurements.
+:func:`plan_tour` grows a tree of follow-the-leader routes (:mod:`~aftir_rl.planning.ftl.tree`: a
+target's route continues a prefix of another's where it can), so the arm at one target retracts only
+to where the next target's route departs from its own. The cost of going from target ``i`` to ``j``
+is the time-optimal duration of retracting ``i`` to their common prefix plus deploying ``j`` from it
+(:mod:`aftir_rl.planning.timing`, each leg from rest to rest); the visiting order is a
+travelling-salesman tour over those costs from the panel and back, solved by OR-Tools (the ``robot``
+extra). A target near another may instead be visited by a side trip from it
+(:mod:`~aftir_rl.planning.ftl.side_trip`: the last sections bend there and back). docs/robot.md has
+the details and measurements.
 """
 
 from __future__ import annotations

@@ -1,10 +1,9 @@
 """Region clipping and minimum-norm Gauss–Newton refinement, whatever the problem.
 
 One implementation of each, shared by the planar search of :mod:`aftir_rl.planning.posture.search`
-(the bending angles of a planar arm, jace) and by
-:mod:`aftir_rl.planning.posture.obstacle_clipping` (every ``θ_i`` and ``φ_i``, icra2014): the
-problem
-only says how a grid of angles is evaluated and which combination is best.
+(the bending angles of a planar arm, jace) and by :mod:`aftir_rl.planning.posture.obstacle_clipping`
+(every ``θ_i`` and ``φ_i``, icra2014): the problem only says how a grid of angles is evaluated and
+which combination is best.
 """
 
 from __future__ import annotations

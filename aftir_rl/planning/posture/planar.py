@@ -1,13 +1,12 @@
 """The arm reduced to its bending plane (dimension reduction, jace §IV.A).
 
 With every ``φ_i`` equal to the bearing ``ψ`` of the target, the arm lies in the vertical plane
-through the ``z`` axis and the target; headings add up, and a point of the arm is
-``(ρ, z)`` in that plane (``x = ρ cos ψ``, ``y = ρ sin ψ``). A section starting at heading ``a``
-(angle from ``+z`` towards ``+ρ``) and bending by ``b`` over arc ``s`` moves by
+through the ``z`` axis and the target; headings add up, and a point of the arm is ``(ρ, z)`` in that
+plane (``x = ρ cos ψ``, ``y = ρ sin ψ``). A section starting at heading ``a`` (angle from ``+z``
+towards ``+ρ``) and bending by ``b`` over arc ``s`` moves by
 ``s · sinc(b/2) · (sin(a + b/2), cos(a + b/2))`` with ``sinc(x) = sin x / x``: exact, and smooth
 through ``b = 0``. This is the same chain as :mod:`aftir_rl.core.robot` with equal ``φ`` and is
-checked
-against it in the tests; it is only cheaper (2D, no matrices), which matters when the search
+checked against it in the tests; it is only cheaper (2D, no matrices), which matters when the search
 evaluates 10⁴–10⁶ postures per loop.
 """
 

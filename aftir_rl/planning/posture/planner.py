@@ -1,9 +1,8 @@
 """The planner: a planning context that dispatches to the registered methods.
 
-``Planner(tank).plan(target, method)`` runs one method of :mod:`aftir_rl.planning.posture.registry`
-on the
-planner's :class:`~aftir_rl.planning.posture.context.PlanningContext` (which the planner is).
-``auto`` is
+``Planner(tank).plan(target, method)`` runs one method of
+:mod:`aftir_rl.planning.posture.registry` on the planner's
+:class:`~aftir_rl.planning.posture.context.PlanningContext` (which the planner is). ``auto`` is
 TSM for a target beyond the baffle and TGA otherwise. Every posture a method returns is checked:
 joint limits, the panel rule, python-fcl collision with the arm's radius, and the tip error by
 forward kinematics. Otherwise it raises :class:`~aftir_rl.core.errors.PlanningError`, "Cannot reach

@@ -1,12 +1,10 @@
 """Every posture method, by name: the one list that ``plan``, ``bench`` and the planner read.
 
 Adding a method: write its module beside the others (a
-:class:`~aftir_rl.planning.posture.context.Method`
-or anything with the :class:`~aftir_rl.planning.posture.context.PostureMethod` protocol) and add it
-here.
-The methods import :mod:`aftir_rl.planning.posture.context` and the search, never this module nor
-the
-planner.
+:class:`~aftir_rl.planning.posture.context.Method` or anything with the
+:class:`~aftir_rl.planning.posture.context.PostureMethod` protocol) and add it here. The methods
+import :mod:`aftir_rl.planning.posture.context` and the search helpers (TSM builds on TGA's),
+never this module nor the planner.
 """
 
 from __future__ import annotations

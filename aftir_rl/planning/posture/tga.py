@@ -2,10 +2,9 @@
 
 Dimension reduction (all ``φ_i`` equal to the target's bearing), region clipping over the bending
 angles with the MDS criterion (:mod:`aftir_rl.planning.posture.search`), the rising distance,
-sections
-added until a collision-free solution exists, then a Gauss–Newton refinement so the tip error is
-far below the search step. An optional required end direction (the guided angle) is what TSM
-needs for its first part (:mod:`aftir_rl.planning.posture.tsm`).
+sections added until a collision-free solution exists, then a Gauss–Newton refinement so the tip
+error is far below the search step. An optional required end direction (the guided angle) is what
+TSM needs for its first part (:mod:`aftir_rl.planning.posture.tsm`).
 
 Three methods are registered here: ``tga`` (refined), and ``region_clipping`` and ``blind``,
 which stop at the search step as the papers do (the tip anywhere in the target zone).

@@ -1,6 +1,6 @@
 """Stable-Baselines3 baselines (PPO, SAC, TD3) on the arm envs, logged like the Q-table runs.
 
-One import for the SB3 side of the package, which lives in five modules:
+One import for the SB3 side of the package, whose main modules are:
 
 - :mod:`aftir_rl.rl.sb3.hyperparams` and :mod:`aftir_rl.rl.sb3.config`: the env-keyed
   hyperparameter files and the named configs load into a checked :class:`SB3Config`, and

@@ -4,10 +4,9 @@ A config (:class:`SB3Config`; read by :mod:`aftir_rl.rl.sb3.hyperparams` from th
 hyperparameter files and the named configs) is checked by :func:`check_sb3_config`:
 ``hyperparameters`` go to the algorithm's constructor and are checked against its signature and
 against bounds (an unknown key or a value out of range is a
-:class:`~aftir_rl.core.errors.ConfigError`
-naming the file and the key), as is a run directory's ``config.json``
-(:func:`sb3_config_from_run`). :func:`build_model` makes the model of a checked config. The
-bounds of the hyperparameters and their checks are :mod:`aftir_rl.rl.sb3.checks`'.
+:class:`~aftir_rl.core.errors.ConfigError` naming the file and the key), as is a run directory's
+``config.json`` (:func:`sb3_config_from_run`). :func:`build_model` makes the model of a checked
+config. The bounds of the hyperparameters and their checks are :mod:`aftir_rl.rl.sb3.checks`'.
 """
 
 from __future__ import annotations

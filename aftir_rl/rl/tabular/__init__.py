@@ -1,4 +1,4 @@
-"""Agents: tabular Q-learning (and, through the train CLI, SB3 baselines)."""
+"""Tabular Q-learning: one target (:class:`QLearning`) or all at once (:class:`GoalQLearning`)."""
 
 from aftir_rl.rl.tabular.q_table import QLearning, QLearningConfig, greedy_rollout
 from aftir_rl.rl.tabular.q_table_goal import GoalQLearning, train_all_targets

@@ -2,8 +2,7 @@
 
 :class:`GoalTable` is the table ``Q[s, g, a]`` of
 :class:`~aftir_rl.rl.tabular.q_table_goal.GoalQLearning` (which adds the training) for the goals of
-a
-:class:`~aftir_rl.envs.tank_goal.TankGoalEnv`: every reachable free cell but the start. It is
+a :class:`~aftir_rl.envs.tank_goal.TankGoalEnv`: every reachable free cell but the start. It is
 stored actions first, ``(6, n_cells, n_goals)``, because gathering ``(6, n)`` blocks and reducing
 over the first axis is several times faster in numpy than over a trailing axis of 6;
 :attr:`GoalTable.q_table` is a ``(n_cells, n_goals, 6)`` view of it.
