@@ -52,7 +52,6 @@ __all__ = [
     "parse_hyperparameters",
     "check_sb3_config",
     "check_goal_settings",
-    "refuse_tank",
     "sb3_config_from_run",
     "constructor_keys",
     "build_model",
@@ -250,17 +249,6 @@ SB3_ENV_IDS = ("AFTIR-ArmReach-v0", "AFTIR-Arm-v0", "AFTIR-ArmFull-v0", "AFTIR-A
 GOAL_ENV_IDS = ("AFTIR-ArmFTL-v0",)
 #: HerReplayBuffer's settings when ``her`` is on.
 HER_KWARGS = {"n_sampled_goal": 4, "goal_selection_strategy": "future", "copy_info_dict": True}
-
-
-def refuse_tank(env_kwargs: dict[str, Any], source: str) -> None:
-    """A config file or ``--env-kwargs`` names no tank (a shared file points at no other file).
-
-    Raises:
-        ConfigError: ``env_kwargs`` has ``tank``; ``--tank`` gives one.
-
-    """
-    if "tank" in env_kwargs:
-        raise ConfigError(f"{source}: env_kwargs.tank: a config names no tank; give --tank")
 
 
 def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:

@@ -35,7 +35,6 @@ from aftir_rl.rl.sb3.config import (
     TrainConfig,
     check_sb3_config,
     parse_hyperparameters,
-    refuse_tank,
     sb3_config_from_run,
 )
 
@@ -52,6 +51,7 @@ __all__ = [
     "load_curriculum",
     "load_sb3_config",
     "parse_key_values",
+    "refuse_tank",
     "saved_config",
     "train_config",
     "with_overrides",
@@ -370,6 +370,17 @@ def _stage(entry: Any, k: int, algo: str, source: str) -> SB3Config:
             raise ConfigError(f"{where}.config: {name} is a stage file itself")
         base = config_from_mapping(data, algo, str(found))
     return config_from_mapping(fields, algo, where, base)
+
+
+def refuse_tank(env_kwargs: dict[str, Any], source: str) -> None:
+    """A config file or ``--env-kwargs`` names no tank (a shared file points at no other file).
+
+    Raises:
+        ConfigError: ``env_kwargs`` has ``tank``; ``--tank`` gives one.
+
+    """
+    if "tank" in env_kwargs:
+        raise ConfigError(f"{source}: env_kwargs.tank: a config names no tank; give --tank")
 
 
 def parse_key_values(items: Sequence[str], option: str) -> dict[str, Any]:
