@@ -28,8 +28,7 @@ from aftir_rl.experiments.runs import evaluate_run
 from aftir_rl.rl.demos import write_dataset
 from aftir_rl.rl.imitation import pretrainer
 from aftir_rl.rl.sb3 import entry_config, load_sb3_config
-from aftir_rl.rl.sb3.curriculum import train_curriculum
-from aftir_rl.rl.sb3.train import train_sb3
+from aftir_rl.rl.sb3.train import train_curriculum, train_sb3
 
 METRICS = ("success_rate", "tip_error_cm", "collision_rate", "min_clearance_cm")
 

@@ -76,8 +76,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from tqdm import tqdm
 
     from aftir_rl.rl.demos import check_dataset_id, write_dataset
-    from aftir_rl.rl.sb3.hyperparams import load_sb3_config
-    from aftir_rl.rl.sb3.overrides import with_overrides
+    from aftir_rl.rl.sb3.hyperparams import load_sb3_config, with_overrides
 
     check_dataset_id(args.id)
     config = with_overrides(load_sb3_config(args.config, "ppo"), "ppo", args.env_kwargs)

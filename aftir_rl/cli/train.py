@@ -18,7 +18,7 @@ import dataclasses
 import math
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from aftir_rl.cli.args import (
     MAX_ENVS,
@@ -43,6 +43,10 @@ from aftir_rl.core.config import CONFIG_DIR, DEFAULT_BRIDGE_SECONDS, DEFAULT_MAR
 from aftir_rl.core.errors import AftirError, ConfigError
 from aftir_rl.experiments.runs import load_q_table_config
 from aftir_rl.rl.common import DEFAULT_SB3_ENV_ID
+
+if TYPE_CHECKING:
+    from aftir_rl.rl.sb3.config import TrainConfig
+    from aftir_rl.rl.tabular.learning import QLearningConfig
 
 # The trainers (torch, numba) are imported when a command runs: Ctrl-C is honoured from then.
 __all__ = ["build_parser", "main", "load_q_table_config"]
@@ -241,80 +245,69 @@ def _add_run_numbers(p: argparse.ArgumentParser) -> None:
     add_int_option(p, "--bc-epochs", (1, 1000), "passes over the demonstrations (default 20)", 20)
 
 
-def _sb3_configs(args: argparse.Namespace) -> list[Any]:
-    """The configs to train: one, or a stage file's stages, with the command line's overrides.
+def _train_config(args: argparse.Namespace) -> TrainConfig:
+    """The run ``args`` asks for, resolved and checked once (:func:`train_config`).
 
-    The numbers of the command line, ``--env-kwargs`` and ``--hyperparams`` apply to every stage
-    (a short try of a whole curriculum); ``--env`` alone trains the env's entry in the
+    The numbers of the command line, ``--env-kwargs``, ``--hyperparams`` and ``--tank`` apply to
+    every stage (a short try of a whole curriculum); ``--env`` alone trains the env's entry in the
     hyperparameter file (or in ``--config``'s, if it is one), with a named config it replaces the
     config's env. ``--resume`` without ``--config`` trains the resumed run's own config.
     """
-    from aftir_rl.rl.sb3.curriculum import is_curriculum, load_curriculum
-    from aftir_rl.rl.sb3.hyperparams import entry_config, is_hyperparams_file, load_sb3_config
-    from aftir_rl.rl.sb3.loading import resumed_config
-    from aftir_rl.rl.sb3.overrides import with_overrides
+    from aftir_rl.rl.sb3.hyperparams import train_config
 
-    own = resumed_config(args.resume) if args.config is None and args.resume else None
-    if own is not None:
-        if own[0] != args.algo:
-            raise ConfigError(f"--resume {args.resume}: a {own[0]} run, not {args.algo}")
-        configs = [own[1]]
-    elif args.config is None:
-        configs = [entry_config(args.algo, args.env or DEFAULT_SB3_ENV_ID)]
-    elif is_curriculum(args.config):
-        if args.env:
-            raise ConfigError(f"--env: {args.config} is a stage file; its stages name their env")
-        configs = load_curriculum(args.config, args.algo)
-    elif is_hyperparams_file(args.config):  # RL Zoo's -conf: the entry of --env
-        configs = [entry_config(args.algo, args.env or DEFAULT_SB3_ENV_ID, args.config)]
-    else:
-        configs = [load_sb3_config(args.config, args.algo)]
-    changes = {
-        "env_id": args.env,
+    if args.tank is not None:
+        check_tank(args.tank)
+    numbers = {
         "n_envs": args.n_envs,
         "total_timesteps": args.total_timesteps,
         "eval_freq": args.eval_freq,
         "eval_targets": args.eval_episodes,
         "checkpoint_freq": args.save_freq,
     }
-    for k, config in enumerate(configs):
-        config = dataclasses.replace(config, **{a: v for a, v in changes.items() if v is not None})
-        config = with_overrides(config, args.algo, args.env_kwargs, args.hyperparams)
-        if args.tank is not None:
-            if config.env_id.split(":")[-1] != "AFTIR-ArmFTL-v0":
-                raise ConfigError("--tank: only AFTIR-ArmFTL-v0 takes a tank")
-            check_tank(args.tank)
-            config = dataclasses.replace(
-                config, env_kwargs={**config.env_kwargs, "tank": args.tank}
-            )
-        configs[k] = config
-    return configs
+    return train_config(
+        args.algo,
+        args.config,
+        env=args.env,
+        resume=args.resume,
+        tank=args.tank,
+        env_kwargs=args.env_kwargs,
+        hyperparams=args.hyperparams,
+        numbers=numbers,
+        seed=args.seed,
+        logdir=args.logdir,
+        progress_bar=not args.no_progress,
+        demos=args.demos,
+        bc_epochs=args.bc_epochs,
+    )
 
 
 def _main_sb3(args: argparse.Namespace) -> int:
     with interrupts.held():  # torch: Ctrl-C is taken once it is imported
-        from aftir_rl.rl.sb3.curriculum import train_curriculum
-        from aftir_rl.rl.sb3.train import train_sb3
+        from aftir_rl.rl.sb3.train import train_run
 
-    configs = _sb3_configs(args)
-    for config in configs:
-        _say_rollout(args.algo, config)
-    options: dict[str, Any] = {"progress_bar": not args.no_progress}
-    if args.demos is not None:
-        options["pretrain"] = _pretrainer(args, configs)
-    if len(configs) == 1:
-        summaries = [
-            train_sb3(args.algo, configs[0], args.seed, args.logdir, args.resume, **options)
-        ]
-    else:
-        print(f"{len(configs)} stages, each resumed from the one before: {args.logdir}/stage<k>/")
-        summaries = train_curriculum(
-            train_sb3, args.algo, configs, args.seed, args.logdir, args.resume, **options
-        )
+    from aftir_rl.rl.sb3.config import rollout_steps
+
+    run = _train_config(args)
+    for config in run.stages:  # the steps asked are not a whole number of rollouts: say so
+        rollout, asked = rollout_steps(run.algo, config), config.total_timesteps
+        if asked % rollout:
+            print(
+                f"note: {run.algo.upper()} collects {rollout:,} steps per update "
+                f"({config.n_envs} envs), so {-(-asked // rollout) * rollout:,} steps are "
+                f"trained for --total-timesteps {asked:,}"
+            )
+    pretrain = None
+    if run.demos is not None:
+        from aftir_rl.rl.imitation import pretrainer
+
+        pretrain = pretrainer(run.demos, run.stages[0], run.bc_epochs, run.seed)
+    if len(run.stages) > 1:
+        print(f"{len(run.stages)} stages, each resumed from the one before: {run.logdir}/stage<k>/")
+    summaries = train_run(run, pretrain)
     for k, s in enumerate(summaries):
         stage = f"stage {k}: " if len(summaries) > 1 else ""
         print(
-            f"{stage}{args.algo.upper()} on {s['env_id']}: {s['timesteps']} steps in "
+            f"{stage}{run.algo.upper()} on {s['env_id']}: {s['timesteps']} steps in "
             f"{s['seconds']:.0f} s; evaluation: success {s['success_rate']:.0%}, tip error "
             f"{s['tip_error_cm']:.1f} cm, path {s['path_length_cm']:.0f} cm, collisions "
             f"{s['collision_rate']:.0%}"
@@ -323,29 +316,7 @@ def _main_sb3(args: argparse.Namespace) -> int:
     return 0
 
 
-def _pretrainer(args: argparse.Namespace, configs: list[Any]) -> Any:
-    """Behaviour cloning of ``--demos`` for the one config of a new PPO run."""
-    if args.algo != "ppo" or len(configs) != 1 or args.resume is not None:
-        raise ConfigError("--demos: behaviour cloning starts a new PPO run of one config")
-    from aftir_rl.rl.imitation import pretrainer
-
-    return pretrainer(args.demos, configs[0], args.bc_epochs, args.seed)
-
-
-def _say_rollout(algo: str, config: Any) -> None:
-    """Say so when the steps asked are not a whole number of the updates' rollouts."""
-    from aftir_rl.rl.sb3.config import rollout_steps
-
-    rollout, asked = rollout_steps(algo, config), config.total_timesteps
-    if asked % rollout:
-        trained = -(-asked // rollout) * rollout
-        print(
-            f"note: {algo.upper()} collects {rollout:,} steps per update ({config.n_envs} envs), "
-            f"so {trained:,} steps are trained for --total-timesteps {asked:,}"
-        )
-
-
-def _q_table_config(args: argparse.Namespace) -> Any:
+def _q_table_config(args: argparse.Namespace) -> QLearningConfig:
     """The ``QLearningConfig`` of ``--config`` with ``--episodes``; the other numbers checked.
 
     Without ``--config``: the config of the run ``--resume`` names, else ``configs/q_table.yaml``.
@@ -376,7 +347,7 @@ def _q_table_config(args: argparse.Namespace) -> Any:
     return config
 
 
-def _main_all_targets(args: argparse.Namespace, config: Any) -> int:
+def _main_all_targets(args: argparse.Namespace, config: QLearningConfig) -> int:
     """``q_table --all-targets``: one goal-conditioned run; print its summary."""
     with interrupts.held():  # torch (the logger): Ctrl-C is taken once it is imported
         from aftir_rl.rl.tabular.train import train_q_table_all_targets
@@ -435,9 +406,6 @@ def _main_q_table(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.train``."""
     args = build_parser().parse_args(argv)
-    if not 0 <= args.seed < 2**32:
-        print(f"error: --seed must be from 0 to 2**32 - 1, got {args.seed}", file=sys.stderr)
-        return 2
     try:
         return _main_q_table(args) if args.algo == "q_table" else _main_sb3(args)
     except AftirError as exc:

@@ -92,8 +92,6 @@ def _base_config(args: argparse.Namespace) -> Any:
         raise ConfigError(
             f"--trials must be at most {MAX_TRIALS} and --evaluations at most {MAX_EVALUATIONS}"
         )
-    if not 0 <= args.seed < 2**32:
-        raise ConfigError(f"--seed must be from 0 to 2**32 - 1, got {args.seed}")
     changes: dict[str, Any] = {}
     if args.env is not None:
         changes["env_id"] = args.env

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import pytest
 
 from aftir_rl.cli import train
@@ -12,13 +10,14 @@ from aftir_rl.rl.sb3 import load_sb3_config
 from aftir_rl.rl.sb3.config import rollout_steps
 
 
-def test_steps_below_a_rollout_are_said(capsys):
-    config = load_sb3_config("ppo_ftl", "ppo")
-    assert rollout_steps("ppo", config) == 128 * 128
-    train._say_rollout("ppo", dataclasses.replace(config, total_timesteps=4096))
-    assert "so 16,384 steps are trained for --total-timesteps 4,096" in capsys.readouterr().out
-    train._say_rollout("ppo", dataclasses.replace(config, total_timesteps=2 * 16_384))
-    assert capsys.readouterr().out == ""
+def test_steps_below_a_rollout_are_said(tmp_path, capsys):
+    assert rollout_steps("ppo", load_sb3_config("ppo_ftl", "ppo")) == 128 * 128
+    args = ["ppo", "--env", "AFTIR-ArmReach-v0", "--hyperparams", "n_steps:64", "batch_size:64"]
+    args += ["--eval-episodes", "1", "--logdir", str(tmp_path), "--no-progress"]
+    assert train.main([*args, "--total-timesteps", "100"]) == 0
+    assert "so 128 steps are trained for --total-timesteps 100" in capsys.readouterr().out
+    assert train.main([*args, "--total-timesteps", "0"]) == 0
+    assert "note:" not in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(
@@ -45,7 +44,7 @@ def test_tank_option_reaches_every_stage_and_files_name_none(tmp_path):
     args = train.build_parser().parse_args(
         ["ppo", "--config", "ppo_ftl_curriculum", "--tank", "wing:3:0-7"]
     )
-    configs = train._sb3_configs(args)
+    configs = train._train_config(args).stages
     assert len(configs) == 2 and all(c.env_kwargs["tank"] == "wing:3:0-7" for c in configs)
     shared = tmp_path / "tank.yaml"
     shared.write_text("env_id: AFTIR-ArmFTL-v0\nenv_kwargs:\n  tank: /etc/passwd\n")

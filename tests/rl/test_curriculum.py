@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from aftir_rl.core.errors import ConfigError
-from aftir_rl.rl.sb3.curriculum import MAX_STAGES, is_curriculum, load_curriculum, train_curriculum
+from aftir_rl.rl.sb3.hyperparams import MAX_STAGES, is_curriculum, load_curriculum
+from aftir_rl.rl.sb3.train import train_curriculum
 
 
 def test_the_shipped_recipe_is_one_stage_file():

@@ -15,8 +15,12 @@ from aftir_rl.core.config import CONFIG_DIR
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.rl.sb3 import entry_config, load_sb3_config
 from aftir_rl.rl.sb3.config import HER_KWARGS, SB3_ENV_IDS
-from aftir_rl.rl.sb3.curriculum import is_curriculum, load_curriculum
-from aftir_rl.rl.sb3.hyperparams import entry_env_ids, is_hyperparams_file
+from aftir_rl.rl.sb3.hyperparams import (
+    entry_env_ids,
+    is_curriculum,
+    is_hyperparams_file,
+    load_curriculum,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 ALGOS = ("ppo", "sac", "td3")
@@ -141,7 +145,7 @@ def test_the_command_line_numbers_override_the_entry():
         ["ppo", "--env", "AFTIR-ArmFTL-v0", "--eval-freq", "3", "--eval-episodes", "4"]
         + ["--save-freq", "5", "--total-timesteps", "6"]
     )
-    (config,) = train._sb3_configs(args)
+    (config,) = train._train_config(args).stages
     expected = dataclasses.replace(
         entry_config("ppo", "AFTIR-ArmFTL-v0"),
         eval_freq=3,

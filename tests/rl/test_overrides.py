@@ -6,7 +6,7 @@ import pytest
 
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.rl.sb3 import load_sb3_config
-from aftir_rl.rl.sb3.overrides import MAX_ITEMS, parse_key_values, with_overrides
+from aftir_rl.rl.sb3.hyperparams import MAX_ITEMS, parse_key_values, with_overrides
 
 
 def test_values_are_yaml_not_python():

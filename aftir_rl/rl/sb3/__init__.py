@@ -2,15 +2,15 @@
 
 One import for the SB3 side of the package, whose main modules are:
 
-- :mod:`aftir_rl.rl.sb3.hyperparams` and :mod:`aftir_rl.rl.sb3.config`: the env-keyed
-  hyperparameter files and the named configs load into a checked :class:`SB3Config`, and
-  :func:`build_model` makes the model;
+- :mod:`aftir_rl.rl.sb3.hyperparams` and :mod:`aftir_rl.rl.sb3.config`: the command line, the
+  hyperparameter files, named configs, stage files and a resumed run's config resolve in one
+  pass into a checked :class:`TrainConfig` (:mod:`aftir_rl.rl.sb3.train` trains it);
 - :mod:`aftir_rl.rl.sb3.evaluation`: :class:`ArmEvalCallback` evaluates the deterministic policy
   on fixed targets and logs the ``eval/*`` tags and ``paths/eval`` shared with the Q-learning
   runs (docs/design.md §10); checkpoints are written atomically (:class:`AtomicCheckpoint`,
   :func:`save_model`);
-- :mod:`aftir_rl.rl.sb3.loading`: a saved model is loaded without unpickling anything from the
-  file (:func:`load_model`, :func:`load_run`);
+- :mod:`aftir_rl.rl.sb3.loading`: a saved model is built from its config (:func:`build_model`)
+  and loaded without unpickling anything (:func:`load_model`, :func:`load_run`);
 - :mod:`aftir_rl.rl.sb3.vec_adapter`: :func:`make_sb3_vec_env`, the SB3 ``VecEnv`` of any env of
   the package (the batched one where it has one), for code of your own.
 """
@@ -24,6 +24,7 @@ from aftir_rl.rl.sb3.config import (
     HER_KWARGS,
     OBJECT_KEYS,
     SB3Config,
+    TrainConfig,
     build_model,
     check_goal_settings,
     check_sb3_config,
@@ -40,7 +41,7 @@ from aftir_rl.rl.sb3.evaluation import (
     evaluation_targets,
     save_model,
 )
-from aftir_rl.rl.sb3.hyperparams import entry_config, load_sb3_config
+from aftir_rl.rl.sb3.hyperparams import entry_config, load_sb3_config, train_config
 from aftir_rl.rl.sb3.loading import MAX_MODEL_BYTES, load_model, load_run, newest_model
 from aftir_rl.rl.sb3.vec_adapter import SB3VectorEnv, make_sb3_vec_env
 
@@ -53,6 +54,7 @@ __all__ = [
     "MAX_MODEL_BYTES",
     "OBJECT_KEYS",
     "SB3Config",
+    "TrainConfig",
     "ArmEvalCallback",
     "AtomicCheckpoint",
     "Period",
@@ -72,4 +74,5 @@ __all__ = [
     "newest_model",
     "save_model",
     "sb3_config_from_run",
+    "train_config",
 ]

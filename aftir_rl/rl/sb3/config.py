@@ -1,7 +1,8 @@
 """Configs of the Stable-Baselines3 baselines (PPO, SAC, TD3), checked before anything is built.
 
-A config (:class:`SB3Config`; read by :mod:`aftir_rl.rl.sb3.hyperparams` from the env-keyed
-hyperparameter files and the named configs) is checked by :func:`check_sb3_config`:
+A config (:class:`SB3Config`; a run of ``aftir train``, its stages and the rest, is a
+:class:`TrainConfig`; both read by :mod:`aftir_rl.rl.sb3.hyperparams` from the command line,
+the env-keyed hyperparameter files and the named configs) is checked by :func:`check_sb3_config`:
 ``hyperparameters`` go to the algorithm's constructor and are checked against its signature and
 against bounds (an unknown key or a value out of range is a
 :class:`~aftir_rl.core.errors.ConfigError` naming the file and the key), as is a run directory's
@@ -22,6 +23,7 @@ from typing import Any
 import gymnasium as gym
 from stable_baselines3 import PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.type_aliases import GymEnv
 
 from aftir_rl.core.config import brief, from_mapping, shorten, to_float
 from aftir_rl.core.errors import CheckpointError, ConfigError
@@ -40,6 +42,7 @@ __all__ = [
     "rollout_steps",
     "ALGORITHMS",
     "SB3Config",
+    "TrainConfig",
     "ENV_KWARGS",
     "GOAL_ENV_IDS",
     "SB3_ENV_IDS",
@@ -48,7 +51,6 @@ __all__ = [
     "parse_hyperparameters",
     "check_sb3_config",
     "check_goal_settings",
-    "refuse_tank",
     "sb3_config_from_run",
     "constructor_keys",
     "build_model",
@@ -86,6 +88,35 @@ class SB3Config:
     hyperparameters: dict[str, Any] = field(default_factory=dict)
     her: bool = False
     env_kwargs: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One run of ``aftir train ppo|sac|td3``, resolved and checked once.
+
+    Built by :func:`aftir_rl.rl.sb3.hyperparams.train_config`, then read, never resolved again.
+
+    Attributes:
+        algo: ``ppo``, ``sac`` or ``td3``.
+        stages: the configs trained one after the other, each resumed from the one before (one
+            for a plain run; a stage file's otherwise).
+        seed: random seed of every stage.
+        logdir: parent of the run directory (of ``stage<k>/`` folders for several stages).
+        resume: a model or run directory the first stage continues from.
+        progress_bar: show SB3's progress bar.
+        demos: a Minari dataset behaviour-cloned into the new PPO policy first.
+        bc_epochs: passes over ``demos``.
+
+    """
+
+    algo: str
+    stages: tuple[SB3Config, ...]
+    seed: int = 0
+    logdir: str = "runs"
+    resume: str | None = None
+    progress_bar: bool = True
+    demos: str | None = None
+    bc_epochs: int = 20
 
 
 def rollout_steps(algo: str, config: SB3Config) -> int:
@@ -219,17 +250,6 @@ GOAL_ENV_IDS = ("AFTIR-ArmFTL-v0",)
 HER_KWARGS = {"n_sampled_goal": 4, "goal_selection_strategy": "future", "copy_info_dict": True}
 
 
-def refuse_tank(env_kwargs: dict[str, Any], source: str) -> None:
-    """A config file or ``--env-kwargs`` names no tank (a shared file points at no other file).
-
-    Raises:
-        ConfigError: ``env_kwargs`` has ``tank``; ``--tank`` gives one.
-
-    """
-    if "tank" in env_kwargs:
-        raise ConfigError(f"{source}: env_kwargs.tank: a config names no tank; give --tank")
-
-
 def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:
     """Check ``her`` and ``env_kwargs`` of a config (plain values of known keys only).
 
@@ -312,7 +332,7 @@ def constructor_keys(algo: str) -> set[str]:
 
 
 def build_model(
-    algo: str, config: SB3Config, env: Any, seed: int | None = 0, evaluation: bool = False
+    algo: str, config: SB3Config, env: GymEnv, seed: int | None = 0, evaluation: bool = False
 ) -> BaseAlgorithm:
     """A new model of ``algo`` for ``env`` from a checked ``config``.
 

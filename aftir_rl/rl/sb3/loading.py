@@ -21,6 +21,7 @@ from typing import Any, cast
 
 import gymnasium as gym
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.type_aliases import GymEnv
 
 from aftir_rl.core.archives import BoundedZip
 from aftir_rl.core.config import brief, read_limited, shorten
@@ -39,7 +40,6 @@ __all__ = [
     "newest_model",
     "load_model",
     "load_run",
-    "resumed_config",
 ]
 
 #: The largest model file read [bytes] (SB3 stores its entries as they are; the arm envs'
@@ -297,7 +297,7 @@ def _read_archive(
 def load_model(
     algo: str,
     path: str | os.PathLike[str],
-    env: Any = None,
+    env: GymEnv | None = None,
     config: SB3Config | None = None,
     evaluation: bool | None = None,
 ) -> BaseAlgorithm:
@@ -405,25 +405,6 @@ def _set_counters(model: BaseAlgorithm, data: dict[str, Any], path: Path) -> Non
             raise CheckpointError(f"{path}: data.{key} is not a step count; refused")
         if hasattr(model, key):
             setattr(model, key, value)
-
-
-def resumed_config(resume: str | os.PathLike[str]) -> tuple[str, SB3Config] | None:
-    """``(algo, config)`` of the run that ``--resume`` names, or None if it has no ``config.json``.
-
-    ``resume`` is a run directory or a model inside one (``model.zip``, ``best/model.zip``,
-    ``checkpoints/model_<steps>.zip``); the run's own config makes ``--resume DIR`` alone finish
-    that run as it was started.
-
-    Raises:
-        CheckpointError: the run's ``config.json`` is unreadable or not a training run's.
-
-    """
-    path = Path(resume)
-    for folder in (path, *list(path.parents)[:2]):
-        if folder.is_dir() and (folder / "config.json").exists():
-            source = str(folder / "config.json")
-            return sb3_config_from_run(read_json(source, "config.json"), source)
-    return None
 
 
 def load_run(run_dir: str | os.PathLike[str]) -> tuple[str, SB3Config, str, BaseAlgorithm]:

@@ -1,36 +1,105 @@
-"""PPO, SAC and TD3 runs (Stable-Baselines3) on the arm envs: :func:`train_sb3`."""
+"""PPO, SAC and TD3 runs (Stable-Baselines3) on the arm envs: :func:`train_run`, :func:`train_sb3`.
+
+A :class:`~aftir_rl.rl.sb3.config.TrainConfig` is trained as it was checked (:func:`train_run`):
+its stages one after the other, each resumed from the run of the one before
+(:func:`train_curriculum`), under ``LOGDIR/stage<k>/`` when there are several.
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import os
 import signal
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+import numpy as np
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import Logger
+from stable_baselines3.common.vec_env import VecEnv
 
 from aftir_rl.core import interrupts
 from aftir_rl.core.files import check_writable_dir, staged_dir, unfinished_start, write_json
 from aftir_rl.core.tank.loading import keep_run_tank
 from aftir_rl.rl.common import check_env_id, hyperparameter_text, run_name
 from aftir_rl.rl.logs import run_logger
+from aftir_rl.rl.sb3.config import SB3_ENV_IDS, SB3Config, TrainConfig, check_sb3_config
 
-__all__ = ["train_sb3"]
+if TYPE_CHECKING:
+    from aftir_rl.rl.sb3.evaluation import ArmEvalCallback
+
+__all__ = ["train_curriculum", "train_run", "train_sb3"]
+
+#: ``pretrain(model)``: numbers of what was done to a new model before training, logged.
+Pretrain = Callable[[BaseAlgorithm], dict[str, float]]
+#: ``on_evaluation(model, metrics)``: called after each evaluation is logged.
+OnEvaluation = Callable[[BaseAlgorithm, dict[str, Any]], None]
+
+
+def train_run(run: TrainConfig, pretrain: Pretrain | None = None) -> list[dict[str, Any]]:
+    """Train the checked ``run``: its one config, or its stages each resumed from the one before.
+
+    ``pretrain`` applies to the new model of a one-stage run (:func:`train_sb3`).
+
+    Returns:
+        Each stage's summary (``run_dir`` holds its run directory).
+
+    """
+    if len(run.stages) > 1:
+        return train_curriculum(
+            _train_checked,
+            run.algo,
+            list(run.stages),
+            run.seed,
+            run.logdir,
+            run.resume,
+            progress_bar=run.progress_bar,
+        )
+    only, bar = run.stages[0], run.progress_bar
+    return [_train_checked(run.algo, only, run.seed, run.logdir, run.resume, bar, None, pretrain)]
+
+
+def train_curriculum(
+    train: Callable[..., dict[str, Any]],
+    algo: str,
+    configs: list[SB3Config],
+    seed: int,
+    logdir: str | os.PathLike[str],
+    resume: str | os.PathLike[str] | None = None,
+    **kwargs: Any,
+) -> list[dict[str, Any]]:
+    """Train ``configs`` one after the other, each resumed from the previous stage's run.
+
+    ``train`` is :func:`train_sb3` (or one of the same call); ``resume`` starts the first stage
+    from a model; ``kwargs`` go to every call.
+
+    Returns:
+        Each stage's summary (``run_dir`` holds its run directory).
+
+    """
+    summaries = []
+    for k, config in enumerate(configs):
+        stage_dir = Path(logdir) / f"stage{k}"  # made and checked by ``train`` (one line if not)
+        summary = train(algo, config, seed=seed, logdir=stage_dir, resume=resume, **kwargs)
+        summaries.append(summary)
+        resume = summary["run_dir"]
+    return summaries
 
 
 def train_sb3(
     algo: str,
-    config: Any,
+    config: SB3Config,
     seed: int = 0,
-    logdir: str | Path = "runs",
-    resume: str | Path | None = None,
+    logdir: str | os.PathLike[str] = "runs",
+    resume: str | os.PathLike[str] | None = None,
     progress_bar: bool = True,
-    on_evaluation: Any = None,
-    pretrain: Any = None,
+    on_evaluation: OnEvaluation | None = None,
+    pretrain: Pretrain | None = None,
 ) -> dict[str, Any]:
     """Train PPO, SAC or TD3 on an arm env; one run directory with the model and its logs.
 
@@ -57,20 +126,35 @@ def train_sb3(
         WriteError: a full disk or a failing device; the partial directory is kept.
 
     """
-    from aftir_rl.rl.sb3 import check_sb3_config, evaluation_targets, newest_model
-    from aftir_rl.rl.sb3.config import SB3_ENV_IDS
-
-    bare = check_env_id(config.env_id, SB3_ENV_IDS, algo)
+    check_env_id(config.env_id, SB3_ENV_IDS, algo)
     check_sb3_config(config, algo, "config")
+    return _train_checked(algo, config, seed, logdir, resume, progress_bar, on_evaluation, pretrain)
+
+
+def _train_checked(
+    algo: str,
+    config: SB3Config,
+    seed: int,
+    logdir: str | os.PathLike[str],
+    resume: str | os.PathLike[str] | None,
+    progress_bar: bool = True,
+    on_evaluation: OnEvaluation | None = None,
+    pretrain: Pretrain | None = None,
+) -> dict[str, Any]:
+    """:func:`train_sb3` of a config already checked for ``algo``."""
+    from aftir_rl.rl.sb3 import evaluation_targets, newest_model
+
+    bare = config.env_id.removeprefix("aftir_rl:")
     env_id = f"aftir_rl:{bare}"
-    logdir = check_writable_dir(logdir)
+    folder = check_writable_dir(logdir)
     resume_path = newest_model(resume) if resume is not None else None
     targets = evaluation_targets(env_id, config.eval_targets, env_kwargs=config.env_kwargs)
     venv = _make_venv(env_id, config, seed)
-    run = (algo, bare, config, venv, seed, logdir, resume_path, targets)
-    hooks = {"on_evaluation": on_evaluation, "pretrain": pretrain}
+    run = (algo, bare, config, venv, seed, folder, resume_path, targets)
     try:
-        return _train_run(*run, progress_bar=progress_bar, **hooks)
+        return _train_run(
+            *run, progress_bar=progress_bar, on_evaluation=on_evaluation, pretrain=pretrain
+        )
     finally:
         try:
             venv.close()
@@ -78,7 +162,7 @@ def train_sb3(
             pass
 
 
-def _make_venv(env_id: str, config: Any, seed: int) -> Any:
+def _make_venv(env_id: str, config: SB3Config, seed: int) -> VecEnv:
     """The training envs: a batched env when the env has one, else copies (Ctrl-C held back)."""
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
@@ -125,16 +209,16 @@ def _ctrl_c_held() -> Iterator[None]:
 def _train_run(
     algo: str,
     bare: str,
-    config: Any,
-    venv: Any,
+    config: SB3Config,
+    venv: VecEnv,
     seed: int,
     logdir: Path,
     resume_path: Path | None,
-    targets: Any,
+    targets: list[np.ndarray],
     *,
     progress_bar: bool,
-    on_evaluation: Any,
-    pretrain: Any = None,
+    on_evaluation: OnEvaluation | None,
+    pretrain: Pretrain | None = None,
 ) -> dict[str, Any]:
     """Build (or load) the model, train it and write its run directory under ``logdir``.
 
@@ -179,7 +263,7 @@ def _train_run(
     return summary
 
 
-def _learnt_steps(model: Any, start: int) -> int:
+def _learnt_steps(model: BaseAlgorithm, start: int) -> int:
     """The steps a loaded model has learnt from, counted in its run that began at ``start``.
 
     An on-policy model (PPO, A2C) updates its weights only after a whole rollout: a checkpoint
@@ -205,7 +289,7 @@ def _run_start(resume_path: Path | None, steps: int) -> int:
 
 
 def _write_config(
-    partial: Path, logger: Any, algo: str, config: Any, seed: int, resume_path: Path | None
+    partial: Path, logger: Logger, algo: str, config: SB3Config, seed: int, resume_path: Path | None
 ) -> None:
     """Write ``config.json`` and log it as text."""
     params = {
@@ -222,8 +306,12 @@ def _write_config(
 
 
 def _callbacks(
-    env_id: str, config: Any, targets: Any, on_evaluation: Any, partial: Path
-) -> tuple[Any, list[Any]]:
+    env_id: str,
+    config: SB3Config,
+    targets: list[np.ndarray],
+    on_evaluation: OnEvaluation | None,
+    partial: Path,
+) -> tuple[ArmEvalCallback, list[BaseCallback]]:
     """The evaluation callback (best model under ``best/``) and the list of training callbacks."""
     from aftir_rl.rl.sb3 import ArmEvalCallback, AtomicCheckpoint
 
@@ -259,9 +347,9 @@ class _StopOnRequest(BaseCallback):
 
 
 def _learn(
-    model: Any,
+    model: BaseAlgorithm,
     steps: int,
-    callbacks: list[Any],
+    callbacks: list[BaseCallback],
     progress_bar: bool,
     resume_path: Path | None,
     partial: Path,
@@ -292,7 +380,7 @@ def _learn(
     return time.perf_counter() - start
 
 
-def _save_stopped(model: Any, steps: int, partial: Path) -> None:
+def _save_stopped(model: BaseAlgorithm, steps: int, partial: Path) -> None:
     """Save the stopped model as of step ``steps`` (its last update) and raise KeyboardInterrupt.
 
     Periodic checkpoints of the unfinished rollout hold the same weights under later step
