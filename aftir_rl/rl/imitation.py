@@ -24,6 +24,7 @@ from aftir_rl.core.errors import ConfigError
 
 if TYPE_CHECKING:
     from gymnasium import Space
+    from stable_baselines3.common.base_class import BaseAlgorithm
     from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 
     from aftir_rl.rl.sb3.config import SB3Config
@@ -167,7 +168,7 @@ def _check_observations(space: Space[Any], demos: Demos) -> None:
 
 def pretrainer(
     path: str | os.PathLike[str], config: SB3Config, epochs: int = 20, seed: int = 0
-) -> Callable[[OnPolicyAlgorithm], dict[str, float]]:
+) -> Callable[[BaseAlgorithm], dict[str, float]]:
     """``pretrain(model)`` for :func:`~aftir_rl.rl.sb3.train.train_sb3`: clone ``path``'s demos.
 
     Raises:
@@ -185,7 +186,11 @@ def pretrainer(
             "their actions would mean something else"
         )
 
-    def pretrain(model: OnPolicyAlgorithm) -> dict[str, float]:
+    def pretrain(model: BaseAlgorithm) -> dict[str, float]:
+        from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+
+        if not isinstance(model, OnPolicyAlgorithm):
+            raise ConfigError(f"demonstrations clone into PPO or A2C, not {type(model).__name__}")
         return {"episodes": float(demos.episodes), **clone(model, demos, epochs, seed=seed)}
 
     return pretrain

@@ -113,8 +113,8 @@ def _counted(data: bytes, suffix: str, where: str) -> int:
         faces = sum(max(k - 2, 1) for k in corners)
         vertices = sum(1 for line in lines if line.startswith(b"v "))
     if faces > MAX_TRIANGLES or vertices > 3 * MAX_TRIANGLES:
-        count = f"{faces:,} triangles" if faces > MAX_TRIANGLES else f"{vertices:,} vertices"
-        raise ConfigError(f"{where}: {count}, more than {MAX_TRIANGLES:,} triangles allow")
+        what = f"{faces:,} triangles" if faces > MAX_TRIANGLES else f"{vertices:,} vertices"
+        raise ConfigError(f"{where}: {what}, more than {MAX_TRIANGLES:,} triangles allow")
     return faces
 
 
