@@ -4,16 +4,31 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from datetime import datetime
-from typing import Any
+from typing import Any, Protocol
 
 from aftir_rl.core.config import brief
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.envs.registration import registered_env_id
 
-__all__ = ["DEFAULT_SB3_ENV_ID", "check_env_id", "target_tag", "run_name", "hyperparameter_text"]
+__all__ = [
+    "DEFAULT_SB3_ENV_ID",
+    "Predictor",
+    "check_env_id",
+    "target_tag",
+    "run_name",
+    "hyperparameter_text",
+]
 
 #: The env ``aftir train ppo|sac|td3`` trains when neither ``--env`` nor ``--config`` is given.
 DEFAULT_SB3_ENV_ID = "AFTIR-ArmReach-v0"
+
+
+class Predictor(Protocol):
+    """An agent with SB3's ``predict``: ``(action, state)`` for an observation."""
+
+    def predict(self, observation: Any, *, deterministic: bool = ...) -> tuple[Any, Any]:
+        """The action for ``observation`` (greedy with ``deterministic``) and a state."""
+        ...
 
 
 def target_tag(target: Sequence[float]) -> str:

@@ -21,6 +21,7 @@ import time
 from dataclasses import dataclass, replace
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -274,7 +275,13 @@ class ExpertPolicy:
 
     """
 
-    def __init__(self, env: Any, expert: FTLExpert | None = None, max_seconds: float = 10.0):
+    def __init__(
+        self, env: gym.Env[Any, Any], expert: FTLExpert | None = None, max_seconds: float = 10.0
+    ):
+        if not isinstance(env.unwrapped, ArmFTLEnv):
+            raise ConfigError(
+                f"ExpertPolicy plays AFTIR-ArmFTL-v0, not {type(env.unwrapped).__name__}"
+            )
         self.env: ArmFTLEnv = env.unwrapped
         if self.env.pool is not None:
             raise ConfigError("ExpertPolicy plays in one tank, not in a pool of tanks")

@@ -29,6 +29,7 @@ from aftir_rl.core import interrupts
 from aftir_rl.core.config import EVAL_SEED
 from aftir_rl.core.files import atomic_open, write_json
 from aftir_rl.envs.ftl.spec import TRAINING_ONLY_KWARGS
+from aftir_rl.rl.common import Predictor
 
 __all__ = [
     "EVAL_SEED",
@@ -85,7 +86,7 @@ def arm_clearance(arm: Any) -> float:
 
 
 def evaluate_policy_on_targets(
-    model: Any,
+    model: Predictor,
     env_id: str,
     targets: list[np.ndarray],
     clearance: bool = False,
@@ -165,7 +166,7 @@ def _pool_option(arm: Any, i: int) -> dict[str, int] | None:
 
 
 def _run_target(
-    model: Any,
+    model: Predictor,
     env: gym.Env,
     arm: Any,
     options: dict[str, Any],

@@ -8,21 +8,16 @@ at once), and :func:`optimality` compares the lengths with the BFS optimum.
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Predictor", "greedy_rollout", "greedy_walk", "greedy_lengths", "optimality"]
+if TYPE_CHECKING:
+    from aftir_rl.rl.common import Predictor
 
-
-class Predictor(Protocol):
-    """An agent with SB3's ``predict``: ``(action, state)`` for an observation."""
-
-    def predict(self, observation: Any, deterministic: bool = True) -> tuple[Any, Any]:
-        """The action for ``observation`` (greedy with ``deterministic``) and a state."""
-        ...
+__all__ = ["greedy_rollout", "greedy_walk", "greedy_lengths", "optimality"]
 
 
 #: A deterministic model: ``next_state[s, a]`` and ``hit[s, a]``.
