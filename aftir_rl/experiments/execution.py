@@ -104,7 +104,7 @@ def read_timed(run: str | Path) -> TimedRun:
     try:
         limits = ActuatorLimits.from_mapping(timing.get("limits"), f"{path}: timing.limits")
         margin = float(data.kept.get("margin_cm", 1.0))
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise CheckpointError(str(exc)) from None
     velocities, accelerations = (
         _array(timing.get(key), (m, 1 + 2 * n), key, path)

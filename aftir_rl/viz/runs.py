@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from aftir_rl.core.errors import CheckpointError
 from aftir_rl.core.files import read_json, run_file
 from aftir_rl.core.robot import body_points
+from aftir_rl.core.tank.parts import MAX_SECTIONS
 
 __all__ = ["RUN_FILES", "RunData", "read_run", "unique_names"]
 
@@ -96,10 +97,15 @@ def _bad(path: Path, what: str) -> CheckpointError:
     return CheckpointError(f"{path}: {what}")
 
 
+#: The most joint values (postures × sections) a motion read from a file may hold: about 8 times
+#: a 20-target tour's, and 128 MB as arrays. A file that says more is refused before any array.
+MAX_MOTION_VALUES = 8_000_000
+
+
 def _points(value: Any, path: Path, key: str) -> NDArray[np.float64]:
     try:
         arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise _bad(path, f"{key}: expected a list of [x, y, z] in cm") from None
     if arr.ndim == 1 and arr.size == 3:
         return arr
@@ -111,11 +117,16 @@ def _points(value: Any, path: Path, key: str) -> NDArray[np.float64]:
 def _posture(entry: Any, path: Path, where: str) -> tuple[float, list[float], list[float]]:
     if not isinstance(entry, dict) or not {"dis", "theta", "phi"} <= set(entry):
         raise _bad(path, f"{where}: expected {{'dis', 'theta', 'phi'}}, got {str(entry)[:60]}")
+    for key in ("theta", "phi"):
+        if not isinstance(entry[key], list) or len(entry[key]) > MAX_SECTIONS:
+            raise _bad(
+                path, f"{where}: {key} must list one angle per section, at most {MAX_SECTIONS}"
+            )
     try:
         dis = float(entry["dis"])
         theta = [float(v) for v in entry["theta"]]
         phi = [float(v) for v in entry["phi"]]
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise _bad(path, f"{where}: dis, theta and phi must be numbers (cm, rad)") from None
     if len(theta) != len(phi) or not theta:
         raise _bad(path, f"{where}: theta and phi need one value per section, equal in number")
@@ -131,7 +142,7 @@ def _section_length(data: dict[str, Any], path: Path) -> float:
         value = postures[0].get("section_length") if postures else None
     try:
         length = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise _bad(path, "section_length: expected a positive length in cm") from None
     if not length > 0 or not math.isfinite(length):
         raise _bad(path, f"section_length: expected a positive length in cm, got {value!r}")
@@ -153,8 +164,12 @@ def _motion_entries(data: dict[str, Any], path: Path) -> tuple[list[Any], list[i
         raise _bad(path, "expected a 'motion' list (or the older 'postures' and 'moves')")
     vias: dict[int, list[Any]] = {}
     for move in data.get("moves") or []:
-        if isinstance(move, dict) and isinstance(move.get("via"), list):
-            vias[int(move.get("from", -1))] = move["via"]
+        if (
+            isinstance(move, dict)
+            and isinstance(move.get("via"), list)
+            and isinstance(move.get("from"), int)
+        ):
+            vias[move["from"]] = move["via"]
     motion, waypoints = [], []
     for i, posture in enumerate(postures):
         if posture is not None:
@@ -175,6 +190,13 @@ def _read_trajectory(run: RunData, path: Path, keep: Sequence[str] = ()) -> None
     if not entries:
         run.notes.append("trajectory.json has no postures: no arm to show")
         return
+    if len(entries) > MAX_MOTION_VALUES // MAX_SECTIONS:
+        # at most MAX_SECTIONS each: only a longer motion needs its entries counted
+        values = sum(len(e["theta"]) if isinstance(e, dict) and isinstance(e.get("theta"), list)
+                     else 1 for e in entries)  # fmt: skip
+        if values > MAX_MOTION_VALUES:
+            raise _bad(path, f"the motion holds {values:,} joint values, more than "
+                       f"{MAX_MOTION_VALUES:,}")  # fmt: skip
     parsed = [_posture(e, path, f"motion[{i}]") for i, e in enumerate(entries)]
     l = _section_length(data, path)
     n = max(len(t) for _, t, _ in parsed)

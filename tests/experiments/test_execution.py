@@ -202,3 +202,22 @@ def test_export_never_writes_over_its_input_or_a_device(run_dir, tmp_path, capsy
         assert "\n" not in err and ("input of this command" in err or "not a regular" in err)
     assert (run_dir / "trajectory.json").read_bytes() == before
     assert Path("/dev/full").is_char_device()
+
+
+@pytest.mark.parametrize(
+    "motion, problem",
+    [
+        ([{"dis": 0.0, "theta": [0.0] * 100_000, "phi": [0.0] * 100_000}], "at most 64"),
+        ([{"dis": 10**400, "theta": [0.1], "phi": [0.0]}], "must be numbers"),
+    ],
+)
+def test_readers_refuse_what_no_arm_means_in_one_line(tmp_path, capsys, motion, problem):
+    """100,000 sections or a number beyond a float: one line, exit 2, nothing allocated."""
+    run = tmp_path / "hostile"
+    run.mkdir()
+    data = {"motion": motion, "section_length": 50.0, "margin_cm": 10**400}
+    (run / "trajectory.json").write_text(json.dumps(data))
+    for main in (check_cli.main, lambda a: export_cli.main([*a, "-o", str(tmp_path / "x")])):
+        assert main([str(run)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert problem in err and "\n" not in err
