@@ -1,4 +1,4 @@
-"""``aftir check RUN``: re-check a timed motion independently of the planner; exit 0 or 1.
+"""``aftir check RUN...``: re-check a timed motion independently of the planner; exit 0 or 1.
 
 A thin command line over :func:`aftir_rl.experiments.execution.check_motion`: time from 0 and
 never back, every joint's and cable's speed and acceleration within the arm's limits, the cables
@@ -11,10 +11,12 @@ trusted) with the panel rule at every entry. Prints ``ok`` or the first problem 
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
 
 from aftir_rl.cli.args import OneLineParser, add_margin_option, check_margin
 from aftir_rl.cli.guard import cli
+from aftir_rl.core.errors import AftirError
 
 __all__ = ["build_parser", "main"]
 
@@ -26,7 +28,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Re-check a run's timed motion: time, actuator limits, forward kinematics, "
         "clearance and the margin. Exit 0 if it holds, 1 with the first problem otherwise.",
     )
-    parser.add_argument("run", metavar="RUN", help="a run directory or its trajectory.json")
+    parser.add_argument(
+        "runs", nargs="+", metavar="RUN", help="run directories (or their trajectory.json)"
+    )
     parser.add_argument(
         "--tank", help="tank name or YAML (default: the tank the run names, else b737_center)"
     )
@@ -39,17 +43,32 @@ def build_parser() -> argparse.ArgumentParser:
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``aftir check``."""
-    from aftir_rl.experiments.execution import check_motion, timed_run_tank
-
     args = build_parser().parse_args(argv)
     check_margin(args.margin)
-    run, tank = timed_run_tank(args.run, args.tank)
-    problems = check_motion(run, tank, args.margin)
+    if len(args.runs) == 1:  # one run: an unreadable one is the command's one-line error
+        return _check(args.runs[0], args.tank, args.margin)
+    worst = 0
+    for run in args.runs:
+        try:
+            code = _check(run, args.tank, args.margin)
+        except AftirError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            code = 2
+        worst = max(worst, code)
+    return worst
+
+
+def _check(path: str, tank_name: str | None, margin: float) -> int:
+    """Check one run, print its line; 0 if it holds, 1 if not."""
+    from aftir_rl.experiments.execution import check_motion, timed_run_tank
+
+    run, tank = timed_run_tank(path, tank_name)
+    problems = check_motion(run, tank, margin)
     if problems:
         more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
-        print(f"{args.run}: {problems[0]}{more}")
+        print(f"{path}: {problems[0]}{more}")
         return 1
-    stated = "" if run.margin_cm == args.margin else f"; the file states {run.margin_cm:g} cm"
-    facts = f"{len(run.dis)} entries, {run.timing.duration:.2f} s, margin {args.margin:g} cm"
-    print(f"{args.run}: ok ({facts}{stated})")
+    stated = "" if run.margin_cm == margin else f"; the file states {run.margin_cm:g} cm"
+    facts = f"{len(run.dis)} entries, {run.timing.duration:.2f} s, margin {margin:g} cm"
+    print(f"{path}: ok ({facts}{stated})")
     return 0

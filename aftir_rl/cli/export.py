@@ -16,6 +16,7 @@ from pathlib import Path
 
 from aftir_rl.cli.args import OneLineParser, add_margin_option, check_margin
 from aftir_rl.cli.guard import cli
+from aftir_rl.core.errors import ConfigError
 from aftir_rl.experiments.execution import FORMATS, SPACES
 
 __all__ = ["build_parser", "main"]
@@ -28,7 +29,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Write a run's timed motion (trajectory.json) as a JSON with ROS "
         "trajectory_msgs/JointTrajectory field names, or as CSV.",
     )
-    parser.add_argument("run", metavar="RUN", help="a run directory or its trajectory.json")
+    parser.add_argument(
+        "run", nargs="+", metavar="RUN", help="a run directory or its trajectory.json (one)"
+    )
     parser.add_argument("-o", "--output", required=True, metavar="FILE", help="the file to write")
     parser.add_argument(
         "--format",
@@ -62,6 +65,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     from aftir_rl.experiments.execution import check_motion, export_motion, timed_run_tank
 
     args = build_parser().parse_args(argv)
+    if len(args.run) > 1:
+        shown = ", ".join(args.run[:3]) + (", ..." if len(args.run) > 3 else "")
+        raise ConfigError(
+            f"export writes one run to one file (-o); got {len(args.run)} runs ({shown}): "
+            "export them one at a time"
+        )
+    args.run = args.run[0]
     check_margin(args.margin)
     run_dir = Path(args.run).parent if Path(args.run).is_file() else Path(args.run)
     check_outputs([args.output], [run_dir])

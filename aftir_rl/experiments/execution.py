@@ -226,13 +226,26 @@ def check_motion(run: TimedRun, tank: Tank, margin: float = DEFAULT_MARGIN) -> l
 
 
 def _rows(run: TimedRun, space: str) -> tuple[list[str], list[NDArray[np.float64]]]:
-    """Names and ``(positions, velocities, accelerations)`` in ``space``."""
+    """Names and ``(positions, velocities, accelerations)`` in ``space``.
+
+    Subnormal values (rounding residue, such as ``8.5e-311``) and negative zeros are written
+    as ``0.0``.
+    """
     timing, n = run.timing, run.theta.shape[1]
     if space == "joints":
-        return joint_names(n), [timing.positions, timing.velocities, timing.accelerations]
-    dis = (timing.positions[:, :1], timing.velocities[:, :1], timing.accelerations[:, :1])
-    cables = (timing.cables, timing.cable_velocities, timing.cable_accelerations)
-    return ["dis"] + cable_names(n), [np.concatenate(pair, axis=1) for pair in zip(dis, cables)]
+        names, rows = joint_names(n), [timing.positions, timing.velocities, timing.accelerations]
+    else:
+        dis = (timing.positions[:, :1], timing.velocities[:, :1], timing.accelerations[:, :1])
+        cables = (timing.cables, timing.cable_velocities, timing.cable_accelerations)
+        names = ["dis"] + cable_names(n)
+        rows = [np.concatenate(pair, axis=1) for pair in zip(dis, cables)]
+    tiny = np.finfo(np.float64).tiny
+    return names, [np.where(np.abs(a) < tiny, 0.0, a) + 0.0 for a in rows]
+
+
+def _unit(name: str) -> str:
+    """The unit of a position named by :func:`_rows`: ``cm`` (``dis``, cables) or ``rad``."""
+    return "rad" if name.endswith(("_kx", "_ky")) else "cm"
 
 
 def export_motion(
@@ -240,9 +253,12 @@ def export_motion(
 ) -> str:
     """The motion as ``jointtrajectory-json`` (ROS field names and layout) or ``csv`` text.
 
-    ``checked_margin``: the margin [cm] :func:`check_motion` found the motion to keep, or None
-    for a motion exported without that check, which the file then says (the JSON's
-    ``checked_margin_cm`` is null; a CSV starts with a ``#`` line).
+    Both say their units: the JSON has ``units`` (each joint's position unit, and those of
+    time, velocities and accelerations); a CSV column's name ends with its unit (``dis_cm``,
+    ``section_1_kx_rad``, ``dis_velocity_cm_per_s``...). ``checked_margin``: the margin [cm]
+    :func:`check_motion` found the motion to keep, or None for a motion exported without that
+    check, which the file then says (the JSON's ``checked_margin_cm`` is null; a CSV starts
+    with a ``#`` line).
     """
     names, (pos, vel, acc) = _rows(run, space)
     if fmt == "csv":
@@ -253,9 +269,9 @@ def export_motion(
         writer.writerow(
             [
                 "time_s",
-                *names,
-                *(f"{k}_velocity" for k in names),
-                *(f"{k}_acceleration" for k in names),
+                *(f"{k}_{_unit(k)}" for k in names),
+                *(f"{k}_velocity_{_unit(k)}_per_s" for k in names),
+                *(f"{k}_acceleration_{_unit(k)}_per_s2" for k in names),
             ]
         )
         for i, t in enumerate(run.timing.t.tolist()):
@@ -284,7 +300,13 @@ def export_motion(
             }
         )
     header = {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "panel"}
-    data = {"header": header, "joint_names": names, "points": points}
+    units = {
+        "positions": {k: _unit(k) for k in names},
+        "velocities": "position unit per s",
+        "accelerations": "position unit per s^2",
+        "time_from_start": "s",
+    }
+    data = {"header": header, "joint_names": names, "points": points, "units": units}
     return json.dumps({**data, "checked_margin_cm": checked_margin}, indent=1) + "\n"
 
 

@@ -117,8 +117,16 @@ def test_jointtrajectory_json_matches_the_trajectory(run_dir, tmp_path):
         for p in message["points"]
     ]
     np.testing.assert_allclose(times, run.timing.t, atol=1e-9)
-    velocities = [p["velocities"] for p in message["points"]]
-    np.testing.assert_array_equal(velocities, run.timing.velocities)
+    velocities = np.array([p["velocities"] for p in message["points"]])
+    tiny = np.finfo(float).tiny  # subnormal residue is written as 0
+    expected = np.where(np.abs(run.timing.velocities) < tiny, 0.0, run.timing.velocities)
+    np.testing.assert_array_equal(velocities, expected)
+    # units said, and no subnormal residue or negative zero written
+    assert message["units"]["positions"]["dis"] == "cm"
+    assert message["units"]["positions"]["section_1_kx"] == "rad"
+    every = np.concatenate([velocities.ravel(), positions.ravel()])
+    assert not np.any((every != 0) & (np.abs(every) < np.finfo(float).tiny))
+    assert not np.any(np.signbit(every) & (every == 0))
     # the bending vectors give back the postures' angles
     kx, ky = positions[:, 1::2], positions[:, 2::2]
     np.testing.assert_allclose(np.hypot(kx, ky), run.theta, atol=1e-12)
@@ -137,15 +145,16 @@ def test_cable_csv_matches_the_cables(run_dir, tmp_path):
     cables = cable_lengths(run.theta, run.phi, run.timing.limits)
     for i in (0, len(rows) // 2, len(rows) - 1):
         assert float(rows[i]["time_s"]) == run.timing.t[i]
-        assert float(rows[i]["dis"]) == run.dis[i]
-        got = [float(rows[i][f"section_{s + 1}_cable_{j}"]) for s in range(n) for j in range(3)]
+        assert float(rows[i]["dis_cm"]) == run.dis[i]
+        got = [float(rows[i][f"section_{s + 1}_cable_{j}_cm"]) for s in range(n) for j in range(3)]
         np.testing.assert_allclose(got, cables[i].ravel(), atol=1e-12)
     # the cable rates are the cables' change over time (finite differences, mid-motion)
     mid = len(rows) // 2
     dt = run.timing.t[mid + 1] - run.timing.t[mid - 1]
     name = f"section_{n}_cable_0"
-    rate = (float(rows[mid + 1][name]) - float(rows[mid - 1][name])) / dt
-    assert math.isclose(float(rows[mid][f"{name}_velocity"]), rate, rel_tol=0.1, abs_tol=1e-3)
+    rate = (float(rows[mid + 1][f"{name}_cm"]) - float(rows[mid - 1][f"{name}_cm"])) / dt
+    velocity = float(rows[mid][f"{name}_velocity_cm_per_s"])
+    assert math.isclose(velocity, rate, rel_tol=0.1, abs_tol=1e-3)
 
 
 def test_export_and_check_agree_in_the_library(run_dir, tank):
@@ -221,3 +230,15 @@ def test_readers_refuse_what_no_arm_means_in_one_line(tmp_path, capsys, motion, 
         assert main([str(run)]) == 2
         err = capsys.readouterr().err.strip()
         assert problem in err and "\n" not in err
+
+
+def test_check_takes_several_runs_and_export_says_it_takes_one(run_dir, tmp_path, capsys):
+    broken = _edited(run_dir, tmp_path, _faster)
+    assert check_cli.main([str(run_dir), str(run_dir)]) == 0
+    assert capsys.readouterr().out.count(": ok (") == 2
+    assert check_cli.main([str(run_dir), str(broken), str(tmp_path / "missing")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.count("\n") == 2 and "times its speed limit" in captured.out
+    assert captured.err.count("\n") == 1
+    assert export_cli.main([str(run_dir), str(broken), "-o", str(tmp_path / "x.json")]) == 2
+    assert "export writes one run to one file" in capsys.readouterr().err
