@@ -240,5 +240,8 @@ def test_check_takes_several_runs_and_export_says_it_takes_one(run_dir, tmp_path
     captured = capsys.readouterr()
     assert captured.out.count("\n") == 2 and "times its speed limit" in captured.out
     assert captured.err.count("\n") == 1
-    assert export_cli.main([str(run_dir), str(broken), "-o", str(tmp_path / "x.json")]) == 2
-    assert "export writes one run to one file" in capsys.readouterr().err
+    # several runs go to a folder, one file each; the one that fails its check is not written
+    folder = tmp_path / "deploy"
+    assert export_cli.main([str(run_dir), str(broken), "-o", str(folder)]) == 1
+    assert sorted(p.name for p in folder.iterdir()) == [f"{run_dir.name}.json"]
+    assert "not written" in capsys.readouterr().err
