@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import stat
+
 import pytest
 import yaml
 
@@ -76,3 +79,33 @@ def test_tour_draws_targets_in_any_bay_of_a_generated_tank(tmp_path, capsys):
     out = tmp_path / "tour"
     assert tour(["--tank", "wing:2:1", "--random", "9", "--bay", "7", "-o", str(out)]) == 2
     assert "this tank has 2 bays" in capsys.readouterr().err and not out.exists()
+
+
+def test_show_escapes_what_a_tank_file_says(tmp_path, capsys):
+    """A name or description with terminal escapes (retitle, clear screen) prints as text."""
+    path = tmp_path / "w.yaml"
+    assert main(["generate", "--bays", "2", "--seed", "1", "-o", str(path)]) == 0
+    data = yaml.safe_load(path.read_text())
+    data["name"], data["description"] = "evil\x1b]0;pwned\x07", "x\x1b[2Jy"
+    path.write_text(yaml.safe_dump(data))
+    capsys.readouterr()
+    assert main(["show", "--tank", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "\x1b" not in out and "\x07" not in out and "evil?]0;pwned?" in out
+
+
+def test_outputs_never_replace_inputs_devices_or_each_other(tmp_path, capsys):
+    tank = tmp_path / "w.yaml"
+    assert main(["generate", "--bays", "2", "--seed", "1", "-o", str(tank)]) == 0
+    before = tank.read_bytes()
+    refusals = [
+        ["generate", "--bays", "2", "--seed", "1", "-o", "/dev/full"],
+        ["export", str(tank), "-o", str(tmp_path / "a.stl"), "--walls", str(tmp_path / "a.stl")],
+        ["export", str(tank), "-o", str(tmp_path / "b.stl"), "--yaml", str(tank)],
+    ]
+    for argv in refusals:
+        capsys.readouterr()
+        assert main(argv) == 2
+        assert capsys.readouterr().err.count("\n") == 1
+    assert tank.read_bytes() == before and not (tmp_path / "a.stl").exists()
+    assert stat.S_ISCHR(os.stat("/dev/full").st_mode)

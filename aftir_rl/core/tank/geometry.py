@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from aftir_rl.core.config import one_line
 from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.robot import ArmSpec
 from aftir_rl.core.tank.distance import TankDistance
@@ -355,7 +356,8 @@ class Tank:
             marks[raster.point_to_cell(t)] = str(i + 1)
         marks[self.start_cell] = "S"
         head = [
-            f"tank {self.name}: {self.description}".rstrip(": "),
+            # the name and description come from a file: no control character reaches a terminal
+            one_line(f"tank {self.name}: {self.description}".rstrip(": ")),
             f"box {format_point(self.box_min)}..{format_point(self.box_max)} cm, "
             f"raster {' x '.join(map(str, raster.shape))} cells of {raster.cell_size:g} cm, "
             f"{int(raster.obstructed.sum())} obstructed",
