@@ -187,11 +187,37 @@ def add_stochastic_option(parser: argparse.ArgumentParser, what: str) -> None:
     )
 
 
+#: The largest time budget a ``--*-seconds`` flag takes [s]: an hour.
+MAX_SECONDS = 3600.0
+
+
+def bounded_float(lo: float, hi: float) -> Callable[[str], float]:
+    """A ``type=`` function: a number from ``lo`` to ``hi`` (never NaN or infinite).
+
+    Its error reads "must be from LO to HI, got VALUE".
+    """
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(
+                f"must be from {lo:g} to {hi:g}, got {shorten(text, 40)}"
+            )
+        return value
+
+    return parse
+
+
 def add_seconds_option(
     parser: argparse.ArgumentParser, flag: str, default: float, help: str
 ) -> None:
-    """``flag S``, a time budget in seconds."""
-    parser.add_argument(flag, type=float, default=default, metavar="S", help=help)
+    """``flag S``, a time budget in seconds, from 0 to :data:`MAX_SECONDS`."""
+    parser.add_argument(
+        flag, type=bounded_float(0.0, MAX_SECONDS), default=default, metavar="S", help=help
+    )
 
 
 def add_key_values_option(parser: argparse.ArgumentParser, flag: str, help: str) -> None:

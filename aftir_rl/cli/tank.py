@@ -29,7 +29,7 @@ from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import atomic_open
 from aftir_rl.core.shipped import DEFAULT_TANK
-from aftir_rl.core.tank.generate import MAX_BAYS, wing_tank
+from aftir_rl.core.tank.generate import MAX_BAYS, MAX_SEED, wing_tank
 from aftir_rl.core.tank.loading import load_tank, tank_files, tank_from_mapping
 
 __all__ = ["build_parser", "main"]
@@ -50,7 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     gen = sub.add_parser("generate", help="a generated wing tank as YAML")
     gen.add_argument("--kind", choices=("wing",), default="wing", help="what to generate (wing)")
     add_int_option(gen, "--bays", (1, MAX_BAYS), f"number of bays, 1 to {MAX_BAYS} (3)", 3)
-    add_int_option(gen, "--seed", (0, 2**32 - 1), "random seed (0)", 0)
+    add_int_option(gen, "--seed", (0, MAX_SEED), "random seed (0)", 0)
     gen.add_argument("-o", "--output", required=True, help="the YAML file to write")
     export = sub.add_parser("export", help="the tank's solids as a triangle mesh (STL, OBJ, PLY)")
     export.add_argument("tank", help=_TANK_HELP)

@@ -19,10 +19,12 @@ import numpy as np
 
 from aftir_rl.core.errors import ConfigError
 
-__all__ = ["WingRanges", "wing_tank", "MAX_BAYS"]
+__all__ = ["WingRanges", "wing_tank", "MAX_BAYS", "MAX_SEED"]
 
 #: Most bays of a generated wing tank (12 sections of 50 cm reach about five).
 MAX_BAYS = 8
+#: The largest seed of a generated tank (``aftir tank generate --seed``, ``wing:BAYS:SEED``).
+MAX_SEED = 2**32 - 1
 
 
 @dataclass(frozen=True)
@@ -133,11 +135,13 @@ def wing_tank(bays: int, seed: int, ranges: WingRanges | None = None) -> dict[st
     """A wing tank of ``bays`` bays drawn with ``seed``, as a tank YAML mapping.
 
     Raises:
-        ConfigError: ``bays`` outside 1..:data:`MAX_BAYS`.
+        ConfigError: ``bays`` outside 1..:data:`MAX_BAYS`, or ``seed`` outside 0..:data:`MAX_SEED`.
 
     """
     if not 1 <= int(bays) <= MAX_BAYS:
         raise ConfigError(f"bays: a wing tank has 1 to {MAX_BAYS} bays, got {bays}")
+    if not 0 <= int(seed) <= MAX_SEED:
+        raise ConfigError(f"seed: a wing tank's seed is from 0 to {MAX_SEED:,}, got {seed}")
     r = ranges or WingRanges()
     rng = np.random.default_rng([int(seed), int(bays)])
     step = r.cell_size
