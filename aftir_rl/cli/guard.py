@@ -167,10 +167,43 @@ def cli(main: F) -> F:
 
     @functools.wraps(main)
     def wrapper(*args: Any, **kwargs: Any) -> int:
+        _announce_compiling()
         with _stop_signals():  # a second Ctrl-C while the first is reported exits at once too
             return _one_line_failures(main, args, kwargs)
 
     return wrapper  # type: ignore[return-value]
+
+
+_ANNOUNCED: list[bool] = []
+
+
+def _announce_compiling() -> None:
+    """At a terminal, say so once when numba starts compiling a kernel (its cache is cold).
+
+    The kernels compile once per install (``make install`` does it ahead); from a fresh wheel
+    the first command that needs them would otherwise sit silent for a minute or two. Only at a
+    terminal: piped output and tests stay as they are.
+    """
+    if _ANNOUNCED or not sys.stderr.isatty():
+        return
+    _ANNOUNCED.append(True)
+    from numba.core import event
+
+    class _Notice(event.Listener):
+        said = False
+
+        def on_start(self, ev: event.Event) -> None:
+            if not self.said:
+                self.said = True
+                _say(
+                    "compiling the package's numba kernels, once per install (about a minute "
+                    "or two on 2 cores; later runs load them from the cache)..."
+                )
+
+        def on_end(self, ev: event.Event) -> None:
+            pass
+
+    event.register("numba:compile", _Notice())
 
 
 def _one_line_failures(main: Callable[..., int], args: Any, kwargs: Any) -> int:
