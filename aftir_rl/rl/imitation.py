@@ -10,6 +10,7 @@ values that fit it. The ``imitation`` library would do the same, but it requires
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
 from collections.abc import Callable
@@ -53,11 +54,64 @@ class Demos:
     env_kwargs: dict[str, Any]
 
 
-def load_demos(path: str | os.PathLike[str], gamma: float) -> Demos:
-    """Read the Minari dataset in ``path`` (``ROOT/namespace/name-vN``).
+#: The most demonstration steps read (about 700 MB of 87-number observations as float32).
+MAX_DEMO_STEPS = 2_000_000
+
+
+def _episode_arrays(
+    episode: Any, keys: set[str] | None, where: str
+) -> tuple[dict[str, NDArray[np.float32]], NDArray[np.float32], NDArray[np.float64]]:
+    """One episode's observations (without the last), actions and rewards, each checked.
 
     Raises:
-        ConfigError: Minari is missing, or ``path`` is not a dataset (one line).
+        ConfigError: naming the episode and the field: a key missing or extra, a shape that
+            does not fit the others, a value that is not a finite number.
+
+    """
+
+    def array(value: Any, field: str, dtype: type = np.float32) -> NDArray[Any]:
+        try:
+            out: NDArray[Any] = np.asarray(value, dtype=dtype)
+        except (TypeError, ValueError, OverflowError):
+            out = np.zeros(())
+        if out.ndim == 0:
+            raise ConfigError(f"{where}: {field} is not an array of numbers")
+        if out.size and not np.all(np.isfinite(out)):
+            raise ConfigError(f"{where}: {field} holds a NaN or an infinite value")
+        return out
+
+    observations = getattr(episode, "observations", None)
+    if not isinstance(observations, dict) or (keys is not None and set(observations) != keys):
+        found = sorted(observations) if isinstance(observations, dict) else type(observations)
+        want = sorted(keys) if keys else "arrays"
+        raise ConfigError(f"{where}: observations must be a dict of {want}, got {found}")
+    actions = array(getattr(episode, "actions", None), "actions")
+    rewards = array(getattr(episode, "rewards", None), "rewards", np.float64)
+    steps = len(actions)
+    if actions.ndim != 2 or actions.shape[1] != 3 or steps == 0 or rewards.shape != (steps,):
+        raise ConfigError(
+            f"{where}: expected actions (T, 3) and rewards (T,) of T > 0 steps, got "
+            f"{actions.shape} and {rewards.shape}"
+        )
+    obs = {}
+    for key, value in observations.items():
+        values = array(value, f"observations[{key!r}]")
+        if values.ndim != 2 or len(values) != steps + 1:
+            raise ConfigError(
+                f"{where}: observations[{key!r}] must hold T + 1 = {steps + 1} rows, "
+                f"got {values.shape}"
+            )
+        obs[key] = values[:-1]
+    return obs, actions, rewards
+
+
+def load_demos(path: str | os.PathLike[str], gamma: float) -> Demos:
+    """Read the Minari dataset in ``path`` (``ROOT/namespace/name-vN``), every episode checked.
+
+    Raises:
+        ConfigError: Minari is missing, ``path`` is not a dataset, an episode's field is
+            missing, of the wrong shape or not finite, or the dataset holds more than
+            :data:`MAX_DEMO_STEPS` steps (one line naming the episode and the field).
 
     """
     try:
@@ -75,13 +129,25 @@ def load_demos(path: str | os.PathLike[str], gamma: float) -> Demos:
     except Exception as exc:  # Minari raises ValueError, KeyError, OSError... for bad files
         raise ConfigError(f"{path}: not a readable Minari dataset ({type(exc).__name__})") from None
     obs: dict[str, list[NDArray[np.float32]]] = {}
-    actions, returns = [], []
-    for episode in dataset.iterate_episodes():
-        for key, value in episode.observations.items():
-            obs.setdefault(key, []).append(np.asarray(value[:-1], dtype=np.float32))
-        actions.append(np.asarray(episode.actions, dtype=np.float32))
+    actions, returns, steps = [], [], 0
+    episodes = iter(dataset.iterate_episodes())
+    for i in itertools.count():
+        try:
+            episode = next(episodes)
+        except StopIteration:
+            break
+        except Exception as exc:  # noqa: BLE001 - a corrupt file fails in Minari or h5py
+            raise ConfigError(f"{path}: episode {i} is unreadable ({type(exc).__name__})") from None
+        keys = set(obs) if obs else None
+        o, a, rewards = _episode_arrays(episode, keys, f"{path}: episode {i}")
+        steps += len(a)
+        if steps > MAX_DEMO_STEPS:
+            raise ConfigError(f"{path}: more than {MAX_DEMO_STEPS:,} steps; use a smaller dataset")
+        for key, value in o.items():
+            obs.setdefault(key, []).append(value)
+        actions.append(a)
         g, back = 0.0, []
-        for r in episode.rewards[::-1]:
+        for r in rewards[::-1]:
             g = float(r) + gamma * g
             back.append(g)
         returns.append(np.array(back[::-1], dtype=np.float32))

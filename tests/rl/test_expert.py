@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -310,3 +312,42 @@ def test_aftir_dataset_refuses_bad_input_in_one_line(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert says in err and "\n" not in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "edit, says",
+    [
+        (lambda e: e.__setattr__("actions", e.actions * np.nan), "episode 1: actions holds a NaN"),
+        (
+            lambda e: e.__setattr__("actions", e.actions[:, :2]),
+            "expected actions (T, 3)",
+        ),
+        (lambda e: e.__setattr__("actions", None), "episode 1: actions is not an array"),
+        (lambda e: e.observations.pop("desired_goal"), "episode 1: observations must be a dict"),
+        (lambda e: e.__setattr__("rewards", e.rewards * np.inf), "episode 1: rewards holds"),
+        (
+            lambda e: e.observations.__setitem__("observation", e.observations["observation"][:3]),
+            "observations['observation'] must hold T + 1",
+        ),
+    ],
+)
+def test_corrupt_demonstrations_are_one_line(tmp_path, monkeypatch, edit, says):
+    """Every episode of a dataset is checked before any cloning: the episode and the field named."""
+    import types
+
+    import minari
+
+    from aftir_rl.rl.imitation import load_demos
+
+    def episode():
+        obs = {k: np.zeros((6, n)) for k, n in (("observation", 87), ("desired_goal", 3))}
+        return types.SimpleNamespace(observations=obs, actions=np.zeros((5, 3)), rewards=np.ones(5))
+
+    episodes = [episode(), episode()]
+    edit(episodes[1])
+    fake = types.SimpleNamespace(iterate_episodes=lambda: iter(episodes), spec=None)
+    monkeypatch.setattr(minari, "load_dataset", lambda name: fake)
+    (tmp_path / "aftir" / "demo-v0" / "data").mkdir(parents=True)
+    with pytest.raises(ConfigError, match=re.escape(says)) as info:
+        load_demos(tmp_path / "aftir" / "demo-v0", 0.99)
+    assert "\n" not in str(info.value)
