@@ -46,6 +46,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "one timed deployment that visits many targets (needs aftir_rl[robot])",
     ),
     "check": ("aftir_rl.cli.check", "re-check a timed motion: time, limits, clearance; exit 0/1"),
+    "runs": ("aftir_rl.cli.runs", "the runs under a folder, unfinished ones too; remove old ones"),
     "configs": (
         "aftir_rl.cli.configs",
         "the shipped configs and tanks, by the names --config takes",
