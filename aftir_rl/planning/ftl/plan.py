@@ -8,10 +8,17 @@ checks the whole dense motion independently of the search: every entry's backbon
 2.5 cm apart, must keep the margin from the tank (entries are less than 1 cm of backbone movement
 apart). A route whose deployment misses the margin is replaced by the next search setting; a
 target that no setting reaches is ``complete: false`` with the reason.
+
+The rule for the search settings: :data:`SEARCH_VARIANTS` are tried in a fixed order, each
+search bounded by its own work budget (``RouteSettings.max_expanded``, candidate sections
+evaluated) and all of them by one total (:data:`MAX_EXPANDED_TOTAL`), never by the clock, so a
+target's plan is the same on any machine under any load. A wall-clock guard (``max_seconds``,
+off by default) only stops a runaway call: its plan says ``timed_out``, never "no route".
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -23,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.core.actuation import ActuatorLimits
 from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.config import DEFAULT_MARGIN
-from aftir_rl.core.errors import AftirError, PlanningError
+from aftir_rl.core.errors import AftirError, ConfigError, PlanningTimeout
 from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.kernel.sections import postures_min_clearance
 from aftir_rl.core.tank import Tank
@@ -34,7 +41,7 @@ from aftir_rl.planning.ftl.model import (
     ftl_deviation,
     ftl_motion,
 )
-from aftir_rl.planning.ftl.route import RouteResult, RouteSettings, plan_route
+from aftir_rl.planning.ftl.route import RouteResult, RouteSettings, search_route
 from aftir_rl.planning.timing import TimedMotion, time_motion
 
 __all__ = [
@@ -47,6 +54,7 @@ __all__ = [
     "SEARCH_VARIANTS",
     "MAIN_VARIANTS",
     "LAST_RESORTS",
+    "MAX_EXPANDED_TOTAL",
 ]
 
 _FINE = RouteSettings(beam_width=800, bin_cm=4.0, bin_heading=0.2, slack=0.5, change_weight=5.0)
@@ -77,8 +85,14 @@ LAST_RESORTS: tuple[RouteSettings, ...] = (
     replace(_FINE, max_change=1.5, leads=_DEEP_LEADS),
 )
 
-#: Every setting :func:`plan_motion` tries by default.
+#: Every setting :func:`plan_motion` tries by default, in this order.
 SEARCH_VARIANTS = MAIN_VARIANTS + LAST_RESORTS
+
+#: Default total work budget of one :func:`plan_motion` call: candidate sections evaluated by
+#: all its route searches together. Above the most that all of :data:`SEARCH_VARIANTS` can
+#: evaluate on a 12-section arm (2,120,300), so it never cuts them short there; a setting is
+#: given at most what is left of it.
+MAX_EXPANDED_TOTAL = 2_500_000
 
 #: Largest follow-the-leader deviation [cm] a motion should keep (the published FTL anchors:
 #: about 2% of the shape); a motion above it is kept only when no search setting does better.
@@ -87,7 +101,12 @@ DEVIATION_GOAL = 2.5
 
 @dataclass
 class MotionPlan:
-    """The result of :func:`plan_motion` (see ``to_json`` for the file contract)."""
+    """The result of :func:`plan_motion` (see ``to_json`` for the file contract).
+
+    ``timed_out``: the wall-clock guard stopped the planning (``complete`` is then False and
+    says nothing about the target). ``expanded``: candidate sections the route searches
+    evaluated, all settings tried together (the work :data:`MAX_EXPANDED_TOTAL` bounds).
+    """
 
     target: NDArray[np.float64]
     margin_cm: float
@@ -96,6 +115,8 @@ class MotionPlan:
     seconds: float
     method: str = "ftl"
     reason: str | None = None
+    timed_out: bool = False
+    expanded: int = 0
     motion: FTLMotion | None = None
     waypoint_index: list[int] = field(default_factory=list)
     min_clearance_cm: float | None = None
@@ -143,6 +164,8 @@ class MotionPlan:
         }
         if self.reason is not None:
             out["reason"] = self.reason
+        if self.timed_out:
+            out["timed_out"] = True
         if self.motion is not None:
             out.update(
                 n_sections=self.motion.n_sections,
@@ -220,6 +243,8 @@ def plan_motion(
     start_height: float | None = None,
     prefix: Route | None = None,
     variants: Sequence[RouteSettings] = (),
+    max_expanded: int = MAX_EXPANDED_TOTAL,
+    max_seconds: float | None = None,
 ) -> MotionPlan:
     """Plan, deploy and check a follow-the-leader motion from the panel to ``target`` [cm].
 
@@ -231,26 +256,54 @@ def plan_motion(
         start_height: the tip's height above the floor at the start (default: the tank's start
             point, at most 20 cm).
         prefix: a route to continue, unchanged (:func:`~aftir_rl.planning.ftl.route.plan_route`).
-        variants: the route-search settings to try (default :data:`SEARCH_VARIANTS`).
+        variants: the route-search settings to try, in order (default :data:`SEARCH_VARIANTS`).
+        max_expanded: the work budget of the whole call (candidate sections evaluated, all
+            searches together); each setting gets at most its own ``max_expanded`` and what
+            is left of this.
+        max_seconds: a wall-clock guard [s] on the whole call, or None (none).
 
     Returns:
         A :class:`MotionPlan`; ``complete`` is False, with ``reason``, when no motion keeps the
-        margin.
+        margin within the budget, and ``timed_out`` too when the guard stopped it.
+
+    Raises:
+        ConfigError: ``max_expanded`` or ``max_seconds`` is not a budget.
 
     """
     start = time.perf_counter()
+    if not max_expanded >= 1:
+        raise ConfigError(f"max_expanded must be 1 candidate section or more, got {max_expanded!r}")
+    if max_seconds is not None and not 0 < max_seconds < math.inf:
+        raise ConfigError(
+            f"max_seconds must be a positive number of seconds or None, got {max_seconds!r}"
+        )
     target = np.asarray(target, dtype=np.float64)
     arm = tank.arm
     h0 = min(float(tank.start_point[2]) if start_height is None else float(start_height), 20.0)
     reasons: list[str] = []
     best: MotionPlan | None = None
     best_deviation = float("inf")  # the largest FTL deviation of best [cm]
+    used = 0  # candidate sections evaluated by the searches so far
     for settings in variants or SEARCH_VARIANTS:
+        if used >= max_expanded:
+            reasons.append(f"the work budget of {max_expanded:,} candidate sections ran out")
+            break
+        guard = None if max_seconds is None else max_seconds - (time.perf_counter() - start)
+        knobs = replace(
+            settings,
+            margin=margin,
+            max_expanded=min(settings.max_expanded, max_expanded - used),
+            max_seconds=_tighter(settings.max_seconds, guard),
+        )
         try:
-            found = plan_route(tank, target, cells, replace(settings, margin=margin), arm, prefix)
-        except PlanningError as exc:
-            reasons.append(str(exc).removeprefix("Cannot reach the target: "))
-            if "closer than" in str(exc):
+            outcome = search_route(tank, target, cells, knobs, arm, prefix)
+        except PlanningTimeout as exc:
+            return _timed_out(target, margin, arm.section_length, start, str(exc))
+        used += outcome.expanded
+        found = outcome.result
+        if found is None:
+            reasons.append(str(outcome.reason))
+            if "closer than" in str(outcome.reason):
                 break
             continue
         deployed = _deploy(tank, target, cells, margin, found, h0)
@@ -263,9 +316,41 @@ def plan_motion(
         if best_deviation <= DEVIATION_GOAL:
             break
     if best is not None:
-        best.seconds = time.perf_counter() - start
+        best.seconds, best.expanded = time.perf_counter() - start, used
         return best
-    return _unreachable(target, margin, arm.section_length, start, reasons)
+    plan = _unreachable(target, margin, arm.section_length, start, reasons)
+    plan.expanded = used
+    return plan
+
+
+def _tighter(a: float | None, b: float | None) -> float | None:
+    """The smaller of two optional wall-clock guards [s] (None: no guard); at least 1 ms."""
+    if a is None or b is None:
+        return a if b is None else max(b, 1e-3)
+    return max(min(a, b), 1e-3)
+
+
+def _timed_out(
+    target: NDArray[np.float64],
+    margin: float,
+    section_length: float,
+    start: float,
+    why: str,
+) -> MotionPlan:
+    """The plan of a call the wall-clock guard stopped: incomplete, ``timed_out``, and why.
+
+    A complete motion found before the guard is dropped too: which one would have won depends
+    on the settings the guard cut off.
+    """
+    return MotionPlan(
+        target=target,
+        margin_cm=margin,
+        section_length=section_length,
+        complete=False,
+        seconds=time.perf_counter() - start,
+        reason=why,
+        timed_out=True,
+    )
 
 
 def _unreachable(
