@@ -9,16 +9,12 @@ checks the whole dense motion independently of the search: every entry's backbon
 apart). A route whose deployment misses the margin is replaced by the next search setting; a
 target that no setting reaches is ``complete: false`` with the reason.
 
-The rule for the search settings: :data:`SEARCH_VARIANTS` are tried in a fixed order, each
-search bounded by its own work budget (``RouteSettings.max_expanded``, candidate sections
-evaluated) and all of them by one total (:data:`MAX_EXPANDED_TOTAL`), never by the clock, so a
-target's plan is the same on any machine under any load. A wall-clock guard (``max_seconds``,
-off by default) only stops a runaway call: its plan says ``timed_out``, never "no route".
+The settings are tried in a fixed order within one work budget
+(:mod:`aftir_rl.planning.ftl.search`), so a plan is the same on any machine under any load.
 """
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -30,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.core.actuation import ActuatorLimits
 from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.config import DEFAULT_MARGIN
-from aftir_rl.core.errors import AftirError, ConfigError, PlanningTimeout
+from aftir_rl.core.errors import AftirError, PlanningTimeout
 from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.kernel.sections import postures_min_clearance
 from aftir_rl.core.tank import Tank
@@ -42,6 +38,13 @@ from aftir_rl.planning.ftl.model import (
     ftl_motion,
 )
 from aftir_rl.planning.ftl.route import RouteResult, RouteSettings, search_route
+from aftir_rl.planning.ftl.search import (
+    LAST_RESORTS,
+    MAIN_VARIANTS,
+    MAX_EXPANDED_TOTAL,
+    SEARCH_VARIANTS,
+    check_budget,
+)
 from aftir_rl.planning.timing import TimedMotion, time_motion
 
 __all__ = [
@@ -56,43 +59,6 @@ __all__ = [
     "LAST_RESORTS",
     "MAX_EXPANDED_TOTAL",
 ]
-
-_FINE = RouteSettings(beam_width=800, bin_cm=4.0, bin_heading=0.2, slack=0.5, change_weight=5.0)
-_DEEP_LEADS = (-40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0)
-
-#: Route-search settings tried in turn (the margin is set per call): the first whose motion
-#: keeps the margin and the deviation goal wins; otherwise the complete one of least deviation.
-#: :data:`LAST_RESORTS` follow them.
-MAIN_VARIANTS: tuple[RouteSettings, ...] = (
-    RouteSettings(clearance_weight=1.0, change_weight=20.0),
-    RouteSettings(clearance_weight=1.0, change_weight=40.0, max_change=0.5),
-    RouteSettings(clearance_weight=1.0, change_weight=5.0),
-    RouteSettings(clearance_weight=0.5, change_weight=5.0, beam_width=250, max_change=1.0),
-    RouteSettings(
-        clearance_weight=1.0, change_weight=20.0, beam_width=400, bin_cm=6.0, bin_heading=0.3
-    ),
-    # more room for the deviation between stages, for routes whose deployment grazes
-    RouteSettings(clearance_weight=1.0, change_weight=20.0, slack=3.0),
-    RouteSettings(clearance_weight=2.0, change_weight=40.0, slack=3.0, max_change=0.5),
-)
-
-#: The last resorts: a wider, finer beam with sharper turns for tight spots' routes; the first
-#: and last also bend deeper in the panel's guide (the arm leaves the panel at a slant, for
-#: targets low and beside it), the second moves the lead when closing.
-LAST_RESORTS: tuple[RouteSettings, ...] = (
-    replace(_FINE, max_change=1.2, leads=_DEEP_LEADS),
-    replace(_FINE, max_change=1.2, lead_shift=15.0, closings=30),
-    replace(_FINE, max_change=1.5, leads=_DEEP_LEADS),
-)
-
-#: Every setting :func:`plan_motion` tries by default, in this order.
-SEARCH_VARIANTS = MAIN_VARIANTS + LAST_RESORTS
-
-#: Default total work budget of one :func:`plan_motion` call: candidate sections evaluated by
-#: all its route searches together. Above the most that all of :data:`SEARCH_VARIANTS` can
-#: evaluate on a 12-section arm (2,120,300), so it never cuts them short there; a setting is
-#: given at most what is left of it.
-MAX_EXPANDED_TOTAL = 2_500_000
 
 #: Largest follow-the-leader deviation [cm] a motion should keep (the published FTL anchors:
 #: about 2% of the shape); a motion above it is kept only when no search setting does better.
@@ -271,73 +237,97 @@ def plan_motion(
 
     """
     start = time.perf_counter()
-    if not max_expanded >= 1:
-        raise ConfigError(f"max_expanded must be 1 candidate section or more, got {max_expanded!r}")
-    if max_seconds is not None and not 0 < max_seconds < math.inf:
-        raise ConfigError(
-            f"max_seconds must be a positive number of seconds or None, got {max_seconds!r}"
-        )
+    check_budget(max_expanded, max_seconds)
     target = np.asarray(target, dtype=np.float64)
-    arm = tank.arm
     h0 = min(float(tank.start_point[2]) if start_height is None else float(start_height), 20.0)
-    reasons: list[str] = []
-    best: MotionPlan | None = None
-    best_deviation = float("inf")  # the largest FTL deviation of best [cm]
-    used = 0  # candidate sections evaluated by the searches so far
-    for settings in variants or SEARCH_VARIANTS:
-        if used >= max_expanded:
-            reasons.append(f"the work budget of {max_expanded:,} candidate sections ran out")
-            break
-        guard = None if max_seconds is None else max_seconds - (time.perf_counter() - start)
-        knobs = replace(
-            settings,
-            margin=margin,
-            max_expanded=min(settings.max_expanded, max_expanded - used),
-            max_seconds=_tighter(settings.max_seconds, guard),
-        )
-        try:
-            outcome = search_route(tank, target, cells, knobs, arm, prefix)
-        except PlanningTimeout as exc:
-            return _timed_out(target, margin, arm.section_length, start, str(exc))
-        used += outcome.expanded
-        found = outcome.result
-        if found is None:
-            reasons.append(str(outcome.reason))
-            if "closer than" in str(outcome.reason):
-                break
-            continue
-        deployed = _deploy(tank, target, cells, margin, found, h0)
-        if isinstance(deployed, str):
-            reasons.append(deployed)
-            continue
-        plan, deviation = deployed
-        if best is None or deviation < best_deviation:
-            best, best_deviation = plan, deviation
-        if best_deviation <= DEVIATION_GOAL:
-            break
+    tried = _Tries(tank, target, cells, margin, h0, prefix, start)
+    try:
+        best, reasons, used = tried.run(variants or SEARCH_VARIANTS, max_expanded, max_seconds)
+    except PlanningTimeout as exc:
+        return _incomplete(target, margin, tank.arm.section_length, start, str(exc), True)
     if best is not None:
         best.seconds, best.expanded = time.perf_counter() - start, used
         return best
-    plan = _unreachable(target, margin, arm.section_length, start, reasons)
+    why = f"Cannot reach the target with a margin of {margin:g} cm: "
+    plan = _incomplete(
+        target, margin, tank.arm.section_length, start, why + "; ".join(dict.fromkeys(reasons))
+    )
     plan.expanded = used
     return plan
 
 
-def _tighter(a: float | None, b: float | None) -> float | None:
-    """The smaller of two optional wall-clock guards [s] (None: no guard); at least 1 ms."""
-    if a is None or b is None:
-        return a if b is None else max(b, 1e-3)
-    return max(min(a, b), 1e-3)
+@dataclass(frozen=True)
+class _Tries:
+    """One :func:`plan_motion` call's problem, and the clock it started."""
+
+    tank: Tank
+    target: NDArray[np.float64]
+    cells: Sequence[Sequence[int]] | None
+    margin: float
+    h0: float
+    prefix: Route | None
+    start: float
+
+    def run(
+        self, variants: Sequence[RouteSettings], max_expanded: int, max_seconds: float | None
+    ) -> tuple[MotionPlan | None, list[str], int]:
+        """Try the settings in order within the budget: the best plan, the reasons, the work.
+
+        Raises:
+            PlanningTimeout: the wall-clock guard stopped a search.
+
+        """
+        tank, target, cells, margin = self.tank, self.target, self.cells, self.margin
+        reasons: list[str] = []
+        best: MotionPlan | None = None
+        best_deviation = float("inf")  # the largest FTL deviation of best [cm]
+        used = 0  # candidate sections evaluated by the searches so far
+        for settings in variants:
+            if used >= max_expanded:
+                reasons.append(f"the work budget of {max_expanded:,} candidate sections ran out")
+                break
+            knobs = _knobs(settings, margin, max_expanded - used, max_seconds, self.start)
+            outcome = search_route(tank, target, cells, knobs, tank.arm, self.prefix)
+            used += outcome.expanded
+            if outcome.result is None:
+                reasons.append(str(outcome.reason))
+                if "closer than" in str(outcome.reason):
+                    break
+                continue
+            deployed = _deploy(tank, target, cells, margin, outcome.result, self.h0)
+            if isinstance(deployed, str):
+                reasons.append(deployed)
+                continue
+            plan, deviation = deployed
+            if best is None or deviation < best_deviation:
+                best, best_deviation = plan, deviation
+            if best_deviation <= DEVIATION_GOAL:
+                break
+        return best, reasons, used
 
 
-def _timed_out(
+def _knobs(
+    settings: RouteSettings, margin: float, left: int, max_seconds: float | None, start: float
+) -> RouteSettings:
+    """``settings`` with the margin, at most ``left`` work, and what is left of the guard."""
+    guard = settings.max_seconds
+    if max_seconds is not None:
+        left_s = max(max_seconds - (time.perf_counter() - start), 1e-3)
+        guard = left_s if guard is None else min(guard, left_s)
+    return replace(
+        settings, margin=margin, max_expanded=min(settings.max_expanded, left), max_seconds=guard
+    )
+
+
+def _incomplete(
     target: NDArray[np.float64],
     margin: float,
     section_length: float,
     start: float,
-    why: str,
+    reason: str,
+    timed_out: bool = False,
 ) -> MotionPlan:
-    """The plan of a call the wall-clock guard stopped: incomplete, ``timed_out``, and why.
+    """The plan of a target no search setting reached, or of a call the guard stopped.
 
     A complete motion found before the guard is dropped too: which one would have won depends
     on the settings the guard cut off.
@@ -348,27 +338,8 @@ def _timed_out(
         section_length=section_length,
         complete=False,
         seconds=time.perf_counter() - start,
-        reason=why,
-        timed_out=True,
-    )
-
-
-def _unreachable(
-    target: NDArray[np.float64],
-    margin: float,
-    section_length: float,
-    start: float,
-    reasons: list[str],
-) -> MotionPlan:
-    """The incomplete plan that gives the (distinct) reasons no search setting reached."""
-    return MotionPlan(
-        target=target,
-        margin_cm=margin,
-        section_length=section_length,
-        complete=False,
-        seconds=time.perf_counter() - start,
-        reason="Cannot reach the target with a margin of "
-        f"{margin:g} cm: " + "; ".join(dict.fromkeys(reasons)),
+        reason=reason,
+        timed_out=timed_out,
     )
 
 

@@ -11,11 +11,8 @@ vector ``κ`` of one route section after another:
 - **Closing**: a state within reach of the target is closed exactly, re-checked and, if needed,
   pushed away from the tank (:mod:`aftir_rl.planning.ftl.closing`); the cheapest route wins.
 
-Units cm and rad; all candidates of one depth are evaluated in one batched call. The search's
-budget is work, not time: the candidate sections it may evaluate (``max_expanded``), so that a
-route is the same on any machine under any load; a wall-clock guard (``max_seconds``, off by
-default) only stops a runaway search, with :class:`~aftir_rl.core.errors.PlanningTimeout`. The
-costs and rules in full: docs/design.md §7.3.
+Units cm and rad; all candidates of one depth are evaluated in one batched call; the budget is
+work, not time (:mod:`aftir_rl.planning.ftl.search`). The costs and rules: docs/design.md §7.3.
 """
 
 from __future__ import annotations
@@ -23,13 +20,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.collision import point_clearance
-from aftir_rl.core.errors import ConfigError, PlanningError, PlanningTimeout
+from aftir_rl.core.errors import PlanningError, PlanningTimeout
 from aftir_rl.core.kernel import KernelTank
 from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.kernel.sections import extend
@@ -39,6 +36,7 @@ from aftir_rl.planning.ftl.closing import close_batch, push_away, route_clearanc
 from aftir_rl.planning.ftl.guide import NEIGHBOURS as NEIGHBOURS  # for aftir_rl.envs.ftl.fields
 from aftir_rl.planning.ftl.guide import GuideField, corridor, guide_field
 from aftir_rl.planning.ftl.model import Route, kappa_to_angles
+from aftir_rl.planning.ftl.search import RouteOutcome, RouteResult, RouteSettings, check_budget
 
 __all__ = [
     "RouteSettings",
@@ -48,92 +46,12 @@ __all__ = [
     "plan_route",
     "search_route",
     "route_clearance",
-    "MAX_EXPANDED",
 ]
 
 
 #: Surface clearance [cm] beyond the margin below which the search's clearance cost uses the
 #: exact distance; farther samples use the clearance grid's value (within its slack).
 EXACT_RANGE = 3.0
-
-#: Default work budget of one :func:`plan_route` call: candidate sections evaluated, both
-#: corridors together. Above the most a search can evaluate on a 12-section arm with the widest
-#: setting of :data:`~aftir_rl.planning.ftl.plan.SEARCH_VARIANTS` (2 corridors x 25 moves x
-#: (8 leads + 11 depths x 800 states) = 440,400), so it never cuts such a search short; on
-#: the reference tank's 4 targets and 300 random ones (150 a bay) a call evaluated at most
-#: 104,600 (median per target, all settings tried: 22,200).
-MAX_EXPANDED = 500_000
-
-
-@dataclass(frozen=True)
-class RouteSettings:
-    """Knobs of the route search (defaults measured on the reference tank, see docs/benchmarks.md).
-
-    Attributes:
-        margin: clearance the arm's surface keeps from everything [cm].
-        slack: extra clearance asked of the route, for the deviation between FTL stages [cm].
-        beam_width: states kept per depth.
-        max_change: largest change of ``κ`` between neighbouring sections [rad].
-        leads: straight travel above the floor before the first bend [cm]; negative: the
-            first bend starts inside the panel's guide (its rim is checked like any surface).
-        corridor: cells the learned path is grown by to make the corridor.
-        clearance_weight: weight of ``∫ ds / (clearance − margin)``.
-        change_weight: weight of ``Σ |Δκ|²·l``.
-        samples: backbone samples per section in the search.
-        max_expanded: work budget of one :func:`plan_route` call, both corridors together:
-            the candidate sections it may evaluate (a depth that would pass it is not
-            expanded; the search keeps what it found). Work, not time, so that the route is the
-            same on any machine under any load.
-        max_seconds: a wall-clock guard [s] on one call, or None (the default: none). Past it
-            the search raises :class:`~aftir_rl.core.errors.PlanningTimeout` (never "no route").
-        bin_cm, bin_heading: the beam keeps the best state per cell of this size [cm] and
-            heading bin [rad], so that it stays diverse.
-        closings: beam states per depth that are tried for closing on the target.
-        lead_shift: how far [cm] a closing may move the lead of a route the beam has built.
-
-    """
-
-    margin: float = 1.0
-    slack: float = 1.5
-    beam_width: int = 160
-    max_change: float = 0.75
-    leads: tuple[float, ...] = (-20.0, -10.0, 0.0, 15.0, 30.0)
-    corridor: int = 2
-    clearance_weight: float = 4.0
-    change_weight: float = 20.0
-    samples: int = 10
-    max_expanded: int = MAX_EXPANDED
-    max_seconds: float | None = None
-    bin_cm: float = 12.0
-    closings: int = 10
-    lead_shift: float = 0.0
-    bin_heading: float = 0.5
-
-
-@dataclass
-class RouteResult:
-    """A planned route and what the search saw.
-
-    Attributes:
-        route: the route (its end is the target).
-        n_sections: arm sections that deploy it.
-        clearance_cm: smallest clearance of the route's body (surface, radius included) [cm].
-        cost: the search's cost of the route.
-        corridor: ``"learned path"`` or ``"whole tank"``: where the guide field came from.
-        seconds: planning time [s].
-        expanded: candidate sections evaluated, both corridors together (the work that
-            ``max_expanded`` bounds).
-
-    """
-
-    route: Route
-    n_sections: int
-    clearance_cm: float
-    cost: float
-    corridor: str
-    seconds: float
-    expanded: int = 0
-    notes: list[str] = field(default_factory=list)
 
 
 def _changes(max_change: float) -> NDArray[np.float64]:
@@ -177,22 +95,6 @@ def plan_route(
     return outcome.result
 
 
-@dataclass(frozen=True)
-class RouteOutcome:
-    """What :func:`search_route` did: the route or why none, and the work it took.
-
-    Attributes:
-        result: the route, or None.
-        expanded: candidate sections evaluated, both corridors together.
-        reason: why there is no route (None when there is one).
-
-    """
-
-    result: RouteResult | None
-    expanded: int
-    reason: str | None = None
-
-
 def search_route(
     tank: Tank,
     target: ArrayLike,
@@ -209,15 +111,7 @@ def search_route(
 
     """
     settings = settings or RouteSettings()
-    if settings.max_expanded < 1:
-        raise ConfigError(
-            f"max_expanded must be 1 candidate section or more, got {settings.max_expanded!r}"
-        )
-    if settings.max_seconds is not None and not 0 < settings.max_seconds < math.inf:
-        raise ConfigError(
-            f"max_seconds must be a positive number of seconds or None, got "
-            f"{settings.max_seconds!r}"
-        )
+    check_budget(settings.max_expanded, settings.max_seconds)
     arm = arm or tank.arm
     target = np.asarray(target, dtype=np.float64)
     start = time.perf_counter()
@@ -225,12 +119,8 @@ def search_route(
     tip_clear = float(point_clearance(tank, target[None])[0])
     if tip_clear < need:
         where = f"{tip_clear:.2f} cm from the tank" if tip_clear >= 0 else "inside a solid or wall"
-        return RouteOutcome(
-            None,
-            0,
-            f"it lies {where}, closer than the arm's radius {arm.radius:g} cm plus the margin "
-            f"{settings.margin:g} cm",
-        )
+        why = f"it lies {where}, closer than the arm's radius {arm.radius:g} cm plus the margin"
+        return RouteOutcome(None, 0, f"{why} {settings.margin:g} cm")
     attempts: list[tuple[str, NDArray[np.bool_] | None]] = []
     if cells is not None and tank.cell_size is not None:
         attempts.append(("learned path", corridor(tank, cells, settings.corridor)))
@@ -251,19 +141,21 @@ def search_route(
             result.seconds = time.perf_counter() - start
             result.expanded = used
             return RouteOutcome(result, used)
-        if spent:
-            notes.append(
-                f"its work budget of {settings.max_expanded:,} candidate sections ran out "
-                f"in the {name} corridor"
-            )
-        else:
-            notes.append(f"no route in the {name} corridor")
+        spent_note = f"its work budget of {settings.max_expanded:,} candidate sections ran out"
+        notes.append(
+            f"{spent_note} in the {name} corridor" if spent else f"no route in the {name} corridor"
+        )
+    return RouteOutcome(None, used, _no_route(settings.margin, notes))
+
+
+def _no_route(margin: float, notes: list[str]) -> str:
+    """Why a search found no route, from each corridor's note."""
     what = (
         "no follow-the-leader route keeps the margin"
         if all(n.startswith("no route") for n in notes)
         else "the search found no follow-the-leader route keeping the margin"
     )
-    return RouteOutcome(None, used, f"{what} of {settings.margin:g} cm ({'; '.join(notes)})")
+    return f"{what} of {margin:g} cm ({'; '.join(notes)})"
 
 
 @dataclass(frozen=True)
