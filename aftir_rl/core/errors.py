@@ -40,5 +40,13 @@ class PlanningError(AftirError, ValueError):
     """A planner found no valid posture; the message starts "Cannot reach the target: "."""
 
 
+class PlanningTimeout(PlanningError):
+    """A planner ran past its wall-clock guard before its work budget was spent.
+
+    Not a verdict on the target: the same call on an idler machine may find a route. The
+    message starts "Planning timed out: ".
+    """
+
+
 class MissingExtraError(AftirError, ImportError):
     """An optional dependency is not installed; the message names the extra that brings it."""

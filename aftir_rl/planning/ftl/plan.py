@@ -7,6 +7,9 @@ the search: every entry's backbone, sampled 2.5 cm apart, must keep the margin f
 (entries are less than 1 cm of backbone movement apart). A route whose deployment misses the margin
 is replaced by the next search setting; a target that no setting reaches is ``complete: false`` with
 the reason.
+
+The settings are tried in a fixed order within one work budget
+(:mod:`aftir_rl.planning.ftl.search`), so a plan is the same on any machine under any load.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from aftir_rl.core.actuation import ActuatorLimits
 from aftir_rl.core.collision import point_clearance
 from aftir_rl.core.config import DEFAULT_MARGIN
-from aftir_rl.core.errors import AftirError, PlanningError
+from aftir_rl.core.errors import AftirError, PlanningTimeout
 from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.kernel.sections import postures_min_clearance
 from aftir_rl.core.tank import Tank
@@ -33,7 +36,14 @@ from aftir_rl.planning.ftl.model import (
     ftl_deviation,
     ftl_motion,
 )
-from aftir_rl.planning.ftl.route import RouteResult, RouteSettings, plan_route
+from aftir_rl.planning.ftl.route import RouteResult, RouteSettings, search_route
+from aftir_rl.planning.ftl.search import (
+    LAST_RESORTS,
+    MAIN_VARIANTS,
+    MAX_EXPANDED_TOTAL,
+    SEARCH_VARIANTS,
+    check_budget,
+)
 from aftir_rl.planning.timing import TimedMotion, time_motion
 
 __all__ = [
@@ -46,38 +56,8 @@ __all__ = [
     "SEARCH_VARIANTS",
     "MAIN_VARIANTS",
     "LAST_RESORTS",
+    "MAX_EXPANDED_TOTAL",
 ]
-
-_FINE = RouteSettings(beam_width=800, bin_cm=4.0, bin_heading=0.2, slack=0.5, change_weight=5.0)
-_DEEP_LEADS = (-40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0)
-
-#: Route-search settings tried in turn (the margin is set per call): the first whose motion
-#: keeps the margin and the deviation goal wins; otherwise the complete one of least deviation.
-#: :data:`LAST_RESORTS` follow them.
-MAIN_VARIANTS: tuple[RouteSettings, ...] = (
-    RouteSettings(clearance_weight=1.0, change_weight=20.0),
-    RouteSettings(clearance_weight=1.0, change_weight=40.0, max_change=0.5),
-    RouteSettings(clearance_weight=1.0, change_weight=5.0),
-    RouteSettings(clearance_weight=0.5, change_weight=5.0, beam_width=250, max_change=1.0),
-    RouteSettings(
-        clearance_weight=1.0, change_weight=20.0, beam_width=400, bin_cm=6.0, bin_heading=0.3
-    ),
-    # more room for the deviation between stages, for routes whose deployment grazes
-    RouteSettings(clearance_weight=1.0, change_weight=20.0, slack=3.0),
-    RouteSettings(clearance_weight=2.0, change_weight=40.0, slack=3.0, max_change=0.5),
-)
-
-#: The last resorts: a wider, finer beam with sharper turns for tight spots' routes; the first
-#: and last also bend deeper in the panel's guide (the arm leaves the panel at a slant, for
-#: targets low and beside it), the second moves the lead when closing.
-LAST_RESORTS: tuple[RouteSettings, ...] = (
-    replace(_FINE, max_change=1.2, leads=_DEEP_LEADS),
-    replace(_FINE, max_change=1.2, lead_shift=15.0, closings=30),
-    replace(_FINE, max_change=1.5, leads=_DEEP_LEADS),
-)
-
-#: Every setting :func:`plan_motion` tries by default.
-SEARCH_VARIANTS = MAIN_VARIANTS + LAST_RESORTS
 
 #: Largest follow-the-leader deviation [cm] a motion should keep (the published FTL anchors:
 #: about 2% of the shape); a motion above it is kept only when no search setting does better.
@@ -86,7 +66,12 @@ DEVIATION_GOAL = 2.5
 
 @dataclass
 class MotionPlan:
-    """The result of :func:`plan_motion` (see ``to_json`` for the file contract)."""
+    """The result of :func:`plan_motion` (see ``to_json`` for the file contract).
+
+    ``timed_out``: the wall-clock guard stopped the planning (``complete`` is then False and
+    says nothing about the target). ``expanded``: candidate sections the route searches
+    evaluated, all settings tried together (the work :data:`MAX_EXPANDED_TOTAL` bounds).
+    """
 
     target: NDArray[np.float64]
     margin_cm: float
@@ -95,6 +80,8 @@ class MotionPlan:
     seconds: float
     method: str = "ftl"
     reason: str | None = None
+    timed_out: bool = False
+    expanded: int = 0
     motion: FTLMotion | None = None
     waypoint_index: list[int] = field(default_factory=list)
     min_clearance_cm: float | None = None
@@ -142,6 +129,8 @@ class MotionPlan:
         }
         if self.reason is not None:
             out["reason"] = self.reason
+        if self.timed_out:
+            out["timed_out"] = True
         if self.motion is not None:
             out.update(
                 n_sections=self.motion.n_sections,
@@ -219,6 +208,8 @@ def plan_motion(
     start_height: float | None = None,
     prefix: Route | None = None,
     variants: Sequence[RouteSettings] = (),
+    max_expanded: int = MAX_EXPANDED_TOTAL,
+    max_seconds: float | None = None,
 ) -> MotionPlan:
     """Plan, deploy and check a follow-the-leader motion from the panel to ``target`` [cm].
 
@@ -230,59 +221,124 @@ def plan_motion(
         start_height: the tip's height above the floor at the start (default: the tank's start
             point, at most 20 cm).
         prefix: a route to continue, unchanged (:func:`~aftir_rl.planning.ftl.route.plan_route`).
-        variants: the route-search settings to try (default :data:`SEARCH_VARIANTS`).
+        variants: the route-search settings to try, in order (default :data:`SEARCH_VARIANTS`).
+        max_expanded: the work budget of the whole call (candidate sections evaluated, all
+            searches together); each setting gets at most its own ``max_expanded`` and what
+            is left of this.
+        max_seconds: a wall-clock guard [s] on the whole call, or None (none).
 
     Returns:
         A :class:`MotionPlan`; ``complete`` is False, with ``reason``, when no motion keeps the
-        margin.
+        margin within the budget, and ``timed_out`` too when the guard stopped it.
+
+    Raises:
+        ConfigError: ``max_expanded`` or ``max_seconds`` is not a budget.
 
     """
     start = time.perf_counter()
+    check_budget(max_expanded, max_seconds)
     target = np.asarray(target, dtype=np.float64)
-    arm = tank.arm
     h0 = min(float(tank.start_point[2]) if start_height is None else float(start_height), 20.0)
-    reasons: list[str] = []
-    best: MotionPlan | None = None
-    best_deviation = float("inf")  # the largest FTL deviation of best [cm]
-    for settings in variants or SEARCH_VARIANTS:
-        try:
-            found = plan_route(tank, target, cells, replace(settings, margin=margin), arm, prefix)
-        except PlanningError as exc:
-            reasons.append(str(exc).removeprefix("Cannot reach the target: "))
-            if "closer than" in str(exc):
-                break
-            continue
-        deployed = _deploy(tank, target, cells, margin, found, h0)
-        if isinstance(deployed, str):
-            reasons.append(deployed)
-            continue
-        plan, deviation = deployed
-        if best is None or deviation < best_deviation:
-            best, best_deviation = plan, deviation
-        if best_deviation <= DEVIATION_GOAL:
-            break
+    tried = _Tries(tank, target, cells, margin, h0, prefix, start)
+    try:
+        best, reasons, used = tried.run(variants or SEARCH_VARIANTS, max_expanded, max_seconds)
+    except PlanningTimeout as exc:
+        return _incomplete(target, margin, tank.arm.section_length, start, str(exc), True)
     if best is not None:
-        best.seconds = time.perf_counter() - start
+        best.seconds, best.expanded = time.perf_counter() - start, used
         return best
-    return _unreachable(target, margin, arm.section_length, start, reasons)
+    why = f"Cannot reach the target with a margin of {margin:g} cm: "
+    plan = _incomplete(
+        target, margin, tank.arm.section_length, start, why + "; ".join(dict.fromkeys(reasons))
+    )
+    plan.expanded = used
+    return plan
 
 
-def _unreachable(
+@dataclass(frozen=True)
+class _Tries:
+    """One :func:`plan_motion` call's problem, and the clock it started."""
+
+    tank: Tank
+    target: NDArray[np.float64]
+    cells: Sequence[Sequence[int]] | None
+    margin: float
+    h0: float
+    prefix: Route | None
+    start: float
+
+    def run(
+        self, variants: Sequence[RouteSettings], max_expanded: int, max_seconds: float | None
+    ) -> tuple[MotionPlan | None, list[str], int]:
+        """Try the settings in order within the budget: the best plan, the reasons, the work.
+
+        Raises:
+            PlanningTimeout: the wall-clock guard stopped a search.
+
+        """
+        tank, target, cells, margin = self.tank, self.target, self.cells, self.margin
+        reasons: list[str] = []
+        best: MotionPlan | None = None
+        best_deviation = float("inf")  # the largest FTL deviation of best [cm]
+        used = 0  # candidate sections evaluated by the searches so far
+        for settings in variants:
+            if used >= max_expanded:
+                reasons.append(f"the work budget of {max_expanded:,} candidate sections ran out")
+                break
+            knobs = _knobs(settings, margin, max_expanded - used, max_seconds, self.start)
+            outcome = search_route(tank, target, cells, knobs, tank.arm, self.prefix)
+            used += outcome.expanded
+            if outcome.result is None:
+                reasons.append(str(outcome.reason))
+                if "closer than" in str(outcome.reason):
+                    break
+                continue
+            deployed = _deploy(tank, target, cells, margin, outcome.result, self.h0)
+            if isinstance(deployed, str):
+                reasons.append(deployed)
+                continue
+            plan, deviation = deployed
+            if best is None or deviation < best_deviation:
+                best, best_deviation = plan, deviation
+            if best_deviation <= DEVIATION_GOAL:
+                break
+        return best, reasons, used
+
+
+def _knobs(
+    settings: RouteSettings, margin: float, left: int, max_seconds: float | None, start: float
+) -> RouteSettings:
+    """``settings`` with the margin, at most ``left`` work, and what is left of the guard."""
+    guard = settings.max_seconds
+    if max_seconds is not None:
+        left_s = max(max_seconds - (time.perf_counter() - start), 1e-3)
+        guard = left_s if guard is None else min(guard, left_s)
+    return replace(
+        settings, margin=margin, max_expanded=min(settings.max_expanded, left), max_seconds=guard
+    )
+
+
+def _incomplete(
     target: NDArray[np.float64],
     margin: float,
     section_length: float,
     start: float,
-    reasons: list[str],
+    reason: str,
+    timed_out: bool = False,
 ) -> MotionPlan:
-    """The incomplete plan that gives the (distinct) reasons no search setting reached."""
+    """The plan of a target no search setting reached, or of a call the guard stopped.
+
+    A complete motion found before the guard is dropped too: which one would have won depends
+    on the settings the guard cut off.
+    """
     return MotionPlan(
         target=target,
         margin_cm=margin,
         section_length=section_length,
         complete=False,
         seconds=time.perf_counter() - start,
-        reason="Cannot reach the target with a margin of "
-        f"{margin:g} cm: " + "; ".join(dict.fromkeys(reasons)),
+        reason=reason,
+        timed_out=timed_out,
     )
 
 

@@ -11,8 +11,8 @@ vector ``κ`` of one route section after another:
 - **Closing**: a state within reach of the target is closed exactly, re-checked and, if needed,
   pushed away from the tank (:mod:`aftir_rl.planning.ftl.closing`); the cheapest route wins.
 
-Units cm and rad; all candidates of one depth are evaluated in one batched call. The costs and
-rules in full: docs/design.md §7.3.
+Units cm and rad; all candidates of one depth are evaluated in one batched call; the budget is
+work, not time (:mod:`aftir_rl.planning.ftl.search`). The costs and rules: docs/design.md §7.3.
 """
 
 from __future__ import annotations
@@ -20,13 +20,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.collision import point_clearance
-from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.errors import PlanningError, PlanningTimeout
 from aftir_rl.core.kernel import KernelTank
 from aftir_rl.core.kernel.clearance import kernel_grid
 from aftir_rl.core.kernel.sections import extend
@@ -36,77 +36,22 @@ from aftir_rl.planning.ftl.closing import close_batch, push_away, route_clearanc
 from aftir_rl.planning.ftl.guide import NEIGHBOURS as NEIGHBOURS  # for aftir_rl.envs.ftl.fields
 from aftir_rl.planning.ftl.guide import GuideField, corridor, guide_field
 from aftir_rl.planning.ftl.model import Route, kappa_to_angles
+from aftir_rl.planning.ftl.search import RouteOutcome, RouteResult, RouteSettings, check_budget
 
-__all__ = ["RouteSettings", "RouteResult", "GuideField", "plan_route", "route_clearance"]
+__all__ = [
+    "RouteSettings",
+    "RouteResult",
+    "RouteOutcome",
+    "GuideField",
+    "plan_route",
+    "search_route",
+    "route_clearance",
+]
 
 
 #: Surface clearance [cm] beyond the margin below which the search's clearance cost uses the
 #: exact distance; farther samples use the clearance grid's value (within its slack).
 EXACT_RANGE = 3.0
-
-
-@dataclass(frozen=True)
-class RouteSettings:
-    """Knobs of the route search (defaults measured on the reference tank, see docs/benchmarks.md).
-
-    Attributes:
-        margin: clearance the arm's surface keeps from everything [cm].
-        slack: extra clearance asked of the route, for the deviation between FTL stages [cm].
-        beam_width: states kept per depth.
-        max_change: largest change of ``κ`` between neighbouring sections [rad].
-        leads: straight travel above the floor before the first bend [cm]; negative: the
-            first bend starts inside the panel's guide (its rim is checked like any surface).
-        corridor: cells the learned path is grown by to make the corridor.
-        clearance_weight: weight of ``∫ ds / (clearance − margin)``.
-        change_weight: weight of ``Σ |Δκ|²·l``.
-        samples: backbone samples per section in the search.
-        max_seconds: wall-clock budget of one search.
-        bin_cm, bin_heading: the beam keeps the best state per cell of this size [cm] and
-            heading bin [rad], so that it stays diverse.
-        closings: beam states per depth that are tried for closing on the target.
-        lead_shift: how far [cm] a closing may move the lead of a route the beam has built.
-
-    """
-
-    margin: float = 1.0
-    slack: float = 1.5
-    beam_width: int = 160
-    max_change: float = 0.75
-    leads: tuple[float, ...] = (-20.0, -10.0, 0.0, 15.0, 30.0)
-    corridor: int = 2
-    clearance_weight: float = 4.0
-    change_weight: float = 20.0
-    samples: int = 10
-    max_seconds: float = 20.0
-    bin_cm: float = 12.0
-    closings: int = 10
-    lead_shift: float = 0.0
-    bin_heading: float = 0.5
-
-
-@dataclass
-class RouteResult:
-    """A planned route and what the search saw.
-
-    Attributes:
-        route: the route (its end is the target).
-        n_sections: arm sections that deploy it.
-        clearance_cm: smallest clearance of the route's body (surface, radius included) [cm].
-        cost: the search's cost of the route.
-        corridor: ``"learned path"`` or ``"whole tank"``: where the guide field came from.
-        seconds: planning time [s].
-        expanded: candidate sections evaluated.
-
-    """
-
-    route: Route
-    n_sections: int
-    clearance_cm: float
-    cost: float
-    corridor: str
-    seconds: float
-    expanded: int = 0
-    notes: list[str] = field(default_factory=list)
 
 
 def _changes(max_change: float) -> NDArray[np.float64]:
@@ -138,10 +83,35 @@ def plan_route(
             arm deployed along it reaches the target without retracting past its end).
 
     Raises:
-        PlanningError: no route keeps the margin (the message says why).
+        PlanningError: no route keeps the margin, or none was found within ``max_expanded``
+            (the message says which).
+        PlanningTimeout: the search ran past ``settings.max_seconds``.
+        ConfigError: ``max_expanded`` or ``max_seconds`` is not a budget.
+
+    """
+    outcome = search_route(tank, target, cells, settings, arm, prefix)
+    if outcome.result is None:
+        raise PlanningError(f"Cannot reach the target: {outcome.reason}")
+    return outcome.result
+
+
+def search_route(
+    tank: Tank,
+    target: ArrayLike,
+    cells: Sequence[Sequence[int]] | None = None,
+    settings: RouteSettings | None = None,
+    arm: ArmSpec | None = None,
+    prefix: Route | None = None,
+) -> RouteOutcome:
+    """:func:`plan_route`, with the work it took whether or not it found a route.
+
+    Raises:
+        PlanningTimeout: the search ran past ``settings.max_seconds``.
+        ConfigError: ``max_expanded`` or ``max_seconds`` is not a budget.
 
     """
     settings = settings or RouteSettings()
+    check_budget(settings.max_expanded, settings.max_seconds)
     arm = arm or tank.arm
     target = np.asarray(target, dtype=np.float64)
     start = time.perf_counter()
@@ -149,35 +119,51 @@ def plan_route(
     tip_clear = float(point_clearance(tank, target[None])[0])
     if tip_clear < need:
         where = f"{tip_clear:.2f} cm from the tank" if tip_clear >= 0 else "inside a solid or wall"
-        raise PlanningError(
-            f"Cannot reach the target: it lies {where}, closer than "
-            f"the arm's radius {arm.radius:g} cm plus the margin {settings.margin:g} cm"
-        )
+        why = f"it lies {where}, closer than the arm's radius {arm.radius:g} cm plus the margin"
+        return RouteOutcome(None, 0, f"{why} {settings.margin:g} cm")
     attempts: list[tuple[str, NDArray[np.bool_] | None]] = []
     if cells is not None and tank.cell_size is not None:
         attempts.append(("learned path", corridor(tank, cells, settings.corridor)))
     attempts.append(("whole tank", None))
     notes: list[str] = []
+    used = 0  # candidate sections evaluated so far, both corridors
     for name, allowed in attempts:
         guide = guide_field(tank, target, allowed)
-        result = _beam(
-            _Search(tank, arm, target, guide, settings, start, kernel_grid(tank), prefix)
+        budget = settings.max_expanded - used
+        search = _Search(
+            tank, arm, target, guide, settings, start, kernel_grid(tank), budget, prefix
         )
+        result, work, spent = _beam(search)
+        used += work
         if result is not None:
             result.corridor = name
             result.notes = notes
             result.seconds = time.perf_counter() - start
-            return result
-        notes.append(f"no route in the {name} corridor")
-    raise PlanningError(
-        "Cannot reach the target: no follow-the-leader route keeps the margin of "
-        f"{settings.margin:g} cm ({'; '.join(notes)})"
+            result.expanded = used
+            return RouteOutcome(result, used)
+        spent_note = f"its work budget of {settings.max_expanded:,} candidate sections ran out"
+        notes.append(
+            f"{spent_note} in the {name} corridor" if spent else f"no route in the {name} corridor"
+        )
+    return RouteOutcome(None, used, _no_route(settings.margin, notes))
+
+
+def _no_route(margin: float, notes: list[str]) -> str:
+    """Why a search found no route, from each corridor's note."""
+    what = (
+        "no follow-the-leader route keeps the margin"
+        if all(n.startswith("no route") for n in notes)
+        else "the search found no follow-the-leader route keeping the margin"
     )
+    return f"{what} of {margin:g} cm ({'; '.join(notes)})"
 
 
 @dataclass(frozen=True)
 class _Search:
-    """What every step of one beam search shares: the problem, its knobs, the clock, a prefix."""
+    """What every step of one beam search shares: the problem, its knobs, the clock, a prefix.
+
+    ``budget``: the candidate sections this search may still evaluate.
+    """
 
     tank: Tank
     arm: ArmSpec
@@ -186,6 +172,7 @@ class _Search:
     settings: RouteSettings
     start: float
     kernel_tank: KernelTank
+    budget: int
     prefix: Route | None = None
 
 
@@ -216,10 +203,11 @@ class _Candidates:
 _Best = tuple[float, Route, float]
 
 
-def _beam(search: _Search) -> RouteResult | None:
+def _beam(search: _Search) -> tuple[RouteResult | None, int, bool]:
     """Beam search over the sections' bending vectors, ranked by the search's guide.
 
-    Returns the cheapest closed route that keeps the clearance (``corridor`` left empty), or None.
+    Returns the cheapest closed route that keeps the clearance (``corridor`` left empty) or None,
+    the candidate sections evaluated, and whether the budget stopped the search.
     """
     arm, settings, prefix = search.arm, search.settings, search.prefix
     if prefix is None:
@@ -233,11 +221,11 @@ def _beam(search: _Search) -> RouteResult | None:
         end = forward_kinematics(prefix.lead, *kappa_to_angles(prefix.kappa), prefix.section_length)
         rot, pos = end[None, -1, :3, :3], end[None, -1, :3, 3]
     beam = _Beam(rot, pos, hist, leads.copy(), leads + hist.shape[1] * arm.section_length)
-    best, expanded = _search_depths(search, beam, best)
+    best, expanded, spent = _search_depths(search, beam, best)
     if best is None:
-        return None
+        return None, expanded, spent
     total, route, rc = best
-    return RouteResult(
+    found = RouteResult(
         route=route,
         n_sections=max(route.min_sections(), 1),
         clearance_cm=rc,
@@ -246,6 +234,7 @@ def _beam(search: _Search) -> RouteResult | None:
         seconds=time.perf_counter() - search.start,
         expanded=expanded,
     )
+    return found, expanded, spent
 
 
 def _keep(
@@ -303,14 +292,33 @@ def _close_near(search: _Search, leads: NDArray[np.float64]) -> _Best | None:
     return best
 
 
-def _search_depths(search: _Search, beam: _Beam, best: _Best | None) -> tuple[_Best | None, int]:
-    """Grow the beam a section a depth, closing promising states: the best, sections evaluated."""
+def _search_depths(
+    search: _Search, beam: _Beam, best: _Best | None
+) -> tuple[_Best | None, int, bool]:
+    """Grow the beam a section a depth, closing promising states.
+
+    Returns the best closed route, the candidate sections evaluated, and whether the budget
+    stopped the search (a depth that would pass ``search.budget`` is not expanded).
+
+    Raises:
+        PlanningTimeout: the call ran past ``max_seconds`` (checked before each depth).
+
+    """
     settings, expanded = search.settings, 0
     changes = _changes(settings.max_change)
     first = 0 if search.prefix is None else search.prefix.n_route_sections
     for depth in range(first, search.arm.max_sections):
-        if time.perf_counter() - search.start > settings.max_seconds or len(beam.cost) == 0:
+        if len(beam.cost) == 0:
             break
+        if expanded + len(beam.cost) * len(changes) > search.budget:
+            return best, expanded, True
+        elapsed = time.perf_counter() - search.start
+        if settings.max_seconds is not None and elapsed > settings.max_seconds:
+            raise PlanningTimeout(
+                f"Planning timed out: the route search passed its wall-clock guard of "
+                f"{settings.max_seconds:g} s ({elapsed:.1f} s, {expanded:,} candidate sections "
+                "evaluated in this corridor)"
+            )
         count, cand = _expand(search, beam, changes, depth)
         expanded += count
         if cand is None:
@@ -322,7 +330,7 @@ def _search_depths(search: _Search, beam: _Beam, best: _Best | None) -> tuple[_B
             break
         beam, togo = pruned
         best = _close_beam(search, beam, togo, depth, best)
-    return best, expanded
+    return best, expanded, False
 
 
 def _expand(
