@@ -17,6 +17,7 @@ import dataclasses
 import inspect
 import math
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,7 +54,8 @@ __all__ = [
     "check_hyperparameters",
     "parse_hyperparameters",
     "check_sb3_config",
-    "check_goal_settings",
+    "Origins",
+    "check_sb3_values",
     "sb3_config_from_run",
     "constructor_keys",
     "build_model",
@@ -120,6 +122,25 @@ class TrainConfig:
     progress_bar: bool = True
     demos: str | None = None
     bc_epochs: int = 20
+
+
+@dataclass(frozen=True)
+class Origins:
+    """Where the values of a config came from, for the one line that refuses one.
+
+    Attributes:
+        source: the file or option of every key that ``keys`` does not name.
+        keys: the source of each key (``n_envs``, ``hyperparameters.gamma``, ``env_kwargs.bay``)
+            that another source gave, in a config merged from several.
+
+    """
+
+    source: str
+    keys: Mapping[str, str] = field(default_factory=dict)
+
+    def of(self, key: str) -> str:
+        """The source of ``key``."""
+        return self.keys.get(key, self.source)
 
 
 def rollout_steps(algo: str, config: SB3Config) -> int:
@@ -262,15 +283,16 @@ def _check_net_arch(value: Any, where: str) -> None:
         layers(value, where)
 
 
-def check_hyperparameters(hyperparameters: dict[str, Any], algo: str, source: str) -> None:
+def check_hyperparameters(hyperparameters: dict[str, Any], algo: str, origins: Origins) -> None:
     """Check every value of a config's ``hyperparameters`` (``algo``: ``ppo``, ``sac``...).
 
     Raises:
-        ConfigError: naming ``source`` and the key.
+        ConfigError: naming the key and its source in ``origins``.
 
     """
     for key, value in hyperparameters.items():
-        _check_hyperparameter(key, value, algo, f"{source}: hyperparameters.{key}")
+        where = f"hyperparameters.{key}"
+        _check_hyperparameter(key, value, algo, f"{origins.of(where)}: {where}")
 
 
 def _check_hyperparameter(key: Any, value: Any, algo: str, where: str) -> None:
@@ -378,23 +400,35 @@ def check_sb3_config(config: SB3Config, algo: str, source: str) -> None:
 
     """
     bare = registered_env_id(config.env_id, source)
+    check_sb3_values(config, algo, bare, Origins(source))
+
+
+def check_sb3_values(config: SB3Config, algo: str, bare: str, origins: Origins) -> None:
+    """:func:`check_sb3_config` of a config whose env id is resolved already, to ``bare``.
+
+    Raises:
+        ConfigError: naming the key and its source in ``origins``.
+
+    """
     for key, (lo, hi) in _CONFIG_RANGES.items():
         if key == "n_envs" and bare in BATCHED_ENV_IDS:
             hi = MAX_BATCHED_ENVS  # rows of one numpy batch, not processes
-        check_range(getattr(config, key), lo, hi, f"{source}: {key}", integer=True)
+        check_range(getattr(config, key), lo, hi, f"{origins.of(key)}: {key}", integer=True)
     aliases = getattr(ALGORITHMS[algo], "policy_aliases", {})
     if config.policy not in aliases:
         raise ConfigError(
-            f"{source}: policy: {brief(config.policy)} is not a {algo.upper()} policy; use one of "
-            f"{', '.join(aliases)}"
+            f"{origins.of('policy')}: policy: {brief(config.policy)} is not a {algo.upper()} "
+            f"policy; use one of {', '.join(aliases)}"
         )
-    check_hyperparameters(config.hyperparameters, algo, source)
+    check_hyperparameters(config.hyperparameters, algo, origins)
     batch, steps = config.hyperparameters.get("batch_size"), config.hyperparameters.get("n_steps")
     if algo == "ppo" and steps is not None and steps * config.n_envs < 2:
-        raise ConfigError(f"{source}: hyperparameters.n_steps: n_steps * n_envs must exceed 1")
+        where = origins.of("hyperparameters.n_steps")
+        raise ConfigError(f"{where}: hyperparameters.n_steps: n_steps * n_envs must exceed 1")
     if algo == "ppo" and batch is not None and batch < 2:
-        raise ConfigError(f"{source}: hyperparameters.batch_size: must be at least 2 for PPO")
-    check_goal_settings(config, algo, source)
+        where = origins.of("hyperparameters.batch_size")
+        raise ConfigError(f"{where}: hyperparameters.batch_size: must be at least 2 for PPO")
+    _check_goal_settings(config, algo, bare, origins)
 
 
 def sb3_config_from_run(data: Any, source: str) -> tuple[str, SB3Config]:
@@ -459,14 +493,14 @@ GOAL_ENV_IDS = ("AFTIR-ArmFTL-v0",)
 HER_KWARGS = {"n_sampled_goal": 4, "goal_selection_strategy": "future", "copy_info_dict": True}
 
 
-def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:
+def _check_goal_settings(config: SB3Config, algo: str, bare: str, origins: Origins) -> None:
     """Check ``her`` and ``env_kwargs`` of a config (plain values of known keys only).
 
     Raises:
-        ConfigError: naming ``source`` and the key.
+        ConfigError: naming the key and its source in ``origins``.
 
     """
-    bare = config.env_id.removeprefix("aftir_rl:")
+    source = origins.of("her")
     if not isinstance(config.her, bool):
         raise ConfigError(f"{source}: her: expected true or false, got {brief(config.her)}")
     if config.her and (algo not in ("sac", "td3") or bare not in GOAL_ENV_IDS):
@@ -476,18 +510,20 @@ def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:
         )
     if not isinstance(config.env_kwargs, dict):
         raise ConfigError(
-            f"{source}: env_kwargs: expected a mapping, got {brief(config.env_kwargs)}"
+            f"{origins.of('env_kwargs')}: env_kwargs: expected a mapping, got "
+            f"{brief(config.env_kwargs)}"
         )
     for key in ("guide", "near_goal"):
         if config.her and config.env_kwargs.get(key) is True:
             raise ConfigError(
-                f"{source}: env_kwargs.{key}: the {key} columns observe the goal, which HER "
-                f"relabels; use {key} with PPO, or her without {key}"
+                f"{origins.of(f'env_kwargs.{key}')}: env_kwargs.{key}: the {key} columns observe "
+                f"the goal, which HER relabels; use {key} with PPO, or her without {key}"
             )
     if config.her:
-        _check_her_start(config, algo, bare, source)
+        _check_her_start(config, algo, bare, origins.of("hyperparameters.learning_starts"))
     allowed = ENV_KWARGS.get(bare, {})
     for key, value in config.env_kwargs.items():
+        source = origins.of(f"env_kwargs.{key}")
         if key == "tank" and bare in TANK_ENV_IDS:  # the command line's or a run's (not a file's)
             if not isinstance(value, str) or not 0 < len(value) <= 255:
                 raise ConfigError(f"{source}: env_kwargs.tank: unexpected value {brief(value)}")
