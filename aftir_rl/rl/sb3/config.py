@@ -6,9 +6,9 @@ the env-keyed hyperparameter files and the named configs) is checked by :func:`c
 ``hyperparameters`` go to the algorithm's constructor and are checked against its signature and
 against bounds (an unknown key or a value out of range is a
 :class:`~aftir_rl.core.errors.ConfigError` naming the file and the key), as is a run directory's
-``config.json`` (:func:`sb3_config_from_run`). :func:`build_model` makes the model of a checked
-config; :func:`check_hyperparameters` checks a config's ``hyperparameters`` against their bounds,
-:func:`check_range` one number.
+``config.json`` (:func:`sb3_config_from_run`). A config merged from several sources is checked
+once by :func:`check_sb3_values`, its :class:`Origins` naming the source of a refused value.
+:func:`build_model` makes the model of a checked config.
 """
 
 from __future__ import annotations

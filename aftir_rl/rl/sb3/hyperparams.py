@@ -11,7 +11,8 @@ its ``env_kwargs`` and ``hyperparameters`` merge key by key, and ``eval_freq`` a
 each over its ``config`` or its env's entry) is a curriculum, each stage resumed from the one
 before. ``--env-kwargs`` and ``--hyperparams`` give ``KEY:VALUE`` items, each value read as YAML
 (:func:`parse_key_values`). :func:`train_config` merges the command line, the files and a
-resumed run's ``config.json`` into one checked :class:`~aftir_rl.rl.sb3.config.TrainConfig`.
+resumed run's ``config.json`` into one :class:`~aftir_rl.rl.sb3.config.TrainConfig`: each
+stage's sources are merged first, the source of every key kept, then checked once.
 """
 
 from __future__ import annotations
