@@ -11,7 +11,7 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from aftir_rl.cli.args import (
     MAX_ENVS,
@@ -26,7 +26,9 @@ from aftir_rl.core.config import CONFIG_DIR
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.experiments.search_space import load_search_space
 from aftir_rl.experiments.tune import ALGOS, MAX_EVALUATIONS, MAX_TRIALS, run_sweep
-from aftir_rl.rl.common import DEFAULT_SB3_ENV_ID, check_env_id
+
+if TYPE_CHECKING:
+    from aftir_rl.rl.sb3.config import SB3Config
 
 __all__ = ["build_parser", "main"]
 
@@ -72,41 +74,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _base_config(args: argparse.Namespace) -> Any:
-    """The config every trial starts from: ``--config`` or ``--env``'s entry, with overrides."""
-    from aftir_rl.rl.sb3 import check_sb3_config, entry_config, load_sb3_config
+def _base_config(args: argparse.Namespace) -> SB3Config:
+    """The config every trial starts from: ``--config`` or ``--env``'s entry, with overrides.
 
-    if args.config is None:
-        config = entry_config(args.algo, args.env or DEFAULT_SB3_ENV_ID)
-    else:
-        config = load_sb3_config(args.config, args.algo)
-    for flag, value in (
-        ("--trials", args.trials),
-        ("--evaluations", args.evaluations),
-        ("--total-timesteps", args.total_timesteps),
-        ("--n-envs", args.n_envs),
-    ):
-        if value is not None and value < 1:
-            raise ConfigError(f"{flag} must be at least 1, got {value}")
-    if args.trials > MAX_TRIALS or args.evaluations > MAX_EVALUATIONS:
-        raise ConfigError(
-            f"--trials must be at most {MAX_TRIALS} and --evaluations at most {MAX_EVALUATIONS}"
-        )
-    changes: dict[str, Any] = {}
-    if args.env is not None:
-        changes["env_id"] = args.env
-    if args.total_timesteps is not None:
-        changes["total_timesteps"] = args.total_timesteps
-    if args.n_envs is not None:
-        changes["n_envs"] = args.n_envs
-    config = dataclasses.replace(config, **changes)
-    total = config.total_timesteps
-    config = dataclasses.replace(config, eval_freq=max(1, math.ceil(total / args.evaluations)))
-    check_sb3_config(config, args.algo, "the command line")
-    from aftir_rl.rl.sb3.config import SB3_ENV_IDS
+    Resolved and checked as ``aftir train`` resolves one (:func:`train_config`); its
+    ``eval_freq`` makes ``--evaluations`` evaluations of each trial (ASHA's rungs).
+    """
+    from aftir_rl.rl.sb3 import train_config
 
-    check_env_id(config.env_id, SB3_ENV_IDS, args.algo)
-    return config
+    numbers = {"total_timesteps": args.total_timesteps, "n_envs": args.n_envs}
+    run = train_config(args.algo, args.config, env=args.env, numbers=numbers)
+    if len(run.stages) != 1:
+        raise ConfigError(f"--config: {args.config} is a stage file; a sweep tunes one config")
+    (config,) = run.stages
+    # from 1 to total_timesteps: within eval_freq's bounds, as checked
+    every = max(1, math.ceil(config.total_timesteps / args.evaluations))
+    return dataclasses.replace(config, eval_freq=every)
 
 
 @cli

@@ -140,8 +140,7 @@ def load_search_space(path: str | os.PathLike[str], algo: str, base: Any) -> lis
         ConfigError: naming the file and the key.
 
     """
-    from aftir_rl.rl.sb3.checks import INTEGER_KEYS
-    from aftir_rl.rl.sb3.config import OBJECT_KEYS, check_sb3_config, constructor_keys
+    from aftir_rl.rl.sb3.config import INTEGER_KEYS, OBJECT_KEYS, check_sb3_config, constructor_keys
 
     path = find_config(path, "search_spaces")
     data = read_yaml(path)

@@ -182,3 +182,25 @@ def test_rl_zoo_trains_from_the_shipped_file(tmp_path, algo, params):
     run = tmp_path / algo / "AFTIR-ArmFTL-v0_1"
     assert "MultiInputPolicy" in (run / "AFTIR-ArmFTL-v0" / "config.yml").read_text()
     assert (run / "AFTIR-ArmFTL-v0.zip").is_file()
+
+
+def test_a_refused_value_names_the_source_that_gave_it(tmp_path):
+    """Each stage is checked once, merged; the message names the file or option of the value."""
+    from aftir_rl.rl.sb3 import train_config
+
+    named = _write(tmp_path, {"env_id": "AFTIR-ArmFTL-v0", "hyperparameters": {"gamma": 2}})
+    cases = [
+        ({"config": str(named)}, f"{named}: hyperparameters.gamma"),
+        ({"env": "AFTIR-ArmReach-v0", "hyperparams": ["n_epochs:0"]}, "--hyperparams: hyper"),
+        ({"env": "AFTIR-ArmReach-v0", "numbers": {"n_envs": 100}}, "--n-envs: n_envs"),
+        ({"env": "AFTIR-ArmReach-v0", "env_kwargs": ["bay:1"]}, "--env-kwargs: env_kwargs"),
+        # ppo_ftl's env replaced: the FTL entry's 128 envs are too many processes for Reach
+        ({"config": "ppo_ftl", "env": "AFTIR-ArmReach-v0"}, "/ppo.yml: AFTIR-ArmFTL-v0: n_envs"),
+    ]
+    for kwargs, says in cases:
+        with pytest.raises(ConfigError) as info:
+            train_config("ppo", **kwargs)
+        assert says in str(info.value), info.value
+    stages = _write(tmp_path, "stages:\n  - config: ppo_ftl\n    env_kwargs: {bay: x}\n")
+    with pytest.raises(ConfigError, match=r"stages\[0\]: env_kwargs.bay: unexpected value"):
+        load_curriculum(stages, "ppo")

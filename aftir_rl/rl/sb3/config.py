@@ -6,8 +6,9 @@ the env-keyed hyperparameter files and the named configs) is checked by :func:`c
 ``hyperparameters`` go to the algorithm's constructor and are checked against its signature and
 against bounds (an unknown key or a value out of range is a
 :class:`~aftir_rl.core.errors.ConfigError` naming the file and the key), as is a run directory's
-``config.json`` (:func:`sb3_config_from_run`). :func:`build_model` makes the model of a checked
-config. The bounds of the hyperparameters and their checks are :mod:`aftir_rl.rl.sb3.checks`'.
+``config.json`` (:func:`sb3_config_from_run`). A config merged from several sources is checked
+once by :func:`check_sb3_values`, its :class:`Origins` naming the source of a refused value.
+:func:`build_model` makes the model of a checked config.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import dataclasses
 import inspect
 import math
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,9 +36,6 @@ from aftir_rl.envs.ftl.spec import (
     STEER_MODES,
 )
 from aftir_rl.envs.registration import registered_env_id
-from aftir_rl.rl.sb3.checks import LINEAR_PREFIX as LINEAR_PREFIX
-from aftir_rl.rl.sb3.checks import OBJECT_KEYS, check_hyperparameters, check_range
-from aftir_rl.rl.sb3.checks import linear_start as linear_start
 
 __all__ = [
     "rollout_steps",
@@ -48,9 +47,15 @@ __all__ = [
     "SB3_ENV_IDS",
     "HER_KWARGS",
     "OBJECT_KEYS",
+    "INTEGER_KEYS",
+    "LINEAR_PREFIX",
+    "linear_start",
+    "check_range",
+    "check_hyperparameters",
     "parse_hyperparameters",
     "check_sb3_config",
-    "check_goal_settings",
+    "Origins",
+    "check_sb3_values",
     "sb3_config_from_run",
     "constructor_keys",
     "build_model",
@@ -119,6 +124,25 @@ class TrainConfig:
     bc_epochs: int = 20
 
 
+@dataclass(frozen=True)
+class Origins:
+    """Where the values of a config came from, for the one line that refuses one.
+
+    Attributes:
+        source: the file or option of every key that ``keys`` does not name.
+        keys: the source of each key (``n_envs``, ``hyperparameters.gamma``, ``env_kwargs.bay``)
+            that another source gave, in a config merged from several.
+
+    """
+
+    source: str
+    keys: Mapping[str, str] = field(default_factory=dict)
+
+    def of(self, key: str) -> str:
+        """The source of ``key``."""
+        return self.keys.get(key, self.source)
+
+
 def rollout_steps(algo: str, config: SB3Config) -> int:
     """The steps an update of ``algo`` collects: ``n_steps × n_envs`` for PPO, else ``n_envs``."""
     n_steps = int(config.hyperparameters.get("n_steps", 2048)) if algo == "ppo" else 1
@@ -151,6 +175,213 @@ def parse_hyperparameters(hyper: dict[str, Any], algo: str, source: str) -> dict
     return parsed
 
 
+# Bounds of what a config may ask for: each is far above what the shipped configs use, and keeps
+# the memory and time of building a model small (a replay buffer of 2e6 transitions of the arm
+# envs is about 0.5 GB).
+_INT_RANGES: dict[str, tuple[int, int]] = {
+    "n_steps": (1, 1_000_000),
+    "batch_size": (1, 1_000_000),
+    "n_epochs": (1, 1000),
+    "buffer_size": (1, 2_000_000),
+    "learning_starts": (0, 1_000_000_000),
+    "gradient_steps": (-1, 10_000),
+    "policy_delay": (1, 1000),
+    "target_update_interval": (1, 1_000_000),
+    "sde_sample_freq": (-1, 1_000_000),
+    "stats_window_size": (1, 100_000),
+}
+#: The hyperparameters that take integers (a search space must draw integers for them).
+INTEGER_KEYS = frozenset(_INT_RANGES)
+_FLOAT_RANGES: dict[str, tuple[float, float]] = {
+    "learning_rate": (1e-12, 10.0),
+    "gamma": (0.0, 1.0),
+    "gae_lambda": (0.0, 1.0),
+    "clip_range": (1e-12, 100.0),
+    "vf_coef": (0.0, 1e6),
+    "max_grad_norm": (1e-12, 1e9),
+    "tau": (0.0, 1.0),
+    "target_policy_noise": (0.0, 1e3),
+    "target_noise_clip": (0.0, 1e3),
+}
+_OPTIONAL_FLOATS: dict[str, tuple[float, float]] = {
+    "clip_range_vf": (1e-12, 1e6),
+    "target_kl": (1e-12, 1e6),
+}
+_BOOLS = ("normalize_advantage", "use_sde", "use_sde_at_warmup", "optimize_memory_usage")
+#: Keys a YAML config cannot give: they take Python objects (classes, noise processes).
+OBJECT_KEYS = (
+    "rollout_buffer_class",
+    "rollout_buffer_kwargs",
+    "replay_buffer_class",
+    "replay_buffer_kwargs",
+    "action_noise",
+)
+_POLICY_KWARGS = {
+    "net_arch",
+    "log_std_init",
+    "ortho_init",
+    "n_critics",
+    "share_features_extractor",
+    "squash_output",
+    "full_std",
+    "use_expln",
+}
+_POLICY_BOOLS = ("ortho_init", "share_features_extractor", "squash_output", "full_std", "use_expln")
+
+
+#: Prefix of a learning rate that falls linearly to 0 over a run (RL Zoo's ``lin_3e-4``). With
+#: ``--resume``, SB3's progress counts every step of the model: the rate starts the resumed stage
+#: at ``start · (1 − resumed / (resumed + stage))`` and reaches 0 at its end.
+LINEAR_PREFIX = "lin_"
+
+
+def linear_start(value: Any) -> float | None:
+    """The starting value of a ``lin_<number>`` schedule (NaN if not a number), else None."""
+    if not (isinstance(value, str) and value.startswith(LINEAR_PREFIX)):
+        return None
+    try:
+        return float(value[len(LINEAR_PREFIX) :])
+    except ValueError:
+        return math.nan
+
+
+def check_range(value: Any, lo: float, hi: float, where: str, integer: bool) -> None:
+    """Check that ``value`` is a number (an integer if ``integer``) from ``lo`` to ``hi``.
+
+    Raises:
+        ConfigError: naming ``where``.
+
+    """
+    kind = "an integer" if integer else "a number"
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(f"{where}: expected {kind} from {lo:g} to {hi:g}, got {brief(value)}")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if integer and math.isfinite(number) and not number.is_integer():
+        raise ConfigError(f"{where}: expected {kind} from {lo:g} to {hi:g}, got {brief(value)}")
+    if not (math.isfinite(number) and lo <= number <= hi):
+        raise ConfigError(f"{where}: expected {kind} from {lo:g} to {hi:g}, got {brief(value)}")
+
+
+def _check_net_arch(value: Any, where: str) -> None:
+    """Check ``net_arch``: a list of layer widths, or one per ``pi``, ``vf`` and ``qf``."""
+
+    def layers(v: Any, w: str) -> None:
+        if not isinstance(v, list) or len(v) > 8:
+            raise ConfigError(f"{w}: expected a list of at most 8 layer widths, got {brief(v)}")
+        for i, width in enumerate(v):
+            check_range(width, 1, 4096, f"{w}[{i}]", integer=True)
+
+    if isinstance(value, dict):
+        for key, v in value.items():
+            if key not in ("pi", "vf", "qf"):
+                raise ConfigError(f"{where}: unknown key {brief(key)}; allowed keys are pi, qf, vf")
+            layers(v, f"{where}.{key}")
+    else:
+        layers(value, where)
+
+
+def check_hyperparameters(hyperparameters: dict[str, Any], algo: str, origins: Origins) -> None:
+    """Check every value of a config's ``hyperparameters`` (``algo``: ``ppo``, ``sac``...).
+
+    Raises:
+        ConfigError: naming the key and its source in ``origins``.
+
+    """
+    for key, value in hyperparameters.items():
+        where = f"hyperparameters.{key}"
+        _check_hyperparameter(key, value, algo, f"{origins.of(where)}: {where}")
+
+
+def _check_hyperparameter(key: Any, value: Any, algo: str, where: str) -> None:
+    """Check the value of one hyperparameter against its bounds or type.
+
+    Raises:
+        ConfigError: naming ``where``.
+
+    """
+    if key in _INT_RANGES:
+        check_range(value, *_INT_RANGES[key], where, integer=True)
+    elif key == "learning_rate" and isinstance(value, str):
+        _check_linear_rate(value, where)
+    elif key in _FLOAT_RANGES:
+        check_range(value, *_FLOAT_RANGES[key], where, integer=False)
+    elif key in _OPTIONAL_FLOATS:
+        if value is not None:
+            check_range(value, *_OPTIONAL_FLOATS[key], where, integer=False)
+    elif key in _BOOLS:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true or false, got {brief(value)}")
+    elif key in OBJECT_KEYS:
+        raise ConfigError(f"{where}: takes a Python object, which a config file cannot give")
+    elif key in ("ent_coef", "target_entropy"):
+        _check_entropy(key, value, algo, where)
+    elif key == "train_freq":
+        _check_train_freq(value, where)
+    elif key == "device":
+        if value not in ("auto", "cpu", "cuda"):
+            raise ConfigError(f"{where}: expected auto, cpu or cuda, got {brief(value)}")
+    elif key == "policy_kwargs":
+        _check_policy_kwargs(value, where)
+    elif not (value is None or isinstance(value, (bool, int, float, str))):
+        raise ConfigError(f"{where}: expected a plain value, got {brief(value)}")
+
+
+def _check_linear_rate(value: str, where: str) -> None:
+    """Check a learning rate given as text: ``lin_<number>`` within the learning rate's bounds."""
+    start, (low, high) = linear_start(value), _FLOAT_RANGES["learning_rate"]
+    if start is None or not (math.isfinite(start) and low <= start <= high):
+        raise ConfigError(
+            f"{where}: expected a number or {LINEAR_PREFIX}<number> from {low:g} to "
+            f"{high:g} (falling linearly to 0), got {brief(value)}"
+        )
+
+
+def _check_entropy(key: str, value: Any, algo: str, where: str) -> None:
+    """Check ``ent_coef`` or ``target_entropy``: a number, or ``auto``/``auto_<number>`` (SAC)."""
+    auto = isinstance(value, str) and (value == "auto" or value.startswith("auto_"))
+    if not (auto and algo == "sac"):
+        check_range(value, -1e6 if key == "target_entropy" else 0.0, 1e6, where, False)
+    elif value.startswith("auto_"):
+        try:
+            float(value[5:])
+        except ValueError:
+            raise ConfigError(f"{where}: expected 'auto' or 'auto_<number>'") from None
+
+
+def _check_train_freq(value: Any, where: str) -> None:
+    """Check ``train_freq``: ``N`` or ``[N, step|episode]``."""
+    ok = isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 10**6
+    if isinstance(value, list) and len(value) == 2:
+        ok = value[1] in ("step", "episode")
+        check_range(value[0], 1, 10**6, f"{where}[0]", integer=True)
+    if not ok:
+        raise ConfigError(f"{where}: expected N or [N, step|episode], got {brief(value)}")
+
+
+def _check_policy_kwargs(value: Any, where: str) -> None:
+    """Check ``policy_kwargs``: known keys only, each within its bounds."""
+    if not isinstance(value, dict):
+        raise ConfigError(f"{where}: expected a mapping, got {brief(value)}")
+    for k, v in value.items():
+        if k not in _POLICY_KWARGS:
+            raise ConfigError(
+                f"{where}: unknown or unsupported key {brief(k)}; allowed keys are "
+                f"{', '.join(sorted(_POLICY_KWARGS))}"
+            )
+        if k == "net_arch":
+            _check_net_arch(v, f"{where}.net_arch")
+        elif k in _POLICY_BOOLS:
+            if not isinstance(v, bool):
+                raise ConfigError(f"{where}.{k}: expected true or false, got {brief(v)}")
+        elif k == "n_critics":
+            check_range(v, 1, 10, f"{where}.{k}", integer=True)
+        else:
+            check_range(v, -20, 20, f"{where}.{k}", integer=False)
+
+
 #: Bounds of the fields of :class:`SB3Config`.
 _CONFIG_RANGES = {
     "total_timesteps": (0, 1_000_000_000),
@@ -169,23 +400,35 @@ def check_sb3_config(config: SB3Config, algo: str, source: str) -> None:
 
     """
     bare = registered_env_id(config.env_id, source)
+    check_sb3_values(config, algo, bare, Origins(source))
+
+
+def check_sb3_values(config: SB3Config, algo: str, bare: str, origins: Origins) -> None:
+    """:func:`check_sb3_config` of a config whose env id is resolved already, to ``bare``.
+
+    Raises:
+        ConfigError: naming the key and its source in ``origins``.
+
+    """
     for key, (lo, hi) in _CONFIG_RANGES.items():
         if key == "n_envs" and bare in BATCHED_ENV_IDS:
             hi = MAX_BATCHED_ENVS  # rows of one numpy batch, not processes
-        check_range(getattr(config, key), lo, hi, f"{source}: {key}", integer=True)
+        check_range(getattr(config, key), lo, hi, f"{origins.of(key)}: {key}", integer=True)
     aliases = getattr(ALGORITHMS[algo], "policy_aliases", {})
     if config.policy not in aliases:
         raise ConfigError(
-            f"{source}: policy: {brief(config.policy)} is not a {algo.upper()} policy; use one of "
-            f"{', '.join(aliases)}"
+            f"{origins.of('policy')}: policy: {brief(config.policy)} is not a {algo.upper()} "
+            f"policy; use one of {', '.join(aliases)}"
         )
-    check_hyperparameters(config.hyperparameters, algo, source)
+    check_hyperparameters(config.hyperparameters, algo, origins)
     batch, steps = config.hyperparameters.get("batch_size"), config.hyperparameters.get("n_steps")
     if algo == "ppo" and steps is not None and steps * config.n_envs < 2:
-        raise ConfigError(f"{source}: hyperparameters.n_steps: n_steps * n_envs must exceed 1")
+        where = origins.of("hyperparameters.n_steps")
+        raise ConfigError(f"{where}: hyperparameters.n_steps: n_steps * n_envs must exceed 1")
     if algo == "ppo" and batch is not None and batch < 2:
-        raise ConfigError(f"{source}: hyperparameters.batch_size: must be at least 2 for PPO")
-    check_goal_settings(config, algo, source)
+        where = origins.of("hyperparameters.batch_size")
+        raise ConfigError(f"{where}: hyperparameters.batch_size: must be at least 2 for PPO")
+    _check_goal_settings(config, algo, bare, origins)
 
 
 def sb3_config_from_run(data: Any, source: str) -> tuple[str, SB3Config]:
@@ -250,14 +493,14 @@ GOAL_ENV_IDS = ("AFTIR-ArmFTL-v0",)
 HER_KWARGS = {"n_sampled_goal": 4, "goal_selection_strategy": "future", "copy_info_dict": True}
 
 
-def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:
+def _check_goal_settings(config: SB3Config, algo: str, bare: str, origins: Origins) -> None:
     """Check ``her`` and ``env_kwargs`` of a config (plain values of known keys only).
 
     Raises:
-        ConfigError: naming ``source`` and the key.
+        ConfigError: naming the key and its source in ``origins``.
 
     """
-    bare = config.env_id.removeprefix("aftir_rl:")
+    source = origins.of("her")
     if not isinstance(config.her, bool):
         raise ConfigError(f"{source}: her: expected true or false, got {brief(config.her)}")
     if config.her and (algo not in ("sac", "td3") or bare not in GOAL_ENV_IDS):
@@ -267,18 +510,20 @@ def check_goal_settings(config: SB3Config, algo: str, source: str) -> None:
         )
     if not isinstance(config.env_kwargs, dict):
         raise ConfigError(
-            f"{source}: env_kwargs: expected a mapping, got {brief(config.env_kwargs)}"
+            f"{origins.of('env_kwargs')}: env_kwargs: expected a mapping, got "
+            f"{brief(config.env_kwargs)}"
         )
     for key in ("guide", "near_goal"):
         if config.her and config.env_kwargs.get(key) is True:
             raise ConfigError(
-                f"{source}: env_kwargs.{key}: the {key} columns observe the goal, which HER "
-                f"relabels; use {key} with PPO, or her without {key}"
+                f"{origins.of(f'env_kwargs.{key}')}: env_kwargs.{key}: the {key} columns observe "
+                f"the goal, which HER relabels; use {key} with PPO, or her without {key}"
             )
     if config.her:
-        _check_her_start(config, algo, bare, source)
+        _check_her_start(config, algo, bare, origins.of("hyperparameters.learning_starts"))
     allowed = ENV_KWARGS.get(bare, {})
     for key, value in config.env_kwargs.items():
+        source = origins.of(f"env_kwargs.{key}")
         if key == "tank" and bare in TANK_ENV_IDS:  # the command line's or a run's (not a file's)
             if not isinstance(value, str) or not 0 < len(value) <= 255:
                 raise ConfigError(f"{source}: env_kwargs.tank: unexpected value {brief(value)}")

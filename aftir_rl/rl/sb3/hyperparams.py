@@ -11,7 +11,8 @@ its ``env_kwargs`` and ``hyperparameters`` merge key by key, and ``eval_freq`` a
 each over its ``config`` or its env's entry) is a curriculum, each stage resumed from the one
 before. ``--env-kwargs`` and ``--hyperparams`` give ``KEY:VALUE`` items, each value read as YAML
 (:func:`parse_key_values`). :func:`train_config` merges the command line, the files and a
-resumed run's ``config.json`` into one checked :class:`~aftir_rl.rl.sb3.config.TrainConfig`.
+resumed run's ``config.json`` into one :class:`~aftir_rl.rl.sb3.config.TrainConfig`: each
+stage's sources are merged first, the source of every key kept, then checked once.
 """
 
 from __future__ import annotations
@@ -31,9 +32,11 @@ from aftir_rl.rl.common import DEFAULT_SB3_ENV_ID, check_env_id
 from aftir_rl.rl.sb3.config import (
     HER_KWARGS,
     SB3_ENV_IDS,
+    TANK_ENV_IDS,
+    Origins,
     SB3Config,
     TrainConfig,
-    check_sb3_config,
+    check_sb3_values,
     parse_hyperparameters,
     sb3_config_from_run,
 )
@@ -42,7 +45,6 @@ __all__ = [
     "DEFAULT_ENV_ID",
     "MAX_ITEMS",
     "MAX_STAGES",
-    "config_from_mapping",
     "entry_config",
     "entry_env_ids",
     "hyperparams_file",
@@ -75,8 +77,15 @@ _STAGE_KEYS = {"config"} | _FIELDS
 #: Most ``KEY:VALUE`` items one option takes.
 MAX_ITEMS = 64
 _KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
-#: The source the command line's overrides are checked under.
-_OVERRIDES = "--env-kwargs/--hyperparams"
+#: The options of the command line's SB3Config fields, named as their source.
+_OPTIONS = {
+    "env_id": "--env",
+    "total_timesteps": "--total-timesteps",
+    "n_envs": "--n-envs",
+    "eval_freq": "--eval-freq",
+    "eval_targets": "--eval-episodes",
+    "checkpoint_freq": "--save-freq",
+}
 
 
 def train_config(
@@ -101,56 +110,118 @@ def train_config(
     file's stages), else ``env``'s entry in ``algo``'s hyperparameter file, else (with
     ``resume`` alone) the resumed run's own. ``numbers`` (SB3Config fields), ``env`` (over a
     named config's), ``env_kwargs``, ``hyperparams`` and ``tank`` (loaded by the caller) apply to
-    every stage; each stage is then checked, once.
+    every stage; each stage is then checked once, a refused value named with its source.
 
     Raises:
         ConfigError: a file, an item or the merged config is refused (one line, naming where).
         CheckpointError: the resumed run's ``config.json`` is unreadable.
 
     """
-    stages = _stages(algo, config, env, resume)
-    extra_env, extra_hyper = _overrides(algo, env_kwargs, hyperparams)
-    given: dict[str, Any] = {"env_id": env, **(numbers or {})}
-    given = {k: v for k, v in given.items() if v is not None}
-    if tank is not None:
-        extra_env["tank"] = tank
-    source = _OVERRIDES if env_kwargs or hyperparams else "config"
-    merged = []
-    for stage in stages:
-        stage = dataclasses.replace(stage, **given)
-        if tank is not None and stage.env_id.split(":")[-1] != "AFTIR-ArmFTL-v0":
-            raise ConfigError("--tank: only AFTIR-ArmFTL-v0 takes a tank")
-        stage = dataclasses.replace(
-            stage,
-            env_kwargs={**stage.env_kwargs, **extra_env},
-            hyperparameters={**stage.hyperparameters, **extra_hyper},
-        )
-        check_env_id(stage.env_id, SB3_ENV_IDS, algo)
-        check_sb3_config(stage, algo, source)
-        merged.append(stage)
-    if demos is not None and (algo != "ppo" or len(merged) != 1 or resume is not None):
+    drafts = _drafts(algo, config, env, resume)
+    items = _items(env_kwargs, hyperparams)
+    given = {k: v for k, v in {"env_id": env, **(numbers or {})}.items() if v is not None}
+    stages = []
+    for draft in drafts:
+        for key, value in given.items():
+            draft.over({key: value}, _OPTIONS.get(key, "the command line"))
+        for name, (option, values) in items.items():
+            draft.over({name: values}, option)
+        if tank is not None:
+            if draft.bare not in TANK_ENV_IDS:
+                raise ConfigError(f"--tank: only {', '.join(TANK_ENV_IDS)} takes a tank")
+            draft.put("env_kwargs", {"tank": tank}, "--tank")
+        stages.append(draft.checked())
+    if demos is not None and (algo != "ppo" or len(stages) != 1 or resume is not None):
         raise ConfigError("--demos: behaviour cloning starts a new PPO run of one config")
-    return TrainConfig(algo, tuple(merged), seed, logdir, resume, progress_bar, demos, bc_epochs)
+    return TrainConfig(algo, tuple(stages), seed, logdir, resume, progress_bar, demos, bc_epochs)
 
 
-def _stages(algo: str, config: str | None, env: str | None, resume: str | None) -> list[SB3Config]:
+class _Draft:
+    """A config merged from its sources, lowest first, each key's source and the env kept.
+
+    ``bare`` is the env id resolved once, when a source names the env; :meth:`checked` checks
+    the merged values once, naming the source of a refused one.
+    """
+
+    def __init__(self, algo: str, env_id: Any, source: str) -> None:
+        self.algo, self.source = algo, source
+        self.fields: dict[str, Any] = {"env_kwargs": {}, "hyperparameters": {}}
+        self.keys: dict[str, str] = {}
+        self.bare = ""
+        self.over({"env_id": env_id}, source)
+
+    @classmethod
+    def of_config(cls, algo: str, config: SB3Config, source: str) -> _Draft:
+        """A draft of a config checked already (a resumed run's, which may name its tank)."""
+        draft = cls(algo, config.env_id, source)
+        draft.fields = dataclasses.asdict(config)
+        return draft
+
+    def over(self, data: Mapping[str, Any], source: str) -> _Draft:
+        """Merge ``data`` (SB3Config fields of ``source``, which names no tank) over the draft.
+
+        Raises:
+            ConfigError: an unknown key, a value of the wrong type, a hyperparameter the
+                algorithm does not take, an env it cannot train on, a tank (naming ``source``).
+
+        """
+        data = dict(data)
+        env_kwargs = _names(data, "env_kwargs", source)
+        hyper = parse_hyperparameters(_names(data, "hyperparameters", source), self.algo, source)
+        refuse_tank(env_kwargs, source)
+        values = from_mapping(SB3Config, data, source)
+        if "env_id" in data and values.env_id != self.fields.get("env_id"):
+            self.bare = check_env_id(values.env_id, SB3_ENV_IDS, self.algo)
+        self.fields.update({key: getattr(values, key) for key in data})
+        self.keys.update(dict.fromkeys(data, source))
+        self.put("env_kwargs", env_kwargs, source)
+        return self.put("hyperparameters", hyper, source)
+
+    def put(self, name: str, values: dict[str, Any], source: str) -> _Draft:
+        """Merge ``values`` into the mapping field ``name``, key by key."""
+        self.fields[name] = {**self.fields[name], **values}
+        self.keys.update({f"{name}.{key}": source for key in values})
+        return self
+
+    def derive(self) -> _Draft:
+        """``eval_freq`` and ``checkpoint_freq`` from ``total_timesteps``, unless given."""
+        steps = self.fields.get("total_timesteps", SB3Config.total_timesteps)
+        for key, (share, low) in _DERIVED.items():
+            if key not in self.fields:
+                self.fields[key] = max(low, steps // share)
+                self.keys[key] = self.keys.get("total_timesteps", self.source)
+        return self
+
+    def checked(self) -> SB3Config:
+        """The merged config, its values checked once (naming each refused value's source)."""
+        config = SB3Config(**self.fields)
+        check_sb3_values(config, self.algo, self.bare, Origins(self.source, self.keys))
+        return config
+
+
+def _drafts(algo: str, config: str | None, env: str | None, resume: str | None) -> list[_Draft]:
     """The configs a run trains before the command line's overrides (:func:`train_config`)."""
     own = saved_config(resume) if config is None and resume else None
     if own is not None:
         if own[0] != algo:
             raise ConfigError(f"--resume {resume}: a {own[0]} run, not {algo}")
-        return [own[1]]
+        return [_Draft.of_config(algo, own[1], f"--resume {resume}")]
     if config is None:
-        return [entry_config(algo, env or DEFAULT_ENV_ID)]
-    path = find_config(config)
-    data = read_yaml(path)
+        return [_entry(algo, env or DEFAULT_ENV_ID, "--env").derive()]
+    path, data = _read(config)
     if "stages" in data:
         if env:
             raise ConfigError(f"--env: {config} is a stage file; its stages name their env")
-        return _load_stages(data, path, algo)
+        return _stages(data, path, algo)
     if _is_zoo(data):  # RL Zoo's -conf: the entry of --env
-        return [_entry_config(algo, env or DEFAULT_ENV_ID, path, data)]
-    return [config_from_mapping(data, algo, str(path))]
+        return [_entry(algo, env or DEFAULT_ENV_ID, "--env", (path, data)).derive()]
+    return [_named(data, str(path), algo)]
+
+
+def _read(name: str | os.PathLike[str]) -> tuple[Path, dict[str, Any]]:
+    """The file a config name or path stands for, and its mapping."""
+    path = find_config(name)
+    return path, read_yaml(path)
 
 
 def saved_config(resume: str | os.PathLike[str]) -> tuple[str, SB3Config] | None:
@@ -184,7 +255,7 @@ def _entries(data: dict[str, Any]) -> dict[str, Any]:
 
 def entry_env_ids(algo: str) -> list[str]:
     """The env ids ``configs/hyperparams/<algo>.yml`` has an entry for."""
-    return list(_entries(read_yaml(hyperparams_file(algo))))
+    return list(_entries(_read(hyperparams_file(algo))[1]))
 
 
 def _is_zoo(data: dict[str, Any]) -> bool:
@@ -193,18 +264,15 @@ def _is_zoo(data: dict[str, Any]) -> bool:
 
 def is_hyperparams_file(name: str | os.PathLike[str]) -> bool:
     """Whether the config ``name`` stands for is keyed by env id (RL Zoo's format)."""
-    return _is_zoo(read_yaml(find_config(name)))
+    return _is_zoo(_read(name)[1])
 
 
-def _zoo_fields(entry: Any, algo: str, source: str) -> dict[str, Any]:
+def _zoo_fields(entry: Any, source: str) -> dict[str, Any]:
     """The :class:`SB3Config` fields of an RL Zoo entry (``hyperparameters``: the rest)."""
     if not isinstance(entry, dict):
         raise ConfigError(f"{source}: expected a mapping of hyperparameters, got {brief(entry)}")
     rest = dict(entry)
     fields = {name: rest.pop(key) for key, name in _ZOO_FIELDS.items() if key in rest}
-    steps = fields.get("total_timesteps")
-    if isinstance(steps, float) and steps.is_integer():  # RL Zoo writes !!float 2e7
-        fields["total_timesteps"] = int(steps)
     buffer, buffer_kwargs = (
         rest.pop("replay_buffer_class", None),
         rest.pop("replay_buffer_kwargs", None),
@@ -216,8 +284,7 @@ def _zoo_fields(entry: Any, algo: str, source: str) -> dict[str, Any]:
                 f"{HER_KWARGS} (or none), got {brief(buffer)} with {brief(buffer_kwargs)}"
             )
         fields["her"] = True
-    fields["hyperparameters"] = parse_hyperparameters(rest, algo, source)
-    return fields
+    return {**fields, "hyperparameters": rest}
 
 
 def entry_config(algo: str, env_id: str, path: str | os.PathLike[str] | None = None) -> SB3Config:
@@ -230,94 +297,70 @@ def entry_config(algo: str, env_id: str, path: str | os.PathLike[str] | None = N
             entry is refused (naming the file, the env and the key).
 
     """
-    found = hyperparams_file(algo) if path is None else find_config(path)
-    return _entry_config(algo, env_id, found, read_yaml(found))
+    file = None if path is None else _read(path)
+    return _entry(algo, env_id, "env_id", file).derive().checked()
 
 
-def _entry_config(algo: str, env_id: str, path: Path, data: dict[str, Any]) -> SB3Config:
-    """:func:`entry_config` of the file ``path`` already read as ``data``."""
-    bare = check_env_id(env_id, SB3_ENV_IDS, algo)
+def _entry(
+    algo: str,
+    env_id: Any,
+    env_source: str,
+    file: tuple[Path, dict[str, Any]] | None = None,
+    missing_ok: bool = False,
+) -> _Draft:
+    """The draft of ``env_id``'s entry in ``file`` (default ``algo``'s hyperparameter file).
+
+    ``missing_ok``: an env without an entry has the plain defaults, instead of a ConfigError.
+    """
+    path, data = file or _read(hyperparams_file(algo))
+    draft = _Draft(algo, env_id, env_source)
     entries = _entries(data)
-    if bare not in entries:
+    if draft.bare not in entries:
+        if missing_ok:
+            return draft
         raise ConfigError(
-            f"no {algo} hyperparameters for {bare} in {path.name}; it has an entry for "
-            f"{', '.join(entries) or 'no env'} (or give --config FILE with env_id: {bare})"
+            f"no {algo} hyperparameters for {draft.bare} in {path.name}; it has an entry for "
+            f"{', '.join(entries) or 'no env'} (or give --config FILE with env_id: {draft.bare})"
         )
-    source = f"{path}: {bare}"
-    fields = _zoo_fields(entries[bare], algo, source)
-    config = from_mapping(
-        SB3Config, {k: v for k, v in fields.items() if k != "hyperparameters"}, source
-    )
-    config = dataclasses.replace(
-        config, env_id=env_id, hyperparameters=fields["hyperparameters"], **_derived(config, {})
-    )
-    refuse_tank(config.env_kwargs, source)
-    check_sb3_config(config, algo, source)
-    return config
+    draft.source = f"{path}: {draft.bare}"
+    return draft.over(_zoo_fields(entries[draft.bare], draft.source), draft.source)
 
 
-def _derived(config: SB3Config, given: dict[str, Any]) -> dict[str, Any]:
-    """``eval_freq`` and ``checkpoint_freq`` from ``config.total_timesteps``, unless given."""
-    steps = config.total_timesteps
-    return {k: max(low, steps // share) for k, (share, low) in _DERIVED.items() if k not in given}
-
-
-def _mapping(data: dict[str, Any], key: str, source: str) -> dict[str, Any]:
+def _names(data: dict[str, Any], key: str, source: str) -> dict[str, Any]:
+    """The mapping of names ``data`` gives as ``key`` (removed from ``data``), else ``{}``."""
     value = data.pop(key, None) or {}
     if not isinstance(value, dict) or not all(isinstance(k, str) for k in value):
         raise ConfigError(f"{source}: {key}: expected a mapping of names, got {brief(value)}")
     return value
 
 
-def config_from_mapping(
-    data: dict[str, Any], algo: str, source: str, base: SB3Config | None = None
-) -> SB3Config:
-    """The checked config of ``data`` (:class:`SB3Config` fields) over ``base``.
+def _named(data: dict[str, Any], source: str, algo: str) -> _Draft:
+    """The draft of a named config's ``data`` over its env's entry (:func:`load_sb3_config`).
 
-    ``base``: by default the entry of ``data``'s ``env_id`` (:data:`DEFAULT_ENV_ID` if none) in
-    the hyperparameter file of ``algo``, or the plain defaults for an env without one.
-
-    Raises:
-        ConfigError: a key, type or value is refused (naming ``source`` and the key).
-
+    The entry is the one of ``data``'s ``env_id`` (:data:`DEFAULT_ENV_ID` if none) in the
+    hyperparameter file of ``algo``, or the plain defaults for an env without one.
     """
-    data = dict(data)
-    env_kwargs = _mapping(data, "env_kwargs", source)
-    hyper = parse_hyperparameters(_mapping(data, "hyperparameters", source), algo, source)
-    given = {k: getattr(from_mapping(SB3Config, data, source), k) for k in data}
-    derive = base is None
-    if base is None:
-        env_id = given.get("env_id", DEFAULT_ENV_ID)
-        bare = check_env_id(env_id, SB3_ENV_IDS, algo)
-        path = hyperparams_file(algo)
-        file = read_yaml(path)
-        own = bare in _entries(file)
-        base = _entry_config(algo, env_id, path, file) if own else SB3Config(env_id=env_id)
-    config = dataclasses.replace(
-        base,
-        **given,
-        env_kwargs={**base.env_kwargs, **env_kwargs},
-        hyperparameters={**base.hyperparameters, **hyper},
-    )
-    if derive:
-        config = dataclasses.replace(config, **_derived(config, given))
-    refuse_tank(env_kwargs, source)
-    check_sb3_config(config, algo, source)
-    return config
+    draft = _entry(algo, data.get("env_id", DEFAULT_ENV_ID), source, missing_ok=True)
+    draft.source = source
+    return draft.over(data, source).derive()
 
 
 def load_sb3_config(path: str | os.PathLike[str], algo: str) -> SB3Config:
     """Read and check a named config (a path, or a shipped name such as ``ppo_ftl``).
 
-    Numbers written as strings (``3e-4``) are parsed; see :func:`config_from_mapping`.
+    Its fields go over its env's entry; numbers written as strings (``3e-4``) are parsed.
+
+    Raises:
+        ConfigError: a key, type or value is refused (naming the file, or the entry, and the key).
+
     """
-    found = find_config(path)
-    return config_from_mapping(read_yaml(found), algo, str(found))
+    found, data = _read(path)
+    return _named(data, str(found), algo).checked()
 
 
 def is_curriculum(name: str | os.PathLike[str]) -> bool:
     """Whether the config ``name`` stands for is a stage file (its one key is ``stages``)."""
-    return "stages" in read_yaml(find_config(name))
+    return "stages" in _read(name)[1]
 
 
 def load_curriculum(name: str | os.PathLike[str], algo: str) -> list[SB3Config]:
@@ -328,25 +371,26 @@ def load_curriculum(name: str | os.PathLike[str], algo: str) -> list[SB3Config]:
             stage and the key).
 
     """
-    path = find_config(name)
-    return _load_stages(read_yaml(path), path, algo)
+    path, data = _read(name)
+    return [draft.checked() for draft in _stages(data, path, algo)]
 
 
-def _load_stages(data: dict[str, Any], path: Path, algo: str) -> list[SB3Config]:
-    """:func:`load_curriculum` of the file ``path`` already read as ``data``."""
+def _stages(data: dict[str, Any], path: Path, algo: str) -> list[_Draft]:
+    """The drafts of the stages of the stage file ``path``, read as ``data``."""
     stages = data.get("stages")
     if set(data) != {"stages"} or not isinstance(stages, list) or not stages:
         raise ConfigError(f"{path}: a stage file holds one key, stages: a list of stages")
     if len(stages) > MAX_STAGES:
         raise ConfigError(f"{path}: stages: at most {MAX_STAGES}, got {len(stages)}")
-    configs = [_stage(entry, k, algo, str(path)) for k, entry in enumerate(stages)]
-    env_ids = {c.env_id for c in configs}
+    drafts = [_stage(entry, k, algo, str(path)) for k, entry in enumerate(stages)]
+    env_ids = {draft.fields["env_id"] for draft in drafts}
     if len(env_ids) > 1:
         raise ConfigError(f"{path}: every stage must train the same env, got {sorted(env_ids)}")
-    return configs
+    return drafts
 
 
-def _stage(entry: Any, k: int, algo: str, source: str) -> SB3Config:
+def _stage(entry: Any, k: int, algo: str, source: str) -> _Draft:
+    """The draft of stage ``k``: its fields over its ``config``, or over its env's entry."""
     where = f"{source}: stages[{k}]"
     if not isinstance(entry, dict) or not ({"config", "env_id"} & set(entry)):
         raise ConfigError(
@@ -359,17 +403,15 @@ def _stage(entry: Any, k: int, algo: str, source: str) -> SB3Config:
             f"{', '.join(sorted(_STAGE_KEYS))}"
         )
     fields = dict(entry)
-    base = None
-    if "config" in fields:
-        name = fields.pop("config")
-        if not isinstance(name, str):
-            raise ConfigError(f"{where}.config: expected a config's name or path")
-        found = find_config(name)
-        data = read_yaml(found)
-        if "stages" in data:
-            raise ConfigError(f"{where}.config: {name} is a stage file itself")
-        base = config_from_mapping(data, algo, str(found))
-    return config_from_mapping(fields, algo, where, base)
+    if "config" not in fields:
+        return _named(fields, where, algo)
+    name = fields.pop("config")
+    if not isinstance(name, str):
+        raise ConfigError(f"{where}.config: expected a config's name or path")
+    found, data = _read(name)
+    if "stages" in data:
+        raise ConfigError(f"{where}.config: {name} is a stage file itself")
+    return _named(data, str(found), algo).over(fields, where)
 
 
 def refuse_tank(env_kwargs: dict[str, Any], source: str) -> None:
@@ -406,14 +448,12 @@ def parse_key_values(items: Sequence[str], option: str) -> dict[str, Any]:
     return out
 
 
-def _overrides(
-    algo: str, env_kwargs: Sequence[str], hyperparams: Sequence[str]
-) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The ``--env-kwargs`` and ``--hyperparams`` items as mappings, their keys checked."""
-    given = parse_key_values(env_kwargs, "--env-kwargs")
-    refuse_tank(given, "--env-kwargs")
-    hyper = parse_key_values(hyperparams, "--hyperparams")
-    return given, parse_hyperparameters(hyper, algo, _OVERRIDES)
+def _items(env_kwargs: Sequence[str], hyperparams: Sequence[str]) -> dict[str, tuple[str, Any]]:
+    """The ``--env-kwargs`` and ``--hyperparams`` items: ``{field: (option, {KEY: value})}``."""
+    return {
+        "env_kwargs": ("--env-kwargs", parse_key_values(env_kwargs, "--env-kwargs")),
+        "hyperparameters": ("--hyperparams", parse_key_values(hyperparams, "--hyperparams")),
+    }
 
 
 def with_overrides(
@@ -431,11 +471,8 @@ def with_overrides(
     """
     if not env_kwargs and not hyperparams:
         return config
-    given, extra = _overrides(algo, env_kwargs, hyperparams)
-    merged = dataclasses.replace(
-        config,
-        env_kwargs={**config.env_kwargs, **given},
-        hyperparameters={**config.hyperparameters, **extra},
-    )
-    check_sb3_config(merged, algo, _OVERRIDES)
-    return merged
+    items = _items(env_kwargs, hyperparams)
+    draft = _Draft.of_config(algo, config, "config")
+    for name, (option, values) in items.items():
+        draft.over({name: values}, option)
+    return draft.checked()

@@ -28,7 +28,13 @@ from aftir_rl.core.files import check_writable_dir, staged_dir, unfinished_start
 from aftir_rl.core.tank.loading import keep_run_tank
 from aftir_rl.rl.common import check_env_id, hyperparameter_text, run_name
 from aftir_rl.rl.logs import run_logger
-from aftir_rl.rl.sb3.config import SB3_ENV_IDS, SB3Config, TrainConfig, check_sb3_config
+from aftir_rl.rl.sb3.config import (
+    SB3_ENV_IDS,
+    Origins,
+    SB3Config,
+    TrainConfig,
+    check_sb3_values,
+)
 
 if TYPE_CHECKING:
     from aftir_rl.rl.sb3.evaluation import ArmEvalCallback
@@ -126,8 +132,8 @@ def train_sb3(
         WriteError: a full disk or a failing device; the partial directory is kept.
 
     """
-    check_env_id(config.env_id, SB3_ENV_IDS, algo)
-    check_sb3_config(config, algo, "config")
+    bare = check_env_id(config.env_id, SB3_ENV_IDS, algo)
+    check_sb3_values(config, algo, bare, Origins("config"))
     return _train_checked(algo, config, seed, logdir, resume, progress_bar, on_evaluation, pretrain)
 
 
