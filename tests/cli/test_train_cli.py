@@ -129,7 +129,8 @@ def test_resume(tmp_path):
         (["--target", "999", "0", "10"], "outside the tank box"),
         (["--config", "nope.yaml"], "no shipped config of that name"),
         (["--episodes", "0"], "--episodes must be from 1 to"),
-        (["--bridge-seconds", "-1"], "--bridge-seconds must be a finite 0 or more"),
+        (["--bridge-seconds", "-1"], "--bridge-seconds must be from 0 to 3600"),
+        (["--bridge-seconds", "1e308"], "--bridge-seconds must be from 0 to 3600"),
     ],
 )
 def test_user_errors_exit_2_without_traceback(tmp_path, args, message):

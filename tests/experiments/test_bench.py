@@ -106,8 +106,8 @@ def test_bench_cli(tmp_path):
         (["--model", "nowhere"], "no model.zip"),
         (["--model", "{bad_run}"], "config.json is missing or not a training run's"),
         (["--n-random", "0"], "--n-random must be from 1 to"),
-        (["--rrt-seconds", "nan"], "--rrt-seconds positive and finite"),
-        (["--bridge-seconds", "-1"], "--bridge-seconds must be a finite 0 or more"),
+        (["--rrt-seconds", "nan"], "--rrt-seconds must be from 0 to 3600"),
+        (["--bridge-seconds", "-1"], "--bridge-seconds must be from 0 to 3600"),
         (["--json", "/nonexistent/dir/out.json"], "cannot write in"),
     ],
 )
