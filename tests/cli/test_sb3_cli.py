@@ -50,3 +50,19 @@ def test_tank_option_reaches_every_stage_and_files_name_none(tmp_path):
     shared.write_text("env_id: AFTIR-ArmFTL-v0\nenv_kwargs:\n  tank: /etc/passwd\n")
     with pytest.raises(ConfigError, match="a config names no tank"):
         load_sb3_config(shared, "ppo")
+
+
+@pytest.mark.slow
+def test_training_that_diverges_keeps_the_run_and_says_so(tmp_path, capsys):
+    """learning_rate 10 makes PPO's weights NaN: one line, exit 2, the logs kept."""
+    from aftir_rl.cli import train
+
+    argv = ["ppo", "--env", "AFTIR-ArmReach-v0", "--hyperparams", "learning_rate:10",
+            "max_grad_norm:1e9", "--total-timesteps", "8192", "--logdir", str(tmp_path),
+            "--no-progress"]  # fmt: skip
+    assert train.main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "training diverged at step" in err and "\n" not in err
+    (kept,) = tmp_path.iterdir()
+    assert kept.name.endswith(".partial") and (kept / "diverged.json").is_file()
+    assert any(p.name.startswith("events.out.tfevents") for p in kept.rglob("*"))

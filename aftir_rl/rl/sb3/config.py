@@ -344,11 +344,16 @@ def _check_entropy(key: str, value: Any, algo: str, where: str) -> None:
     auto = isinstance(value, str) and (value == "auto" or value.startswith("auto_"))
     if not (auto and algo == "sac"):
         check_range(value, -1e6 if key == "target_entropy" else 0.0, 1e6, where, False)
-    elif value.startswith("auto_"):
+    elif value.startswith("auto_"):  # the initial coefficient: a positive, finite number
         try:
-            float(value[5:])
+            start = float(value[5:])
         except ValueError:
-            raise ConfigError(f"{where}: expected 'auto' or 'auto_<number>'") from None
+            start = math.nan
+        if not (math.isfinite(start) and 0 < start <= 1e6):
+            raise ConfigError(
+                f"{where}: expected 'auto' or 'auto_<number>' with a number in (0, 1e6], "
+                f"got {brief(value)}"
+            )
 
 
 def _check_train_freq(value: Any, where: str) -> None:

@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -24,6 +24,7 @@ from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import VecEnv
 
 from aftir_rl.core import interrupts
+from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import check_writable_dir, staged_dir, unfinished_start, write_json
 from aftir_rl.core.tank.loading import keep_run_tank
 from aftir_rl.rl.common import check_env_id, hyperparameter_text, run_name
@@ -39,7 +40,7 @@ from aftir_rl.rl.sb3.config import (
 if TYPE_CHECKING:
     from aftir_rl.rl.sb3.evaluation import ArmEvalCallback
 
-__all__ = ["train_curriculum", "train_run", "train_sb3"]
+__all__ = ["DIVERGED", "TrainingDiverged", "train_curriculum", "train_run", "train_sb3"]
 
 #: ``pretrain(model)``: numbers of what was done to a new model before training, logged.
 Pretrain = Callable[[BaseAlgorithm], dict[str, float]]
@@ -242,7 +243,7 @@ def _train_run(
     steps = max(0, config.total_timesteps - (int(model.num_timesteps) - start))
     run_dir = logdir / run_name(algo, bare, "random", seed)
     # a partial run that holds a checkpoint is kept on failure (resumable)
-    staged = staged_dir(run_dir, keep=_has_checkpoint, start={"timesteps": start})
+    staged = staged_dir(run_dir, keep=_kept_on_failure, start={"timesteps": start})
     with staged as partial, run_logger(partial) as logger:
         model.set_logger(logger)
         _write_config(partial, logger, algo, config, seed, resume_path)
@@ -333,6 +334,59 @@ def _callbacks(
     return evaluator, callbacks
 
 
+#: The file a diverged run's folder holds: the step, and the last step its weights were finite.
+DIVERGED = "diverged.json"
+
+
+class TrainingDiverged(AftirError):
+    """Training produced NaN or infinite weights: the run folder is kept with its logs."""
+
+
+def _finite(model: BaseAlgorithm) -> bool:
+    """Whether every parameter of the model's policy is a finite number."""
+    return all(bool(p.isfinite().all()) for p in model.policy.parameters())
+
+
+class _StopOnDivergence(BaseCallback):
+    """Stop at the first step after an update that left a weight NaN or infinite.
+
+    The weights are checked at each rollout's start (after the update before it) and at the end;
+    ``finite_step`` is the last step they were seen finite, ``diverged_step`` the first not.
+    """
+
+    finite_step = 0
+    diverged_step: int | None = None
+
+    def _on_training_start(self) -> None:
+        self.finite_step = int(self.model.num_timesteps)
+
+    def _on_rollout_start(self) -> None:
+        if self.diverged_step is None:
+            if _finite(self.model):
+                self.finite_step = int(self.model.num_timesteps)
+            else:
+                self.diverged_step = int(self.model.num_timesteps)
+
+    def _on_step(self) -> bool:
+        return self.diverged_step is None
+
+
+def _diverged(model: BaseAlgorithm, watch: _StopOnDivergence, partial: Path) -> NoReturn:
+    """Keep the run's logs and its finite checkpoints, say where, and raise TrainingDiverged."""
+    step = watch.diverged_step if watch.diverged_step is not None else int(model.num_timesteps)
+    folder = partial / "checkpoints"
+    for path in folder.glob("model_*.zip"):  # saved after the last finite weights: not finite
+        tail = path.stem[len("model_") :]
+        if tail.isdigit() and int(tail) > watch.finite_step:
+            path.unlink(missing_ok=True)
+    write_json(partial / DIVERGED, {"step": step, "last_finite_step": watch.finite_step})
+    kept = f"; the last finite checkpoint is in {folder}" if _has_checkpoint(partial) else ""
+    raise TrainingDiverged(
+        f"training diverged at step {step:,}: the policy's weights became NaN or infinite "
+        f"(a smaller learning_rate or max_grad_norm helps); the logs are kept in {partial}{kept}"
+    )
+
+
 class _StopOnRequest(BaseCallback):
     """End training at the next step once a stop is requested; remember where the rollout began.
 
@@ -370,17 +424,23 @@ def _learn(
             ``partial/checkpoints``.
 
     """
-    stop = _StopOnRequest()
+    stop, watch = _StopOnRequest(), _StopOnDivergence()
     start = time.perf_counter()
     try:
         model.learn(
             steps,
-            callback=[*callbacks, stop],
+            callback=[watch, *callbacks, stop],
             progress_bar=progress_bar,
             reset_num_timesteps=resume_path is None,
         )
     except KeyboardInterrupt:
         pass  # a stop requested during an evaluation: saved as between two steps
+    except ValueError:  # torch's distributions refuse NaN parameters (an evaluation, a rollout)
+        if _finite(model):
+            raise
+        _diverged(model, watch, partial)
+    if watch.diverged_step is not None or not _finite(model):
+        _diverged(model, watch, partial)
     if interrupts.requested():
         _save_stopped(model, stop.rollout_start, partial)
     return time.perf_counter() - start
@@ -408,3 +468,8 @@ def _save_stopped(model: BaseAlgorithm, steps: int, partial: Path) -> None:
 
 def _has_checkpoint(partial: Path) -> bool:
     return any((partial / "checkpoints").glob("model_*.zip"))
+
+
+def _kept_on_failure(partial: Path) -> bool:
+    """Keep a failed run's folder when it can be resumed or it diverged (its logs say how)."""
+    return _has_checkpoint(partial) or (partial / DIVERGED).exists()
