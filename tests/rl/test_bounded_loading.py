@@ -8,6 +8,7 @@ of the issue are also measured in a subprocess (peak memory).
 from __future__ import annotations
 
 import collections
+import dataclasses
 import io
 import os
 import pickle
@@ -377,3 +378,44 @@ def test_fifo_checkpoints_refused_without_blocking(tmp_path):
     model = tmp_path / "model.zip"
     os.mkfifo(model)
     _refused(load_model, "ppo", model, gym.make("AFTIR-ArmReach-v0"), match="no such model")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_the_largest_network_the_trainer_allows_loads_again(tmp_path, algo):
+    """One size limit: the widest net_arch that training accepts round-trips through the loader,
+    and one layer width more is refused before training."""
+    from aftir_rl.core.errors import ConfigError
+    from aftir_rl.rl.sb3 import build_model, entry_config, save_model
+    from aftir_rl.rl.sb3.config import MAX_MODEL_BYTES, model_bytes
+    from aftir_rl.rl.sb3.vec_adapter import make_sb3_vec_env
+
+    env_id = "AFTIR-ArmReach-v0"
+    venv = make_sb3_vec_env(env_id, 1)
+    base = entry_config(algo, env_id)
+
+    def config(width):
+        hyper = {**base.hyperparameters, "policy_kwargs": {"net_arch": [width] * 3}}
+        if algo == "sac":
+            hyper.update(buffer_size=100, learning_starts=10, batch_size=8)
+        else:
+            hyper.update(n_steps=16, batch_size=16)
+        return dataclasses.replace(base, hyperparameters=hyper)
+
+    def size(width):
+        try:
+            return model_bytes(build_model(algo, config(width), venv))
+        except ConfigError:
+            return MAX_MODEL_BYTES + 1
+
+    lo, hi = 16, 4096  # the widest width whose model the trainer builds
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if size(mid) <= MAX_MODEL_BYTES else (lo, mid)
+    model = build_model(algo, config(lo), venv)
+    model.learn(32)  # the optimizers hold their moments, as a trained run's do
+    save_model(model, tmp_path / "model.zip")
+    loaded = load_model(algo, tmp_path / "model.zip", env=venv, config=config(lo))
+    assert model_bytes(loaded) == model_bytes(model) <= MAX_MODEL_BYTES
+    with pytest.raises(ConfigError, match="use narrower layers"):
+        build_model(algo, config(lo + 1), venv)

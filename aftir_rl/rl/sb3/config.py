@@ -39,6 +39,8 @@ from aftir_rl.envs.registration import registered_env_id
 
 __all__ = [
     "rollout_steps",
+    "MAX_MODEL_BYTES",
+    "model_bytes",
     "ALGORITHMS",
     "SB3Config",
     "TrainConfig",
@@ -581,6 +583,21 @@ def constructor_keys(algo: str) -> set[str]:
     }
 
 
+#: The most bytes a model's entries may inflate to, in all, counted as they are read
+#: (:mod:`aftir_rl.rl.sb3.loading`); the records of its ``.pth`` files (the tensors) have a
+#: budget as large. A new model whose file could exceed it is refused (:func:`build_model`).
+MAX_MODEL_BYTES = 64_000_000
+
+
+def model_bytes(model: BaseAlgorithm) -> int:
+    """An upper bound of the bytes the model's saved tensors take [bytes].
+
+    Each parameter of the policy (float32, 4 bytes) is saved with the two moments Adam keeps for
+    it (SB3 saves the optimizers' states too): 12 bytes a parameter.
+    """
+    return 12 * sum(int(p.numel()) for p in model.policy.parameters())
+
+
 def build_model(
     algo: str, config: SB3Config, env: GymEnv, seed: int | None = 0, evaluation: bool = False
 ) -> BaseAlgorithm:
@@ -591,9 +608,26 @@ def build_model(
     run trained with more envs) is not shown then.
 
     Raises:
-        ConfigError: the algorithm refuses the hyperparameters.
+        ConfigError: the algorithm refuses the hyperparameters, or a new model's file could be
+            larger than the loader reads (:data:`MAX_MODEL_BYTES`: ``net_arch`` too wide).
 
     """
+    model = _new_model(algo, config, env, seed, evaluation)
+    size = model_bytes(model)
+    if not evaluation and size > MAX_MODEL_BYTES:
+        arch = (config.hyperparameters.get("policy_kwargs") or {}).get("net_arch")
+        raise ConfigError(
+            f"net_arch {brief(arch)} "
+            f"makes a model of up to {size / 1e6:.0f} MB, more than the {MAX_MODEL_BYTES / 1e6:.0f}"
+            " MB a run's model may hold (it could not be loaded again): use narrower layers"
+        )
+    return model
+
+
+def _new_model(
+    algo: str, config: SB3Config, env: GymEnv, seed: int | None, evaluation: bool
+) -> BaseAlgorithm:
+    """:func:`build_model` without the size check."""
     hyper = dict(config.hyperparameters)
     start = linear_start(hyper.get("learning_rate"))
     if start is not None:

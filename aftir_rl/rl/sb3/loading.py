@@ -28,7 +28,13 @@ from aftir_rl.core.config import brief, read_limited, shorten
 from aftir_rl.core.errors import CheckpointError
 from aftir_rl.core.files import read_json
 from aftir_rl.envs.registration import registered_env_id
-from aftir_rl.rl.sb3.config import ALGORITHMS, SB3Config, build_model, sb3_config_from_run
+from aftir_rl.rl.sb3.config import (
+    ALGORITHMS,
+    MAX_MODEL_BYTES,
+    SB3Config,
+    build_model,
+    sb3_config_from_run,
+)
 
 __all__ = [
     "MAX_MODEL_FILE_BYTES",
@@ -45,9 +51,6 @@ __all__ = [
 #: The largest model file read [bytes] (SB3 stores its entries as they are; the arm envs'
 #: models are under 10 MB).
 MAX_MODEL_FILE_BYTES = 64_000_000
-#: The most bytes a model's entries may inflate to, in all, counted as they are read; the
-#: records of its ``.pth`` files (the tensors) have a budget as large.
-MAX_MODEL_BYTES = 64_000_000
 #: The most entries of a model file (SB3 writes 6 to 8).
 MAX_MODEL_ENTRIES = 16
 #: The most records of one ``.pth`` file (one per tensor: about 40 for SAC's policy).
