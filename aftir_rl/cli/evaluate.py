@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -115,6 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_stochastic_option(parser, "SB3 runs")
     add_tank_option(parser, "AFTIR-ArmFTL-v0 runs: evaluate here, not in the run's own tank")
     add_ray_options(parser, "evaluate the runs")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     return parser
 
 
@@ -151,16 +153,38 @@ def _evaluate_runs(
             )
         return {_row_name(r): row for r, row in zip(args.runs, rows)}
     try:
-        return {
-            _row_name(r): evaluate_run(
-                r, targets, args.motion, args.margin, draw, args.tank, args.stochastic
-            )
-            for r in args.runs
-        }
+        table: dict[str, dict[str, Any]] = {}
+        for r in args.runs:
+            with _bar(r, args.no_progress) as progress:
+                table[_row_name(r)] = evaluate_run(
+                    r, targets, args.motion, args.margin, draw, args.tank, args.stochastic,
+                    progress,
+                )  # fmt: skip
+        return table
     except ConfigError as exc:  # a value the run refuses: say which flag gave it
         if exc.param not in FLAGS:
             raise
         raise ConfigError(f"{FLAGS[exc.param]}: {exc}") from None
+
+
+@contextmanager
+def _bar(run: str, hidden: bool) -> Iterator[Callable[[int, int], None]]:
+    """``progress(done, total)`` drawing a bar of one run's episodes on stderr (when it has any)."""
+    from tqdm import tqdm
+
+    bars: list[Any] = []
+
+    def progress(done: int, total: int) -> None:
+        if not bars:
+            name = Path(run).name
+            bars.append(tqdm(total=total, unit="ep", desc=name[:40], disable=hidden, leave=False))
+        bars[0].update(done - bars[0].n)
+
+    try:
+        yield progress
+    finally:
+        for bar in bars:
+            bar.close()
 
 
 def _print_table(results: dict[str, dict[str, Any]]) -> None:

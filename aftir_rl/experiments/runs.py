@@ -220,6 +220,7 @@ def _evaluate_sb3(
     draw: tuple[int, int] | None = None,
     tank: str | None = None,
     policy_seed: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
     from aftir_rl.rl.sb3 import EVAL_SEED, evaluate_policy_on_targets, evaluation_targets
 
@@ -234,7 +235,7 @@ def _evaluate_sb3(
         count, seed = draw or (run.config.eval_targets, EVAL_SEED)
         targets = evaluation_targets(run.env_id, count, seed=seed, env_kwargs=kwargs)
     metrics, _ = evaluate_policy_on_targets(
-        run.model, run.env_id, targets, True, kwargs, policy_seed
+        run.model, run.env_id, targets, True, kwargs, policy_seed, progress
     )
     note = f"{metrics['collision_rate']:.1%} collided" if metrics["collision_rate"] else ""
     sampled = "" if policy_seed is None else f", sampled from seed {policy_seed}"
@@ -250,6 +251,7 @@ def evaluate_run(
     draw: tuple[int, int] | None = None,
     tank: str | None = None,
     policy_seed: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
     """Evaluate one run directory (Q-table or SB3): one row of ``python -m aftir_rl.evaluate``.
 
@@ -261,7 +263,8 @@ def evaluate_run(
     with actions sampled from it given a ``policy_seed``
     (:func:`~aftir_rl.rl.sb3.evaluation.evaluate_policy_on_targets`). ``tank``: an
     ``AFTIR-ArmFTL-v0`` run's policy in another tank or pool than its own (a pool's target ``i``
-    lies in its tank ``i mod K``).
+    lies in its tank ``i mod K``). ``progress``: called with ``(targets done, targets)`` as an
+    SB3 run's episodes end.
 
     Raises:
         CheckpointError: not a run directory this knows, or unreadable files.
@@ -281,4 +284,4 @@ def evaluate_run(
                 param="policy_seed",
             )
         return _evaluate_q_table(run, motion, margin)
-    return _evaluate_sb3(cast(SB3Run, run), targets, draw, tank, policy_seed)
+    return _evaluate_sb3(cast(SB3Run, run), targets, draw, tank, policy_seed, progress)

@@ -261,8 +261,8 @@ class FTLBatch:
         between the samples too (:func:`aftir_rl.core.kernel.surface_clearance`), which the
         contact rule reads. Below the floor the body is straight on the guide's axis (the route
         starts at the floor), where the distance does not change with depth: the base stands for
-        every sample deeper than the opening's rim can reach. For every env, every array is new (holders of the previous ones keep them);
-        ``rows`` are updated in place.
+        every sample deeper than the opening's rim can reach. For every env, every array is new
+        (holders of the previous ones keep them); ``rows`` are updated in place.
         """
         b, n = self.b, self.n
         if rows is None:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import io
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, cast
 
@@ -92,6 +92,7 @@ def evaluate_policy_on_targets(
     clearance: bool = False,
     env_kwargs: dict[str, Any] | None = None,
     policy_seed: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[dict[str, float], dict[str, Any]]:
     """Run the policy once per target: its mean action, or sampled with ``policy_seed``.
 
@@ -107,6 +108,7 @@ def evaluate_policy_on_targets(
             sampled from the policy's distribution (RL Zoo's ``--stochastic``), episode ``i``
             with torch's generator seeded ``policy_seed + i``, so each episode is reproducible
             on its own.
+        progress: called with ``(targets done, targets)`` after each target.
 
     Returns:
         Means over targets (``success_rate``, ``tip_error_cm``, ``path_length_cm``,
@@ -143,6 +145,8 @@ def evaluate_policy_on_targets(
         )
         if i == 0:
             first = {"tips": path, "target": target, "arm": arm.body(), "tank": arm.tank}
+        if progress is not None:
+            progress(i + 1, len(targets))
     env.close()
     return _mean_metrics(rows, clearance, smallest), first
 
