@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install train test test-all fuzz lint docs bench tensorboard clean
+.PHONY: install train test test-slow test-all fuzz lint house docs bench bench-full tensorboard clean
 
 install: $(STAMP)
 
@@ -26,7 +26,10 @@ PYTEST := OMP_NUM_THREADS=1 $(PY) -m pytest -q -n auto --dist loadfile
 test: $(STAMP)  ## the test suite (fast; long checks are marked slow and run by test-all)
 	$(PYTEST) -m "not slow"
 
-test-all: $(STAMP)
+test-slow: $(STAMP)  ## only the tests marked slow: after `make test`, every test has run once
+	$(PYTEST) -m slow
+
+test-all: $(STAMP)  ## every test, fast and slow
 	$(PYTEST)
 
 # Faults: the run-directory fuzzer, FUZZ_CASES mutated run directories for each of view,
@@ -43,6 +46,10 @@ lint: $(STAMP)
 	$(PY) -m ruff check aftir_launch.py aftir_rl tests benchmarks scripts docs/_ext docs/conf.py
 	$(PY) -m ruff format --check aftir_launch.py aftir_rl tests benchmarks scripts docs/_ext docs/conf.py
 	$(PY) -m mypy
+
+# A review aid, not a test: the largest modules, functions and module docstrings; fails nothing.
+house: $(STAMP)
+	$(PY) scripts/house_report.py
 
 # The documentation site into docs/_build/html, offline, warnings as errors; the env pages and
 # the CLI reference are generated from the package as it builds (docs/_ext/aftir_docs.py).
