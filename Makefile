@@ -57,7 +57,24 @@ docs: $(STAMP)
 	OMP_NUM_THREADS=1 $(VENV)/bin/sphinx-build -W --keep-going -q -b html docs docs/_build/html
 	@echo "open docs/_build/html/index.html"
 
-bench: $(STAMP)  ## every benchmark table of docs/benchmarks.md (about 10 minutes on 2 cores)
+# The benchmark tables of docs/benchmarks.md. `make bench`: every script and every method on
+# smaller fixed sets with shorter budgets (--quick, said above each table), about 3 minutes on
+# 2 cores; `make bench-full`: the full sets and the 10 s budgets, the numbers of the docs
+# (10-12 minutes).
+bench: $(STAMP)  ## every benchmark table, quick
+	$(PY) benchmarks/bench_tank.py --quick
+	$(PY) benchmarks/bench_posture.py --quick
+	$(PY) benchmarks/bench_icra2014.py --quick
+	$(PY) benchmarks/bench_st2014.py --quick
+	$(PY) benchmarks/bench_arm.py --quick
+	$(PY) benchmarks/bench_motion.py --quick
+	$(PY) benchmarks/bench_goal.py --quick
+	$(PY) benchmarks/bench_render.py --quick
+	$(PY) benchmarks/bench_arm_ftl.py --quick
+	$(PY) benchmarks/bench_fields.py --quick
+	$(PY) -m aftir_rl.bench --quick
+
+bench-full: $(STAMP)  ## every benchmark table of docs/benchmarks.md, full
 	$(PY) benchmarks/bench_tank.py
 	$(PY) benchmarks/bench_posture.py
 	$(PY) benchmarks/bench_icra2014.py

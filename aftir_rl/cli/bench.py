@@ -44,6 +44,8 @@ __all__ = ["build_parser", "main"]
 
 #: The most random targets per bay (``--n-random``): each is run by every method.
 MAX_N_RANDOM = 1000
+#: ``--quick`` (``make bench``): every set and method, fewer random targets, shorter budgets.
+QUICK = {"n_random": 3, "rrt_seconds": 1.0, "bridge_seconds": 1.0}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -97,6 +99,12 @@ def build_parser() -> argparse.ArgumentParser:
     add_int_option(
         parser, "--suite-targets", (1, 100), "targets per scene of --suite, 1 to 100 (100)", 100
     )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="the quick table of make bench: 3 random targets per bay, 1 s for RRT-Connect per "
+        "target and per colliding move (options given keep their value)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     add_margin_option(
         parser, f"clearance the q_table+ftl motions keep (default {DEFAULT_MARGIN:g} cm)"
@@ -136,6 +144,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.bench``."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.quick:
+        for name, value in QUICK.items():
+            if getattr(args, name) == parser.get_default(name):
+                setattr(args, name, value)
     _check_numbers(parser, args)
     if args.model:
         preload("aftir_rl.rl.sb3")  # torch
@@ -160,6 +172,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(
         f"machine: {facts['cpu']}, {facts['system']}, {facts['cores']} cores, "
         f"Python {facts['python']}; {seconds:.0f} s in all"
+    )
+    print(
+        ("quick table (make bench; make bench-full for the full one): " if args.quick else "")
+        + f"{args.n_random} random targets per bay (seed {args.seed}); RRT-Connect "
+        f"{args.rrt_seconds:g} s per target and {args.bridge_seconds:g} s per colliding move"
     )
     print()
     print(format_table(rows))
