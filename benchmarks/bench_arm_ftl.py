@@ -25,7 +25,7 @@ from aftir_rl.rl.sb3 import load_sb3_config
 from aftir_rl.rl.sb3.config import SB3Config, build_model
 
 ENV_ID = "AFTIR-ArmFTL-v0"
-QUICK = {"steps": 5_000, "ppo_runs": 1}
+QUICK = {"steps": 2_000, "ppo_runs": 1}
 
 
 def actions(shape: tuple[int, ...], count: int, seed: int = 0) -> np.ndarray:

@@ -25,7 +25,7 @@ from aftir_rl.planning.ftl.plan import plan_motion
 from aftir_rl.planning.posture.planner import Planner, random_free_targets
 from aftir_rl.rl.tabular.q_table_goal import train_all_targets
 
-QUICK = {"n": 5}
+QUICK = {"n": 3}
 
 
 def main() -> None:

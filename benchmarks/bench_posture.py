@@ -32,7 +32,7 @@ from aftir_rl.planning.posture import (
     region_clipping,
 )
 
-QUICK = {"blind_sample": 2_000_000}
+QUICK = {"blind_sample": 2_000_000, "repeats": 1, "random": 10}
 
 
 def best_time(fn, repeats):

@@ -45,7 +45,7 @@ __all__ = ["build_parser", "main"]
 #: The most random targets per bay (``--n-random``): each is run by every method.
 MAX_N_RANDOM = 1000
 #: ``--quick`` (``make bench``): every set and method, fewer random targets, shorter budgets.
-QUICK = {"n_random": 3, "rrt_seconds": 1.0, "bridge_seconds": 1.0}
+QUICK = {"n_random": 2, "rrt_seconds": 1.0, "bridge_seconds": 1.0}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -102,8 +102,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--quick",
         action="store_true",
-        help="the quick table of make bench: 3 random targets per bay, 1 s for RRT-Connect per "
-        "target and per colliding move (options given keep their value)",
+        help=f"the quick table of make bench: {QUICK['n_random']} random targets per bay, "
+        f"{QUICK['rrt_seconds']:g} s for RRT-Connect per target, {QUICK['bridge_seconds']:g} s "
+        "per colliding move (options given keep their value)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     add_margin_option(

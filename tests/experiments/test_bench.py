@@ -84,7 +84,7 @@ def test_bench_cli(tmp_path):
     )
     # --quick takes its values for the options left at default, and the header says so.
     assert run.stdout.splitlines()[1] == (
-        "quick table (make bench; make bench-full for the full one): 3 random targets per bay "
+        "quick table (make bench; make bench-full for the full one): 2 random targets per bay "
         "(seed 7); RRT-Connect 2 s per target and 1 s per colliding move"
     )
     lines = [line for line in run.stdout.splitlines() if line.startswith("| jace")]
@@ -96,7 +96,7 @@ def test_bench_cli(tmp_path):
     ]
     data = json.loads(out.read_text())
     assert data["machine"]["cores"] >= 1 and data["seconds"] > 0
-    assert data["options"]["n_random"] == 3
+    assert data["options"]["n_random"] == 2
     tga = next(r for r in data["rows"] if r["method"] == "tga")
     assert tga["success_rate"] == 1.0 and len(tga["outcomes"]) == 3
     # Every TGA posture of the run is re-checked here, independently of the bench.
