@@ -1,8 +1,9 @@
 """AFTIR-Tank-v0 against Gymnasium's toy-text grids, and Q-learning on the reference targets.
 
-Run: ``python benchmarks/bench_tank.py`` (or ``make bench``). Prints markdown tables measured in
-this one run on this machine: env steps/s through the same ``gym.make`` wrapper stack with the same
-random action sequence, and Q-learning wall time and episodes to the BFS-optimal greedy path.
+Run: ``python benchmarks/bench_tank.py`` (or ``make bench-full``). Prints markdown tables
+measured in this one run on this machine: env steps/s through the same ``gym.make`` wrapper stack
+with the same random action sequence, and Q-learning wall time and episodes to the BFS-optimal
+greedy path.
 """
 
 from __future__ import annotations
