@@ -58,7 +58,7 @@ docs: $(STAMP)
 	@echo "open docs/_build/html/index.html"
 
 # The benchmark tables of docs/benchmarks.md. `make bench`: every script and every method on
-# smaller fixed sets with shorter budgets (--quick, said above each table), about 3 minutes on
+# smaller fixed sets with shorter budgets (--quick, said above each table), about 2 minutes on
 # 2 cores; `make bench-full`: the full sets and the 10 s budgets, the numbers of the docs
 # (10-12 minutes).
 bench: $(STAMP)  ## every benchmark table, quick
