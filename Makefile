@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install train test test-all fuzz lint docs bench tensorboard clean
+.PHONY: install train test test-slow test-all fuzz lint house docs bench bench-full tensorboard clean
 
 install: $(STAMP)
 
@@ -26,7 +26,10 @@ PYTEST := OMP_NUM_THREADS=1 $(PY) -m pytest -q -n auto --dist loadfile
 test: $(STAMP)  ## the test suite (fast; long checks are marked slow and run by test-all)
 	$(PYTEST) -m "not slow"
 
-test-all: $(STAMP)
+test-slow: $(STAMP)  ## only the tests marked slow: after `make test`, every test has run once
+	$(PYTEST) -m slow
+
+test-all: $(STAMP)  ## every test, fast and slow
 	$(PYTEST)
 
 # Faults: the run-directory fuzzer, FUZZ_CASES mutated run directories for each of view,
@@ -44,13 +47,34 @@ lint: $(STAMP)
 	$(PY) -m ruff format --check aftir_launch.py aftir_rl tests benchmarks scripts docs/_ext docs/conf.py
 	$(PY) -m mypy
 
+# A review aid, not a test: the largest modules, functions and module docstrings; fails nothing.
+house: $(STAMP)
+	$(PY) scripts/house_report.py
+
 # The documentation site into docs/_build/html, offline, warnings as errors; the env pages and
 # the CLI reference are generated from the package as it builds (docs/_ext/aftir_docs.py).
 docs: $(STAMP)
 	OMP_NUM_THREADS=1 $(VENV)/bin/sphinx-build -W --keep-going -q -b html docs docs/_build/html
 	@echo "open docs/_build/html/index.html"
 
-bench: $(STAMP)  ## every benchmark table of docs/benchmarks.md (about 10 minutes on 2 cores)
+# The benchmark tables of docs/benchmarks.md. `make bench`: every script and every method on
+# smaller fixed sets with shorter budgets (--quick, said above each table), about 2 minutes on
+# 2 cores; `make bench-full`: the full sets and the 10 s budgets, the numbers of the docs
+# (10-12 minutes).
+bench: $(STAMP)  ## every benchmark table, quick
+	$(PY) benchmarks/bench_tank.py --quick
+	$(PY) benchmarks/bench_posture.py --quick
+	$(PY) benchmarks/bench_icra2014.py --quick
+	$(PY) benchmarks/bench_st2014.py --quick
+	$(PY) benchmarks/bench_arm.py --quick
+	$(PY) benchmarks/bench_motion.py --quick
+	$(PY) benchmarks/bench_goal.py --quick
+	$(PY) benchmarks/bench_render.py --quick
+	$(PY) benchmarks/bench_arm_ftl.py --quick
+	$(PY) benchmarks/bench_fields.py --quick
+	$(PY) -m aftir_rl.bench --quick
+
+bench-full: $(STAMP)  ## every benchmark table of docs/benchmarks.md, full
 	$(PY) benchmarks/bench_tank.py
 	$(PY) benchmarks/bench_posture.py
 	$(PY) benchmarks/bench_icra2014.py

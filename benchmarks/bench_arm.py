@@ -1,21 +1,26 @@
 """The continuous arm envs: steps/s against FrozenLake, and their share of PPO's time per step.
 
-Run: ``python benchmarks/bench_arm.py``. One process, random actions, through ``gym.make``;
-PPO (n_envs 1, default hyperparameters but n_steps 1024) timed on the same machine in the same run.
+Run: ``python benchmarks/bench_arm.py [--ppo-steps N]``. One process, random actions, through
+``gym.make``; PPO (n_envs 1, default hyperparameters but n_steps 1024) timed on the same machine in
+the same run.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import platform
 import time
 
 import gymnasium as gym
 import numpy as np
+from quick_mode import parse_args, print_header  # benchmarks/ is the script's own folder
 from stable_baselines3 import PPO
 
 import aftir_rl  # noqa: F401
 from aftir_rl.experiments.bench import env_steps_per_second
+
+QUICK = {"ppo_steps": 2_048}
 
 
 def ppo_rate(env_id: str, steps: int) -> float:
@@ -26,6 +31,10 @@ def ppo_rate(env_id: str, steps: int) -> float:
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--ppo-steps", type=int, default=4_096, help="PPO steps per env (4,096)")
+    args = parse_args(parser, QUICK)
+    print_header(args, QUICK)
     print(
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python "
         f"{platform.python_version()}, numpy {np.__version__}"
@@ -37,7 +46,7 @@ def main() -> None:
     print(f"| FrozenLake-v1 8x8 | {lake:,.0f} | 1.00x | | |")
     for env_id in ("AFTIR-ArmReach-v0", "AFTIR-Arm-v0"):
         env_rate = env_steps_per_second(env_id, 5_000)
-        train_rate = ppo_rate(env_id, 4_096)
+        train_rate = ppo_rate(env_id, args.ppo_steps)
         share = train_rate / env_rate
         print(
             f"| {env_id} | {env_rate:,.0f} | {env_rate / lake:.3f}x | {train_rate:,.0f} | "

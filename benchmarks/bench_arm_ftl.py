@@ -18,12 +18,14 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from quick_mode import parse_args, print_header  # benchmarks/ is the script's own folder
 
 import aftir_rl  # noqa: F401
 from aftir_rl.rl.sb3 import load_sb3_config
 from aftir_rl.rl.sb3.config import SB3Config, build_model
 
 ENV_ID = "AFTIR-ArmFTL-v0"
+QUICK = {"steps": 2_000, "ppo_runs": 1}
 
 
 def actions(shape: tuple[int, ...], count: int, seed: int = 0) -> np.ndarray:
@@ -121,7 +123,7 @@ def main() -> None:
         default="experiments/configs/ppo_ftl_cost.yaml",
         help="training config of the PPO row and of the 'as trained' env rows",
     )
-    args = parser.parse_args()
+    args = parse_args(parser, QUICK)
     config = load_sb3_config(args.config, "ppo")
     trained = dict(config.env_kwargs)
     all_cores = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
@@ -163,6 +165,7 @@ def main() -> None:
     if all_cores:
         os.sched_setaffinity(0, all_cores)
     ppo = [ppo_env_share(config, 10 * args.steps) for _ in range(max(1, args.ppo_runs))]
+    print_header(args, QUICK)
     cores = f"{os.cpu_count()} CPUs, the env rows pinned to one core" if all_cores else ""
     print(f"{platform.processor() or platform.machine()}, {cores}, one process\n")
     print(f"'as trained': {args.config}'s env_kwargs {trained}, the guide's fields of")

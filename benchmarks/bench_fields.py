@@ -20,6 +20,7 @@ import time
 
 import numpy as np
 from numba import njit
+from quick_mode import parse_args, print_header  # benchmarks/ is the script's own folder
 
 from aftir_rl.core.kernel.guide import descend_field, relax_field
 from aftir_rl.core.tank import load_tank
@@ -27,6 +28,7 @@ from aftir_rl.experiments.bench import machine_facts
 from aftir_rl.planning.ftl.guide import NEIGHBOURS, GuideField
 
 TANKS = ("b737_center", "wing:3:5", "wing:5:2")
+QUICK = {"targets": 10}
 
 
 @njit(cache=True)
@@ -116,7 +118,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--targets", type=int, default=30, help="fields per tank (default 30)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the targets (default 0)")
-    args = parser.parse_args()
+    args = parse_args(parser, QUICK)
+    print_header(args, QUICK)
     rng = np.random.default_rng(args.seed)
     print("| tank | grid points | Dijkstra ms, before / now | next steps ms, before / now | "
           "field ms, before / now | ratio |")  # fmt: skip

@@ -17,10 +17,13 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from quick_mode import parse_args, print_header  # benchmarks/ is the script's own folder
 
 import aftir_rl  # noqa: F401
 from aftir_rl.core.tank import load_tank
 from aftir_rl.rl.tabular import QLearning, QLearningConfig, greedy_rollout, train_all_targets
+
+QUICK = {"cells": 50}
 
 
 def separate_tables(cfg: QLearningConfig, seed: int, limit: int | None) -> dict:
@@ -54,11 +57,12 @@ def main() -> None:
     parser.add_argument(
         "--cells", type=int, help="train separate tables for the first N cells only (quick check)"
     )
-    args = parser.parse_args()
+    args = parse_args(parser, QUICK)
     cfg = QLearningConfig()
     if args.episodes:
         cfg = QLearningConfig(**{**cfg.__dict__, "episodes": args.episodes})
 
+    print_header(args, QUICK)
     print(
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, {platform.processor() or '?'}, "
         f"Python {platform.python_version()}, gymnasium {gym.__version__}, numpy {np.__version__}"

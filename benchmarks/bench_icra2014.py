@@ -1,26 +1,31 @@
 """Collision-free region clipping among spherical obstacles (icra2014 Table II).
 
-Run: ``python benchmarks/bench_icra2014.py``. Prints one markdown table measured in this run:
-target [30, 18, 51], l = 25 cm, r0 = 2, r_b = 2 (so r_oba = 4), NUM = 10, Δθ = 0.1°, the three
-obstacles added one by one (``configs/tanks/open_space_obstacles{1,2,3}.yaml``). For each row,
-ours in the paper's mode (stop in the 1 cm target plane zone) and refined (tip within 0.01 cm),
-beside the paper's posture; "zone distance" is the smallest horizontal distance of the backbone
-above the floor to an obstacle's vertical axis, for ours and for the paper's printed posture.
+Run: ``python benchmarks/bench_icra2014.py [--rows abcd]``. Prints one markdown table measured in
+this run: target [30, 18, 51], l = 25 cm, r0 = 2, r_b = 2 (so r_oba = 4), NUM = 10, Δθ = 0.1°,
+the three obstacles added one by one (``configs/tanks/open_space_obstacles{1,2,3}.yaml``). For
+each row, ours in the paper's mode (stop in the 1 cm target plane zone) and refined (tip within
+0.01 cm), beside the paper's posture; "zone distance" is the smallest horizontal distance of the
+backbone above the floor to an obstacle's vertical axis, for ours and for the paper's printed
+posture.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import platform
 
 import numpy as np
 from bench_posture import fmt_theta as fmt
+from quick_mode import parse_args, print_header
 
 from aftir_rl.core.papers import ICRA2014_TABLE2, ICRA2014_TANKS, ICRA2014_TARGET
 from aftir_rl.core.robot import Posture
 from aftir_rl.planning.posture import Planner
 from aftir_rl.planning.posture.obstacle_clipping import obstacle_clipping
+
+QUICK = {"rows": "b"}
 
 
 def zone_distance(posture: Posture, centres: list[tuple[float, float, float]], l: float) -> float:
@@ -32,6 +37,12 @@ def zone_distance(posture: Posture, centres: list[tuple[float, float, float]], l
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--rows", default="abcd", help="the table's rows: a to d, 0 to 3 obstacles (abcd)"
+    )
+    args = parse_args(parser, QUICK)
+    print_header(args, QUICK)
     print(
         f"machine: {platform.machine()}, {platform.system()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}"
@@ -43,6 +54,8 @@ def main() -> None:
     )
     print("|---|---:|---|---:|---|---|---:|---:|---:|---:|---:|")
     for k, (tank, paper) in enumerate(zip(ICRA2014_TANKS, ICRA2014_TABLE2)):
+        if "abcd"[k] not in args.rows:
+            continue
         planner = Planner(tank)
         l = planner.arm.section_length
         centres = [s.center for s in planner.tank.obstacles]

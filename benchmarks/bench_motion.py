@@ -16,6 +16,7 @@ import platform
 import time
 
 import numpy as np
+from quick_mode import parse_args, print_header  # benchmarks/ is the script's own folder
 from tqdm import tqdm
 
 from aftir_rl.core.collision import CollisionScene
@@ -24,13 +25,15 @@ from aftir_rl.planning.ftl.plan import plan_motion
 from aftir_rl.planning.posture.planner import Planner, random_free_targets
 from aftir_rl.rl.tabular.q_table_goal import train_all_targets
 
+QUICK = {"n": 3}
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--n", type=int, default=20, help="random targets per bay (default 20)")
     parser.add_argument("--seed", type=int, default=21, help="seed of the random targets")
     parser.add_argument("--margin", type=float, default=1.0, help="clearance [cm] (default 1)")
-    args = parser.parse_args()
+    args = parse_args(parser, QUICK)
     tank = load_tank("b737_center")
     start = time.perf_counter()
     agent, _ = train_all_targets(tank=tank.name, seed=0)
@@ -41,6 +44,7 @@ def main() -> None:
         "bay2": drawn["bay2"],
     }
     scene = CollisionScene(tank)
+    print_header(args, QUICK)
     print(
         f"machine: {platform.machine()}, Python {platform.python_version()}; seed {args.seed}, "
         f"margin {args.margin:g} cm\n"

@@ -20,6 +20,7 @@ import platform
 import time
 
 import numpy as np
+from quick_mode import parse_args, print_header  # benchmarks/ is the script's own folder
 
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.papers import FILOMAT2018_TABLE2, JACE_TABLE2
@@ -30,6 +31,8 @@ from aftir_rl.planning.posture import (
     random_free_targets,
     region_clipping,
 )
+
+QUICK = {"blind_sample": 2_000_000, "repeats": 1, "random": 10}
 
 
 def best_time(fn, repeats):
@@ -181,7 +184,8 @@ def main() -> None:
     )
     parser.add_argument("--repeats", type=int, default=3, help="best of this many runs")
     parser.add_argument("--random", type=int, default=25, help="random targets per bay")
-    args = parser.parse_args()
+    args = parse_args(parser, QUICK)
+    print_header(args, QUICK)
     print(
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python "
         f"{platform.python_version()}, numpy {np.__version__}"

@@ -18,11 +18,14 @@ from functools import partial
 
 import gymnasium as gym
 import numpy as np
+from quick_mode import parse_args, print_header  # benchmarks/ is the script's own folder
 
 import aftir_rl  # noqa: F401
 from aftir_rl.core.robot import body_points
 from aftir_rl.core.tank import load_tank
 from aftir_rl.viz.plotting import PathRenderer, render_path
+
+QUICK = {"frames": 20}
 
 
 def frames(kind: str, n: int):
@@ -71,7 +74,8 @@ def env_ms(env_id: str, n: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=40, help="frames per measurement")
-    args = parser.parse_args()
+    args = parse_args(parser, QUICK)
+    print_header(args, QUICK)
     print(f"{platform.python_version()} on {platform.machine()}, {args.frames} frames, one run\n")
     print("| frame | old ms/frame | new ms/frame | ratio | env.render() ms | max pixel diff |")
     print("|---|---:|---:|---:|---:|---|")

@@ -21,12 +21,15 @@ import platform
 
 import numpy as np
 from bench_posture import best_time  # benchmarks/ is the script's own folder
+from quick_mode import parse_args, print_header
 
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.core.papers import ST2014_TABLE1, ST2014_TABLE2
 from aftir_rl.core.tank.raster import format_point
 from aftir_rl.planning.posture import Planner
 from aftir_rl.planning.posture.region_division import bearing, geometric_solution, region_division
+
+QUICK = {"repeats": 1}
 
 
 def table1(planner: Planner, repeats: int) -> None:
@@ -110,7 +113,8 @@ def table2_exact() -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3, help="best of this many runs")
-    args = parser.parse_args()
+    args = parse_args(parser, QUICK)
+    print_header(args, QUICK)
     print(
         f"Machine: {platform.machine()}, {platform.processor() or platform.system()}, "
         f"{os.cpu_count()} cores, Python {platform.python_version()}, "

@@ -1,8 +1,9 @@
 """AFTIR-Tank-v0 against Gymnasium's toy-text grids, and Q-learning on the reference targets.
 
-Run: ``python benchmarks/bench_tank.py`` (or ``make bench``). Prints markdown tables measured in
-this one run on this machine: env steps/s through the same ``gym.make`` wrapper stack with the same
-random action sequence, and Q-learning wall time and episodes to the BFS-optimal greedy path.
+Run: ``python benchmarks/bench_tank.py`` (or ``make bench-full``). Prints markdown tables
+measured in this one run on this machine: env steps/s through the same ``gym.make`` wrapper stack
+with the same random action sequence, and Q-learning wall time and episodes to the BFS-optimal
+greedy path.
 """
 
 from __future__ import annotations
@@ -14,10 +15,13 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from quick_mode import parse_args, print_header  # benchmarks/ is the script's own folder
 
 import aftir_rl  # noqa: F401
 from aftir_rl.core.tank import load_tank
 from aftir_rl.rl.tabular import QLearning, QLearningConfig, greedy_rollout
+
+QUICK = {"steps": 50_000, "repeats": 1}
 
 
 def steps_per_second(env_id: str, n_steps: int, repeats: int, **kwargs) -> float:
@@ -78,8 +82,9 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=200_000, help="env steps per measurement")
     parser.add_argument("--repeats", type=int, default=3, help="take the best of this many")
     parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args()
+    args = parse_args(parser, QUICK)
 
+    print_header(args, QUICK)
     print(
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, {platform.processor() or '?'}, "
         f"Python {platform.python_version()}, gymnasium {gym.__version__}, numpy {np.__version__}"

@@ -42,6 +42,10 @@ __all__ = ["build_parser", "main"]
 
 #: The most random targets per bay (``--n-random``): each is run by every method.
 MAX_N_RANDOM = 1000
+#: ``--quick`` (``make bench``): every set and method on the first ``QUICK_TARGETS`` targets of
+#: each set (as many random ones per bay), shorter budgets.
+QUICK_TARGETS = 2
+QUICK = {"n_random": QUICK_TARGETS, "rrt_seconds": 1.0, "bridge_seconds": 1.0}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -94,6 +98,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_int_option(
         parser, "--suite-targets", (1, 100), "targets per scene of --suite, 1 to 100 (100)", 100
     )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"the quick table of make bench: the first {QUICK_TARGETS} targets of each set "
+        f"({QUICK['n_random']} random ones per bay), {QUICK['rrt_seconds']:g} s for RRT-Connect "
+        f"per target, {QUICK['bridge_seconds']:g} s per colliding move (options given keep their "
+        "value)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     add_margin_option(
         parser, f"clearance the q_table+ftl motions keep (default {DEFAULT_MARGIN:g} cm)"
@@ -118,6 +130,8 @@ def _run_benchmark(args: argparse.Namespace) -> list[Row]:
 
     """
     sets = {k: v for k, v in target_sets(args.n_random, args.seed).items() if k in args.sets}
+    if args.quick:
+        sets = {k: v[:QUICK_TARGETS] for k, v in sets.items()}
     progress = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
     options = ("rrt_seconds", "bridge_seconds", "margin", "ray", "workers")
     chosen = {name: getattr(args, name) for name in options}
@@ -129,6 +143,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m aftir_rl.bench``."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.quick:
+        for name, value in QUICK.items():
+            if getattr(args, name) == parser.get_default(name):
+                setattr(args, name, value)
     _check_numbers(parser, args)
     if args.model:
         preload("aftir_rl.rl.sb3")  # torch
@@ -153,6 +171,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(
         f"machine: {facts['cpu']}, {facts['system']}, {facts['cores']} cores, "
         f"Python {facts['python']}; {seconds:.0f} s in all"
+    )
+    print(
+        (
+            f"quick table (make bench; make bench-full for the full one): the first "
+            f"{QUICK_TARGETS} targets of each set, "
+            if args.quick
+            else ""
+        )
+        + f"{args.n_random} random targets per bay (seed {args.seed}); RRT-Connect "
+        f"{args.rrt_seconds:g} s per target and {args.bridge_seconds:g} s per colliding move"
     )
     print()
     print(format_table(rows))

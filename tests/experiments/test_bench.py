@@ -76,10 +76,17 @@ def test_benchmark_outcomes_check_out(tank):
 def test_bench_cli(tmp_path):
     out = tmp_path / "bench.json"
     run = subprocess.run(
-        [sys.executable, "-m", "aftir_rl.bench", "--sets", "jace", "--quiet", "--json", str(out)],
+        [sys.executable, "-m", "aftir_rl.bench", "--sets", "jace", "--quiet", "--json", str(out)]
+        + ["--quick", "--rrt-seconds", "2"],
         capture_output=True,
         text=True,
         check=True,
+    )
+    # --quick takes its values for the options left at default, and the header says so.
+    assert run.stdout.splitlines()[1] == (
+        "quick table (make bench; make bench-full for the full one): the first 2 targets of each "
+        "set, 2 random targets per bay "
+        "(seed 7); RRT-Connect 2 s per target and 1 s per colliding move"
     )
     lines = [line for line in run.stdout.splitlines() if line.startswith("| jace")]
     assert [line.split("|")[2].strip() for line in lines] == [
@@ -90,8 +97,9 @@ def test_bench_cli(tmp_path):
     ]
     data = json.loads(out.read_text())
     assert data["machine"]["cores"] >= 1 and data["seconds"] > 0
+    assert data["options"]["n_random"] == 2
     tga = next(r for r in data["rows"] if r["method"] == "tga")
-    assert tga["success_rate"] == 1.0 and len(tga["outcomes"]) == 3
+    assert tga["success_rate"] == 1.0 and len(tga["outcomes"]) == 2  # --quick: the first 2
     # Every TGA posture of the run is re-checked here, independently of the bench.
     scene = CollisionScene(load_tank("open_space"))
     for t, outcome in zip(((11, 31, 31), (30, 19, 50), (30, 29, 67)), tga["outcomes"]):
