@@ -33,27 +33,38 @@ from aftir_rl.rl.tabular.q_table_goal import train_all_targets
 
 
 def main() -> None:
-    """Compile (or load) each family of kernels by running it once."""
+    """Compile (or load) each family of kernels by running it once, saying which."""
     start = time.perf_counter()
+
+    def say(family: str) -> None:
+        print(f"  [{time.perf_counter() - start:5.0f} s] {family}", flush=True)
+
+    print("compiling numba's kernels once, into their cache (1-2 minutes on 2 cores):", flush=True)
     tank = load_tank("b737_center")
+    say("the follow-the-leader planner")
     warm_up(tank)
+    say("the camera, the collision pre-check, the tip Jacobian")
     seen = np.zeros((1, 1), dtype=np.bool_)
     one = np.array([[0.0, 0.0, 50.0]])
     seen_by_groups(one, one / 50.0, np.array([0, 1]), one + 10.0, one / 50.0,
                    tank.arm.camera.cosines(), kernel_grid(tank), seen)  # fmt: skip
     CollisionScene(tank).collides_fast(Posture(-60.0, (0.0, 0.0), (0.0, 0.0)))
     joint_tip_jacobian(np.zeros(5), 25.0, 1e-6, np.empty(3), np.empty((3, 5)))
+    say("the AFTIR-ArmFTL-v0 step")
     for kwargs in ({}, {"guide": True, "shaping": "field", "steer": "target"}):
         env = gym.make("AFTIR-ArmFTL-v0", **kwargs)
         env.reset(seed=0)
         env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         env.close()
+    say("the posture planners")
     planner = Planner("b737_center")
     for target in ((100.0, 50.0, 50.0), (230.0, 140.0, 90.0)):  # bay 1 (TGA), bay 2 (TSM)
         planner.plan(target)
+    say("the mesh tanks' distance kernels")
     with tempfile.TemporaryDirectory() as folder:
         export_tank_mesh(tank, Path(folder) / "t.stl", Path(folder) / "t.yaml")
         load_tank(str(Path(folder) / "t.yaml")).raster  # noqa: B018  (builds the mesh grids)
+    say("goal-conditioned Q-learning")
     train_all_targets(tank="b737_center", episodes=1, seed=0)
     print(f"numba kernels compiled or loaded in {time.perf_counter() - start:.1f} s")
 
