@@ -51,7 +51,7 @@ QUICK = {"n_random": QUICK_TARGETS, "rrt_seconds": 1.0, "bridge_seconds": 1.0}
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m aftir_rl.bench``."""
     parser = OneLineParser(
-        prog="python -m aftir_rl.bench",
+        prog="aftir bench",
         description="Measure every planner, Q-learning + postures, RRT-Connect and trained SB3 "
         "agents on the same fixed target sets; print one markdown table.",
     )

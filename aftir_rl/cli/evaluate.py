@@ -81,7 +81,7 @@ def _row_name(run: str) -> str:
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m aftir_rl.evaluate``."""
     parser = OneLineParser(
-        prog="python -m aftir_rl.evaluate",
+        prog="aftir evaluate",
         description="Evaluate trained runs (Q-table or SB3) and print one comparison table.",
     )
     parser.add_argument("runs", nargs="*", metavar="RUN_DIR", help="run directories")

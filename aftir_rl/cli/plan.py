@@ -51,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The options of ``aftir plan``."""
     methods = "; ".join(f"{m.name}: {m.summary} ({m.paper})" for m in REGISTRY.values())
     parser = OneLineParser(
-        prog="python -m aftir_rl.plan",
+        prog="aftir plan",
         description="Plan a collision-free posture (dis, theta, phi) of the arm reaching a target.",
     )
     add_target_option(

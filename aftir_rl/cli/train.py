@@ -97,7 +97,7 @@ def _print_summary(s: dict[str, Any]) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m aftir_rl.train``: one subcommand per algorithm."""
     parser: argparse.ArgumentParser = OneLineParser(
-        prog="python -m aftir_rl.train",
+        prog="aftir train",
         description="Train an agent on an aftir_rl environment and log the run to TensorBoard.",
     )
     sub = parser.add_subparsers(dest="algo", required=True, metavar="ALGO")

@@ -36,7 +36,7 @@ __all__ = ["build_parser", "main"]
 def build_parser() -> argparse.ArgumentParser:
     """The options of ``aftir tune``."""
     parser = OneLineParser(
-        prog="python -m aftir_rl.tune",
+        prog="aftir tune",
         description="Hyperparameter sweep of an SB3 algorithm on Ray Tune: Optuna samples the "
         "search space, ASHA stops the trials that trail on eval/success_rate, every trial is a "
         "run directory, and the best config is written as a YAML for `aftir train`. Needs "

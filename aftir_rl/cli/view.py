@@ -27,7 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
     from aftir_rl.viz.page import DEFAULT_MAX_FRAMES
 
     parser = OneLineParser(
-        prog="python -m aftir_rl.view",
+        prog="aftir view",
         description="Write one self-contained HTML page showing runs in 3D: the tank, each run's "
         "cell path and tip route, and the arm moving along its motion (trajectory.json).",
     )
