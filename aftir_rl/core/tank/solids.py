@@ -184,9 +184,8 @@ class Box(Primitive):
         """Signed distance [cm] to boxes of centre ``(cx, cy, cz)``, half-sizes ``(hx, hy, hz)``."""
         cx, cy, cz, hx, hy, hz = params
         qx, qy, qz = np.abs(x - cx) - hx, np.abs(y - cy) - hy, np.abs(z - cz) - hz
-        outside = np.sqrt(
-            np.maximum(qx, 0.0) ** 2 + np.maximum(qy, 0.0) ** 2 + np.maximum(qz, 0.0) ** 2
-        )
+        # hypot: no overflow (and no RuntimeWarning) for points far outside
+        outside = np.hypot(np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0)), np.maximum(qz, 0.0))
         return outside + np.minimum(np.maximum(np.maximum(qx, qy), qz), 0.0)
 
     def fcl_geometry(self) -> tuple[Any, Any]:
