@@ -11,22 +11,32 @@ from collections.abc import Sequence
 
 from aftir_rl.cli.args import OneLineParser
 from aftir_rl.cli.guard import cli
-from aftir_rl.core.config import CONFIG_DIR, MAX_YAML_BYTES, read_limited
+from aftir_rl.core.config import CONFIG_DIR, MAX_YAML_BYTES, one_line, read_limited
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.shipped import find_config, shipped_configs
 
 __all__ = ["build_parser", "main"]
 
 
+_ABBREVIATIONS = (" eq", " e.g", " i.e", " cf", " vs")
+
+
 def _summary(name: str) -> str:
-    """The first comment line of a shipped config (its purpose), or ``""``."""
+    """The first sentence of a shipped config's leading comment (its purpose), or ``""``."""
     raw = read_limited(find_config(name), MAX_YAML_BYTES, ConfigError)
+    words: list[str] = []
     for line in raw.decode("utf-8", "replace").splitlines():
-        if line.startswith("#"):
-            return line.lstrip("# ").strip()
-        if line.strip():
+        if not line.startswith("#"):
             break
-    return ""
+        words += line.lstrip("#").split()
+    text, depth = " ".join(words), 0
+    for i, char in enumerate(text):  # the first sentence: up to ". X" or ": " outside brackets
+        depth += (char in "([") - (char in ")]")
+        rest = text[i + 1 : i + 3]
+        period = char == "." and not text[:i].endswith(_ABBREVIATIONS) and not rest[1:].islower()
+        if depth == 0 and rest[:1] == " " and (char == ":" or period):
+            return one_line(text[: i + 1])
+    return one_line(text)
 
 
 def build_parser() -> argparse.ArgumentParser:
