@@ -69,6 +69,7 @@ def _check(path: str, tank_name: str | None, margin: float) -> int:
         print(f"{path}: {problems[0]}{more}")
         return 1
     stated = "" if run.margin_cm == margin else f"; the file states {run.margin_cm:g} cm"
+    stated += "; timed now: the run saved no timing" if run.timed_now else ""
     facts = f"{len(run.dis)} entries, {run.timing.duration:.2f} s, margin {margin:g} cm"
     print(f"{path}: ok ({facts}{stated})")
     return 0

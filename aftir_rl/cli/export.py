@@ -107,5 +107,6 @@ def _export(args: argparse.Namespace, given: str, output: Path) -> int:
     text = export_motion(run, args.format, args.space, None if args.unchecked else args.margin)
     with atomic_open(output) as out:
         out.write(text)
-    print(f"wrote {output} ({len(run.dis)} points, {run.timing.duration:.2f} s, {args.space})")
+    now = ", timed now: the run saved no timing" if run.timed_now else ""
+    print(f"wrote {output} ({len(run.dis)} points, {run.timing.duration:.2f} s, {args.space}{now})")
     return 0

@@ -28,7 +28,7 @@ from aftir_rl.core.errors import CheckpointError
 from aftir_rl.core.robot import Posture, body_points
 from aftir_rl.core.tank import Tank, load_tank, resolve_run_tank
 from aftir_rl.planning.timing import TimedMotion, joint_names
-from aftir_rl.viz.runs import read_run
+from aftir_rl.viz.runs import RunData, read_run
 
 __all__ = [
     "FORMATS",
@@ -63,6 +63,8 @@ class TimedRun:
     section_length: float
     margin_cm: float
     tank: str | None = None
+    #: Whether the run held no timing and the motion was timed as it was read.
+    timed_now: bool = False
 
 
 def _array(value: Any, shape: tuple[int, int], where: str, path: Path) -> NDArray[np.float64]:
@@ -83,23 +85,37 @@ def _folder(run: str | Path) -> Path:
     return Path(run).parent if Path(run).name == "trajectory.json" else Path(run)
 
 
-def read_timed(run: str | Path) -> TimedRun:
+def read_timed(run: str | Path, tank: Tank | None = None) -> TimedRun:
     """The timed motion of a run directory (or of its ``trajectory.json``), each file read once.
 
+    A motion written without its timing (the run was made before the ``robot`` extra was
+    installed) is timed now under ``tank``'s arm limits when a ``tank`` is given
+    (:func:`~aftir_rl.planning.timing.time_motion`; :attr:`TimedRun.timed_now` says so).
+
     Raises:
-        CheckpointError: no motion, no timing, or a file of the wrong shape (one line).
+        CheckpointError: no motion, no timing (and no ``tank`` to time it in, or timing it
+            failed), or a file of the wrong shape (one line).
 
     """
-    data = read_run(_folder(run), keep=("timing", "timing_note", "margin_cm"))
-    path = _folder(run) / "trajectory.json"
+    return _timed_run(_read(run), _folder(run) / "trajectory.json", tank)
+
+
+def _read(run: str | Path) -> RunData:
+    return read_run(_folder(run), keep=("timing", "timing_note", "margin_cm"))
+
+
+def _timed_run(data: RunData, path: Path, tank: Tank | None) -> TimedRun:
+    """:func:`read_timed` of a run's files, read."""
     if data.dis is None or data.theta is None or data.phi is None:
-        raise CheckpointError(f"{_folder(run)}: no motion in trajectory.json")
+        raise CheckpointError(f"{path.parent}: no motion in trajectory.json")
     timing = data.kept.get("timing")
     if not isinstance(timing, dict):
         note = data.kept.get("timing_note")
-        raise CheckpointError(
-            f"{path}: the motion has no timing" + (f" ({note})"[:200] if note else "")
-        )
+        if tank is None:
+            raise CheckpointError(
+                f"{path}: the motion has no timing" + (f" ({note})"[:200] if note else "")
+            )
+        return _timed_now(data, tank, path)
     m, n = data.theta.shape
     try:
         limits = ActuatorLimits.from_mapping(timing.get("limits"), f"{path}: timing.limits")
@@ -125,12 +141,31 @@ def timed_run_tank(run: str | Path, tank: str | None = None) -> tuple[TimedRun, 
     """A run's timed motion and its tank: ``tank`` if given, else the one the run names.
 
     A run's tank is a shipped name or a YAML inside the run (:func:`resolve_run_tank`); a run
-    that names none is taken to be in the default tank.
+    that names none is taken to be in the default tank. A motion saved without its timing is
+    timed now, in that tank (:func:`read_timed`).
     """
-    timed = read_timed(run)
-    if tank is None and timed.tank is not None:
-        tank = resolve_run_tank(timed.tank, _folder(run))
-    return timed, load_tank() if tank is None else load_tank(tank)
+    data = _read(run)
+    if tank is None and data.tank is not None:
+        tank = resolve_run_tank(data.tank, _folder(run))
+    loaded = load_tank() if tank is None else load_tank(tank)
+    return _timed_run(data, _folder(run) / "trajectory.json", loaded), loaded
+
+
+def _timed_now(data: RunData, tank: Tank, path: Path) -> TimedRun:
+    """Time a run's saved postures under ``tank``'s arm limits (its timing was not saved)."""
+    from aftir_rl.core.errors import AftirError
+    from aftir_rl.planning.timing import time_motion
+
+    assert data.dis is not None and data.theta is not None and data.phi is not None
+    try:
+        timing = time_motion(data.dis, data.theta, data.phi, data.section_length, tank.arm.limits)
+        margin = float(data.kept.get("margin_cm", 1.0))
+    except (AftirError, TypeError, ValueError, OverflowError) as exc:
+        raise CheckpointError(f"{path}: the motion has no timing, and timing it now failed: "
+                              f"{exc}") from None  # fmt: skip
+    margin = margin if math.isfinite(margin) else 1.0
+    postures = (data.dis, data.theta, data.phi)
+    return TimedRun(*postures, timing, data.section_length, margin, data.tank, timed_now=True)
 
 
 def _time_problems(run: TimedRun) -> list[str]:

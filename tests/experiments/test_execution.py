@@ -14,6 +14,7 @@ import pytest
 from aftir_rl.cli import check as check_cli
 from aftir_rl.cli import export as export_cli
 from aftir_rl.core.cables import cable_lengths
+from aftir_rl.core.errors import CheckpointError
 from aftir_rl.experiments.execution import check_motion, export_motion, read_timed
 from aftir_rl.planning.ftl.plan import plan_motion
 from aftir_rl.planning.timing import joint_positions
@@ -96,12 +97,18 @@ def test_unreadable_timing_exits_2(run_dir, tmp_path, capsys):
     assert "timing.velocities" in err and "\n" not in err
 
 
-def test_untimed_motion_is_named(run_dir, tmp_path, capsys):
+def test_an_untimed_motion_is_timed_when_read(run_dir, tmp_path, capsys):
     def untimed(data):
         data.pop("timing")
 
-    assert export_cli.main([str(_edited(run_dir, tmp_path, untimed)), "-o", "x.json"]) == 2
-    assert "has no timing" in capsys.readouterr().err
+    # a run saved before the robot extra was installed: timed when read, and said so
+    out = tmp_path / "x.json"
+    assert export_cli.main([str(_edited(run_dir, tmp_path, untimed)), "-o", str(out)]) == 0
+    assert "timed now: the run saved no timing" in capsys.readouterr().out
+    times = [p["time_from_start"]["sec"] for p in json.loads(out.read_text())["points"]]
+    assert times[-1] == int(read_timed(run_dir).timing.duration)
+    with pytest.raises(CheckpointError, match="has no timing"):
+        read_timed(tmp_path / "edited")  # no tank to time it in
 
 
 def test_jointtrajectory_json_matches_the_trajectory(run_dir, tmp_path):
