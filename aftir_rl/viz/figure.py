@@ -151,6 +151,9 @@ def _run_lines(
     if run.target is not None:
         marker = {"size": 6, "color": color, "symbol": "diamond"}
         lines.append((run.target[None], {"mode": "markers", "name": "target", "marker": marker}))
+    if run.targets is not None and len(run.targets):
+        marker = {"size": 5, "color": color, "symbol": "diamond-open"}
+        lines.append((run.targets, {"mode": "markers", "name": "targets", "marker": marker}))
     if frames is not None:
         tips = run.tips()
         stride = max(1, math.ceil(len(tips) / _MAX_ROUTE_POINTS))

@@ -47,6 +47,7 @@ class RunData:
         cells_cm: cell centres of the greedy path [cm], shape ``(P, 3)``, or None.
         cells: the path's cells ``(a, b, c)`` when ``path.json`` has no ``points_cm``.
         target: the target [cm], or None.
+        targets: a tour's targets [cm], shape ``(K, 3)``, or None.
         dis: the motion's ``dis`` [cm], shape ``(M,)``, or None without a motion.
         theta: bending angles [rad], shape ``(M, N)``, or None.
         phi: bending-plane angles [rad], shape ``(M, N)``, or None.
@@ -65,6 +66,7 @@ class RunData:
     cells_cm: NDArray[np.float64] | None = None
     cells: NDArray[np.int64] | None = None
     target: NDArray[np.float64] | None = None
+    targets: NDArray[np.float64] | None = None
     dis: NDArray[np.float64] | None = None
     theta: NDArray[np.float64] | None = None
     phi: NDArray[np.float64] | None = None
@@ -97,6 +99,8 @@ def _bad(path: Path, what: str) -> CheckpointError:
     return CheckpointError(f"{path}: {what}")
 
 
+#: The most targets of a tour drawn from its ``trajectory.json``.
+MAX_TARGETS = 10_000
 #: The most joint values (postures × sections) a motion read from a file may hold: about 8 times
 #: a 20-target tour's, and 128 MB as arrays. A file that says more is refused before any array.
 MAX_MOTION_VALUES = 8_000_000
@@ -183,6 +187,10 @@ def _read_trajectory(run: RunData, path: Path, keep: Sequence[str] = ()) -> None
     if not isinstance(data, dict):
         raise _bad(path, "expected a JSON object")
     run.kept = {key: data[key] for key in keep if key in data}
+    if data.get("target") is not None and run.target is None:  # a plan's or a rollout's
+        run.target = _points(data["target"], path, "target").reshape(3)
+    if isinstance(data.get("targets"), list) and len(data["targets"]) <= MAX_TARGETS:  # a tour's
+        run.targets = _points(data["targets"], path, "targets").reshape(-1, 3)
     for key in ("complete", "method", "margin_cm", "inserting"):
         if key in data and not isinstance(data[key], (dict, list)):
             run.facts[key] = str(data[key])

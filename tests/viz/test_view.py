@@ -96,6 +96,20 @@ def test_read_run_and_figure(tmp_path, tank):
     assert fig.data[arm].legendgroup == "run0"
 
 
+def test_rollout_and_tour_pages_show_their_targets(tmp_path, tank):
+    """A run with only trajectory.json (a rollout, a tour) still draws its target(s)."""
+    motion = [p.to_dict() for p in _motion()]
+    rollout, tour = tmp_path / "rollout", tmp_path / "tour"
+    extras = [{"target": [180.0, 110.0, 50.0]}, {"targets": [[100, 50, 50], [180, 110, 50]]}]
+    for folder, extra in zip((rollout, tour), extras):
+        folder.mkdir()
+        data = {"complete": False, "section_length": L, "motion": motion, **extra}
+        (folder / "trajectory.json").write_text(json.dumps(data))
+    fig = build_figure([read_run(rollout), read_run(tour)], tank, max_frames=5)
+    drawn = {t.name: t for t in fig.data}
+    assert list(drawn["target"].x) == [180.0] and list(drawn["targets"].y) == [50, 110]
+
+
 def test_frames_are_bounded_and_keep_the_ends(tmp_path, tank):
     run = read_run(_q_table_run(tmp_path, tank))
     from aftir_rl.viz.figure import _frame_indices

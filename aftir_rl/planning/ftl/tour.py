@@ -98,6 +98,7 @@ class Tour:
             "section_length": self.section_length,
             "seconds": self.seconds,
             "n_sections": int(theta.shape[1]),
+            "targets": self.targets.tolist(),
             "motion": entries,
             "waypoint_index": self.arrivals,
             "min_clearance_cm": self.min_clearance_cm,
