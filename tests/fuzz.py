@@ -334,6 +334,18 @@ MUTATIONS: list[Callable[[random.Random, Path], str]] = [
 
 
 def _commands(cli: str, out: Path) -> Callable[[Path], int]:
+    if cli == "check":
+        from aftir_rl.cli import check
+
+        return lambda run: check.main([str(run)])
+    if cli == "export":
+        from aftir_rl.cli import export
+
+        return lambda run: export.main([str(run), "-o", str(out / "x.json")])
+    if cli == "tank":  # a tank folder: tank.yaml naming the mesh files beside it
+        from aftir_rl.cli import tank
+
+        return lambda run: tank.main(["show", "--tank", str(run / "tank.yaml")])
     if cli == "view":
         from aftir_rl.cli import view
 
@@ -341,7 +353,7 @@ def _commands(cli: str, out: Path) -> Callable[[Path], int]:
     if cli == "evaluate":
         from aftir_rl.cli import evaluate
 
-        return lambda run: evaluate.main([str(run), "--logdir", str(out)])
+        return lambda run: evaluate.main([str(run), "--logdir", str(out), "--no-progress"])
     if cli == "rollout":
         from aftir_rl.cli import rollout
 
