@@ -544,7 +544,15 @@ def test_sigint_to_bench_and_evaluate(tmp_path):
     config.write_text(PPO_YAML)
     assert train.main(_ppo_args(config, tmp_path / "runs", 64)) == 0
     (run,) = (tmp_path / "runs").iterdir()
-    args = ["aftir_rl.evaluate", str(run), "--random", "500", "--logdir", str(tmp_path / "eval")]
+    args = [
+        "aftir_rl.evaluate",
+        str(run),
+        "--random",
+        "500",
+        "--logdir",
+        str(tmp_path / "eval"),
+        "--no-progress",
+    ]
     proc = _start(args, tmp_path)
     time.sleep(rng.uniform(1.0, 4.0))
     code, seconds = _interrupt(proc, signal.SIGINT)

@@ -42,7 +42,9 @@ COMMANDS = {
     "q_table": ["aftir_rl.train", "q_table", *Q_ARGS, "--logdir", "{out}"],
     "ppo": ["aftir_rl.train", "ppo", "--config", "{tmp}/ppo.yaml", "--logdir", "{out}"],
     "bench": ["aftir_rl.bench", "--sets", "jace", "--n-random", "1", "--rrt-seconds", "1"],
-    "evaluate": ["aftir_rl.evaluate", "{run}", "--random", "100", "--logdir", "{out}"],
+    "evaluate": [
+        "aftir_rl.evaluate", "{run}", "--random", "100", "--logdir", "{out}", "--no-progress"
+    ],
     "tune": [
         "aftir_rl.tune", "ppo", "--env", "AFTIR-ArmReach-v0", "--trials", "2", "--workers", "2",
         "--total-timesteps", "2048", "--config", "{tmp}/ppo.yaml", "--logdir", "{out}",
