@@ -154,4 +154,5 @@ def test_mutated_run_directories(cli, sources, tmp_path):
     peak = max(results, key=lambda c: c["allocated"])
     assert peak["allocated"] <= PEAK_MB, peak
     if CASES >= 50:  # enough cases for both kinds: some refused, some still readable
-        assert {c["code"] for c in results} == {0, 2}
+        codes = {c["code"] for c in results}
+        assert {0, 2} <= codes <= ({0, 1, 2} if cli in ("check", "export") else {0, 2})
