@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import shutil
+import stat
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -50,29 +51,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _newest_write(folder: Path) -> float:
-    """The latest modification time of ``folder`` and anything in it [s since the epoch]."""
-    newest = folder.stat().st_mtime
+def _size_and_newest(folder: Path) -> tuple[int, float]:
+    """Bytes of the files in ``folder`` and the latest modification time in it, in one walk."""
+    size, newest = 0, folder.stat().st_mtime
     for count, path in enumerate(folder.rglob("*")):
         if count >= MAX_ENTRIES:
             break
         try:
-            newest = max(newest, path.lstat().st_mtime)
+            info = path.lstat()
         except OSError:
             continue
-    return newest
-
-
-def _size(folder: Path) -> int:
-    total = 0
-    for count, path in enumerate(folder.rglob("*")):
-        if count >= MAX_ENTRIES:
-            break
-        try:
-            total += path.lstat().st_size if path.is_file() and not path.is_symlink() else 0
-        except OSError:
-            continue
-    return total
+        newest = max(newest, info.st_mtime)
+        size += info.st_size if stat.S_ISREG(info.st_mode) else 0
+    return size, newest
 
 
 @cli
@@ -91,8 +82,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(one_line(run.name))
     removed = 0
     for folder in unfinished:
-        age = (now - _newest_write(folder)) / 60.0
-        facts = f"{_size(folder) / 1e6:.1f} MB, last written {age:.0f} min ago"
+        size, newest = _size_and_newest(folder)
+        age = (now - newest) / 60.0
+        facts = f"{size / 1e6:.1f} MB, last written {age:.0f} min ago"
         if args.remove_unfinished and age >= args.older_than:
             shutil.rmtree(folder)
             removed += 1
