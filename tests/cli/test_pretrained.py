@@ -63,7 +63,13 @@ def test_cli_lists_and_shows_cards(capsys):
     out = capsys.readouterr().out
     assert all(f"{name}:" in out for name in NAMES)
     assert pretrained.main(["ppo-armreach"]) == 0
-    assert json.loads(capsys.readouterr().out)["name"] == "ppo-armreach"
+    text = capsys.readouterr().out
+    c = card("ppo-armreach")
+    assert text.startswith("ppo-armreach: PPO on AFTIR-ArmReach-v0")
+    assert f"{c['test']['success_rate']:.1%} success" in text
+    assert " ".join(c["recipe"].split()) in " ".join(text.split())  # wrapped at 100 columns
+    assert pretrained.main(["ppo-armreach", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == c
     assert pretrained.main(["no-such-policy"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no-such-policy" in err
