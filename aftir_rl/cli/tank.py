@@ -7,7 +7,7 @@ A thin command line over :mod:`aftir_rl.core.tank`:
   scene export (docs/design.md §5);
 - ``aftir tank generate --kind wing --bays N --seed S -o wing.yaml`` writes a generated wing
   tank (:func:`~aftir_rl.core.tank.generate.wing_tank`);
-- ``aftir tank export TANK -o tank.stl [--walls walls.stl] [--yaml OUT.yaml]`` writes the
+- ``aftir tank export [--tank TANK] -o tank.stl [--walls walls.stl] [--yaml OUT.yaml]`` writes the
   tank's solids as one triangle mesh (needs ``aftir_rl[mesh]``), with ``--walls`` its inside
   (the box, narrowed by its taper) as a walls mesh, and with ``--yaml`` a tank file that reads
   them back.
@@ -53,7 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_int_option(gen, "--seed", (0, MAX_SEED), "random seed (0)", 0)
     gen.add_argument("-o", "--output", required=True, help="the YAML file to write")
     export = sub.add_parser("export", help="the tank's solids as a triangle mesh (STL, OBJ, PLY)")
-    export.add_argument("tank", help=_TANK_HELP)
+    export.add_argument("--tank", default=DEFAULT_TANK, help=_TANK_HELP)
     export.add_argument("-o", "--output", required=True, help="mesh file: .stl, .obj or .ply")
     export.add_argument("--walls", help="also write the tank's inside as a walls mesh")
     export.add_argument("--yaml", help="also write a tank YAML that reads the mesh files back")

@@ -89,7 +89,7 @@ def sources(tmp_path_factory) -> dict[str, list[list[str]]]:
     runs = {k: [str(p) for p in (top / k).iterdir()] for k in ("q", "reach", "ftl")}
     tank = top / "tank" / "wing"  # a tank YAML that names its walls and solids as meshes
     tank.mkdir(parents=True)
-    _aftir("tank", "export", "wing:2:3", "-o", str(tank / "solids.stl"),
+    _aftir("tank", "export", "--tank", "wing:2:3", "-o", str(tank / "solids.stl"),
            "--walls", str(tank / "walls.stl"), "--yaml", str(tank / "tank.yaml"),
            bars=False)  # fmt: skip
     timed = [r for r in runs["q"] if (Path(r) / "trajectory.json").exists()]

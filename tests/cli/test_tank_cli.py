@@ -32,7 +32,7 @@ def test_show_takes_a_generator_spec_and_the_old_form(capsys):
     [
         (["generate", "--bays", "0", "-o", "x.yaml"], "--bays must be from 1 to 8"),
         (["show", "--tank", "wing:0:1"], "unknown tank 'wing:0:1'"),
-        (["export", "b737_center", "-o", "tank.txt"], "expected a .stl, .obj, .ply file"),
+        (["export", "--tank", "b737_center", "-o", "tank.txt"], "expected a .stl, .obj, .ply file"),
     ],
 )
 def test_refusals_are_one_line(tmp_path, monkeypatch, capsys, argv, message):
@@ -45,7 +45,7 @@ def test_refusals_are_one_line(tmp_path, monkeypatch, capsys, argv, message):
 
 def test_export_writes_a_mesh_and_a_tank_that_reads_it(tmp_path, capsys):
     pytest.importorskip("trimesh")
-    assert main(["export", "wing:2:4", "-o", str(tmp_path / "w.obj"), "--yaml",
+    assert main(["export", "--tank", "wing:2:4", "-o", str(tmp_path / "w.obj"), "--yaml",
                  str(tmp_path / "w.yaml")]) == 0  # fmt: skip
     meshed, tank = load_tank(tmp_path / "w.yaml"), load_tank("wing:2:4")
     assert (meshed.raster.obstructed == tank.raster.obstructed).all()
@@ -100,8 +100,16 @@ def test_outputs_never_replace_inputs_devices_or_each_other(tmp_path, capsys):
     before = tank.read_bytes()
     refusals = [
         ["generate", "--bays", "2", "--seed", "1", "-o", "/dev/full"],
-        ["export", str(tank), "-o", str(tmp_path / "a.stl"), "--walls", str(tmp_path / "a.stl")],
-        ["export", str(tank), "-o", str(tmp_path / "b.stl"), "--yaml", str(tank)],
+        [
+            "export",
+            "--tank",
+            str(tank),
+            "-o",
+            str(tmp_path / "a.stl"),
+            "--walls",
+            str(tmp_path / "a.stl"),
+        ],
+        ["export", "--tank", str(tank), "-o", str(tmp_path / "b.stl"), "--yaml", str(tank)],
     ]
     for argv in refusals:
         capsys.readouterr()
