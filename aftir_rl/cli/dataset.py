@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from collections.abc import Sequence
 
@@ -106,5 +107,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         for bar in bars:
             bar.close()
     out["seconds"] = round(time.perf_counter() - start, 1)
+    if out["before"] >= args.episodes:
+        print(
+            f"{out['path']} already holds {out['before']} episodes ({args.episodes} asked): "
+            "nothing added; a larger --episodes completes it, another --id starts a new one",
+            file=sys.stderr,
+        )
     print(json.dumps(out))
     return 0

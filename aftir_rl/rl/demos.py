@@ -206,7 +206,9 @@ def write_dataset(
         progress: called with ``(episodes written, episodes)`` after each episode.
 
     Returns:
-        ``episodes``, ``skipped`` (targets without a motion), ``steps``, ``dataset_id``, ``path``.
+        ``episodes`` (on disk now), ``before`` (on disk before: a dataset is completed, never
+        rewritten), ``skipped`` (targets without a motion), ``steps`` (added now),
+        ``dataset_id``, ``path``.
 
     Raises:
         ConfigError: Minari is not installed, or the dataset on disk was made differently.
@@ -216,7 +218,7 @@ def write_dataset(
     env_kwargs = dict(env_kwargs or {})
     os.environ["MINARI_DATASETS_PATH"] = str(Path(root).resolve())
     done, next_seed = _resume_point(minari, dataset_id, env_kwargs, seed)
-    skipped = 0
+    before, skipped = done, 0
     env = gym.make(ARM_FTL, **env_kwargs)
     jobs = _targets(env_kwargs, next_seed)
     steps = 0
@@ -236,4 +238,6 @@ def write_dataset(
                 _save(minari, dataset_id, buffers, env)
             done += len(buffers)
     path = str(Path(root) / dataset_id)
-    return dict(episodes=done, skipped=skipped, steps=steps, dataset_id=dataset_id, path=path)
+    return dict(
+        episodes=done, before=before, skipped=skipped, steps=steps, dataset_id=dataset_id, path=path
+    )

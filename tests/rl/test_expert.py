@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 
 import numpy as np
@@ -215,9 +216,10 @@ def dataset(tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_a_dataset_holds_the_env_episodes_and_resumes(dataset):
+def test_a_dataset_holds_the_env_episodes_and_resumes(dataset, capsys):
     import minari
 
+    from aftir_rl.cli import dataset as dataset_cli
     from aftir_rl.rl.demos import write_dataset
 
     root, out = dataset
@@ -243,6 +245,12 @@ def test_a_dataset_holds_the_env_episodes_and_resumes(dataset):
         np.testing.assert_allclose(rewards, episode.rewards, atol=1e-4)
     again = write_dataset(root, 3, seed=8_000_000, env_kwargs=KWARGS)
     assert again["episodes"] == 3 and minari.load_dataset(out["dataset_id"]).total_episodes == 3
+    assert again["before"] == 2 and again["steps"] > 0
+    capsys.readouterr()  # the default config's env_kwargs are KWARGS: a rerun adds nothing
+    assert dataset_cli.main(["--episodes", "3", "-o", str(root), "--no-progress"]) == 0
+    printed = capsys.readouterr()
+    assert json.loads(printed.out)["steps"] == 0
+    assert "already holds 3 episodes (3 asked): nothing added" in printed.err
     with pytest.raises(ConfigError, match="other env arguments"):
         write_dataset(root, 4, env_kwargs={**KWARGS, "bay": 1})
 
