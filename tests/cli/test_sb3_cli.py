@@ -66,3 +66,22 @@ def test_training_that_diverges_keeps_the_run_and_says_so(tmp_path, capsys):
     (kept,) = tmp_path.iterdir()
     assert kept.name.endswith(".partial") and (kept / "diverged.json").is_file()
     assert any(p.name.startswith("events.out.tfevents") for p in kept.rglob("*"))
+
+
+@pytest.mark.parametrize(("algo", "steps", "shown"), [("ppo", 100, 128), ("sac", 101, 102)])
+def test_the_progress_bar_counts_to_the_steps_really_taken(algo, steps, shown):
+    """PPO collects whole rollouts (2 envs x 32 steps: 100 asked, 128 taken); SAC steps 2 envs."""
+    from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from aftir_rl.rl.sb3.train import _ProgressBar
+
+    venv = make_vec_env("Pendulum-v1", n_envs=2, seed=0)
+    if algo == "ppo":
+        model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, seed=0)
+    else:
+        model = SAC("MlpPolicy", venv, learning_starts=200, seed=0)
+    bar = _ProgressBar()
+    model.learn(steps, callback=bar)
+    assert model.num_timesteps == shown
+    assert bar.pbar.total == shown and bar.pbar.n == shown

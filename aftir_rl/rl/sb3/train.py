@@ -406,6 +406,33 @@ class _StopOnRequest(BaseCallback):
         return not interrupts.requested()
 
 
+class _ProgressBar(BaseCallback):
+    """A progress bar over the steps the run really takes (plain tqdm, no rich).
+
+    SB3's own bar counts to the asked steps, but a model steps all its envs at once and PPO
+    collects whole rollouts: ``--total-timesteps 20000`` with 128 rows of 128 steps trains
+    32,768 steps.
+    """
+
+    def _on_training_start(self) -> None:
+        from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+        from tqdm import tqdm
+
+        per = self.model.n_envs  # off-policy models step all envs at once, too
+        if isinstance(self.model, OnPolicyAlgorithm):
+            per *= self.model.n_steps
+        asked = int(self.locals["total_timesteps"]) - int(self.model.num_timesteps)
+        self.pbar = tqdm(total=-(-asked // per) * per, unit="step", unit_scale=True)
+
+    def _on_step(self) -> bool:
+        self.pbar.update(self.training_env.num_envs)
+        return True
+
+    def _on_training_end(self) -> None:
+        self.pbar.refresh()
+        self.pbar.close()
+
+
 def _learn(
     model: BaseAlgorithm,
     steps: int,
@@ -429,8 +456,7 @@ def _learn(
     try:
         model.learn(
             steps,
-            callback=[watch, *callbacks, stop],
-            progress_bar=progress_bar,
+            callback=[watch, *callbacks, stop, *([_ProgressBar()] if progress_bar else [])],
             reset_num_timesteps=resume_path is None,
         )
     except KeyboardInterrupt:
