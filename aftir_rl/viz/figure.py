@@ -19,9 +19,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.core.tank import Box, Solid, Tank
-from aftir_rl.core.tank.meshes import is_walls
+from aftir_rl.core.tank import Box, Tank
 from aftir_rl.core.tank.solids import Mesh
+from aftir_rl.viz.plotting import floor_view, solid_group
 from aftir_rl.viz.runs import RunData
 
 if TYPE_CHECKING:
@@ -42,14 +42,6 @@ _SOLID_GROUPS = {
     "mesh": ("meshes", "#6b8e23", 0.5),
     "walls": ("walls (mesh)", "#b0b0b0", 0.12),
 }
-
-
-def _solid_group(solid: Solid) -> str:
-    if is_walls(solid):
-        return "walls"
-    if solid.kind == "plate" or (solid.kind == "box" and solid.name.startswith("baffle")):
-        return "baffle"
-    return solid.kind
 
 
 def _mesh_trace(parts: list[Mesh], name: str, color: str, opacity: float) -> go.Mesh3d:
@@ -117,7 +109,7 @@ def tank_traces(tank: Tank) -> list[Any]:
         ),
     ]
     for group, (name, color, opacity) in _SOLID_GROUPS.items():
-        parts = [s.mesh() for s in tank.solids if _solid_group(s) == group]
+        parts = [s.mesh() for s in tank.solids if solid_group(s) == group]
         if parts:
             traces.append(_mesh_trace(parts, name, color, opacity))
     return traces
@@ -126,7 +118,7 @@ def tank_traces(tank: Tank) -> list[Any]:
 def _run_lines(
     run: RunData, tank: Tank, color: str, frames: NDArray[np.int64] | None
 ) -> list[tuple[NDArray[np.float64], dict[str, Any]]]:
-    """One run's polylines and their plotly styles: cell path, start, target, tip route, arm."""
+    """One run's polylines and styles: cell path (its start green), target, tip route, arm."""
     lines: list[tuple[NDArray[np.float64], dict[str, Any]]] = []
     cells_cm = run.cells_cm
     if cells_cm is None and run.cells is not None and len(run.cells):
@@ -139,31 +131,47 @@ def _run_lines(
             cells_cm = np.array([tank.raster.cell_center(c) for c in run.cells])
     if cells_cm is not None and len(cells_cm):
         path = {"color": color, "width": 3, "dash": "dash"}
-        marker = {"size": 3, "color": color}
-        lines.append(
-            (
-                cells_cm,
-                {"mode": "lines+markers", "name": "cell path", "line": path, "marker": marker},
-            )
-        )
-        marker = {"size": 5, "color": "green", "symbol": "circle"}
-        lines.append((cells_cm[:1], {"mode": "markers", "name": "start", "marker": marker}))
+        rest = len(cells_cm) - 1  # the start cell green and larger: one legend entry, not two
+        marker = {"size": [6] + [3] * rest, "color": ["green"] + [color] * rest}
+        style = {"mode": "lines+markers", "name": "cell path"}
+        lines.append((cells_cm, {**style, "line": path, "marker": marker}))
     if run.target is not None:
         marker = {"size": 6, "color": color, "symbol": "diamond"}
-        lines.append((run.target[None], {"mode": "markers", "name": "target", "marker": marker}))
+        style = {"mode": "markers", "name": "target", "showlegend": False}  # a diamond: no row
+        lines.append((run.target[None], {**style, "marker": marker}))
     if run.targets is not None and len(run.targets):
         marker = {"size": 5, "color": color, "symbol": "diamond-open"}
-        lines.append((run.targets, {"mode": "markers", "name": "targets", "marker": marker}))
+        style = {"mode": "markers", "name": "targets", "showlegend": False}
+        lines.append((run.targets, {**style, "marker": marker}))
     if frames is not None:
         tips = run.tips()
         stride = max(1, math.ceil(len(tips) / _MAX_ROUTE_POINTS))
         route = np.vstack([tips[::stride], tips[-1:]])
         line = {"color": color, "width": 4}
         lines.append((route, {"mode": "lines", "name": "tip route", "line": line}))
-        arm = run.backbones(frames[:1])[0]
+        arm = run.backbones(frames[-1:])[0]  # the page opens on the deployed arm
         line = {"color": color, "width": 9}
         lines.append((arm, {"mode": "lines", "name": "arm", "line": line, "hoverinfo": "name"}))
     return lines
+
+
+def legend_titles(names: Sequence[str]) -> list[str]:
+    """Short legend titles for runs: ``#k`` and the parts of their names that tell them apart.
+
+    Names are split at ``__``; parts all runs share are left out, and so are the parts after
+    those that already tell the runs apart (the time stamp, say). The page's run list below the
+    scene has the whole names.
+    """
+    parts = [name.split("__") for name in names]
+    if len(names) < 2 or len({len(p) for p in parts}) != 1:
+        return [f"#{k + 1} {name}" for k, name in enumerate(names)]
+    kept: list[int] = []
+    for j in range(len(parts[0])):  # the first parts that differ, until they tell runs apart
+        if len({p[j] for p in parts}) > 1:
+            kept.append(j)
+            if len({tuple(p[k] for k in kept) for p in parts}) == len(names):
+                break
+    return [f"#{k + 1} " + " ".join(p[j] for j in kept) for k, p in enumerate(parts)]
 
 
 def build_figure(runs: Sequence[RunData], tank: Tank, max_frames: int = DEFAULT_MAX_FRAMES) -> Any:
@@ -181,20 +189,19 @@ def build_figure(runs: Sequence[RunData], tank: Tank, max_frames: int = DEFAULT_
         raise ValueError(f"max_frames must be at least 2, got {max_frames}")
     traces = tank_traces(tank)
     animated: list[tuple[int, RunData, NDArray[np.int64]]] = []  # (trace index, run, entries)
+    titles = legend_titles([run.name for run in runs])
     for n, run in enumerate(runs):
         frames = _frame_indices(run, max_frames) if run.n_motion else None
         lines = _run_lines(run, tank, _COLORS[n % len(_COLORS)], frames)
         for i, (points, style) in enumerate(lines):
-            title = {} if i else {"legendgrouptitle_text": run.name}  # on the group's first
+            title = {} if i else {"legendgrouptitle_text": titles[n]}  # on the group's first
             traces.append(_line(points, legendgroup=f"run{n}", **title, **style))
         if frames is not None:
             animated.append((len(traces) - 1, run, frames))
     fig = go.Figure(data=traces)
     if animated:
         _add_frames(fig, animated)
-    span = np.array(tank.box_max) - np.array(tank.box_min)
-    # a little of the guide below the panel; the rest of the arm down there is clipped away
-    z_lo = tank.box_min[2] - 0.3 * span[2]
+    z_lo = floor_view(tank)  # the rest of the arm below is clipped away
     ranges = [
         [tank.box_min[0], tank.box_max[0]],
         [tank.box_min[1], tank.box_max[1]],
@@ -209,11 +216,15 @@ def build_figure(runs: Sequence[RunData], tank: Tank, max_frames: int = DEFAULT_
             "zaxis": {"title": {"text": "z [cm]"}, "range": ranges[2]},
             "aspectmode": "manual",
             "aspectratio": {"x": aspect[0], "y": aspect[1], "z": aspect[2]},
-            "camera": {"eye": {"x": -1.1, "y": -1.6, "z": 0.9}},
+            "camera": {"eye": {"x": -0.85, "y": -1.25, "z": 0.7}},
         },
-        legend={"groupclick": "toggleitem", "itemsizing": "constant"},
+        legend={
+            "groupclick": "toggleitem",
+            "itemsizing": "constant",
+            "font": {"size": 10},
+            "tracegroupgap": 2,
+        },
         margin={"l": 0, "r": 0, "t": 30, "b": 0},
-        height=720,
         uirevision="keep",  # keep the camera while the animation plays
     )
     return fig
@@ -275,9 +286,9 @@ def _slider_step(name: str, label: str) -> dict[str, Any]:
 
 def _add_animation_controls(fig: Any, steps: list[dict[str, Any]]) -> None:
     """Add the play and pause buttons and the slider over ``steps`` to ``fig``'s layout."""
-    play = {
+    play = {  # from the first frame: the page opens on the last
         "frame": {"duration": 60, "redraw": True},
-        "fromcurrent": True,
+        "fromcurrent": False,
         "transition": {"duration": 0},
         "mode": "immediate",
     }
@@ -294,21 +305,25 @@ def _add_animation_controls(fig: Any, steps: list[dict[str, Any]]) -> None:
                 "pad": {"t": 30, "r": 10},
                 "showactive": False,
                 "buttons": [
-                    {"label": "▶ play", "method": "animate", "args": [None, play]},
+                    {"label": "▶ play from the panel", "method": "animate", "args": [None, play]},
                     {"label": "❚❚ pause", "method": "animate", "args": [[None], pause]},
                 ],
             }
         ],
         sliders=[
             {
-                "active": 0,
-                "x": 0.16,
-                "len": 0.84,
+                "active": len(steps) - 1,
+                "x": 0.22,
+                "len": 0.78,
                 "y": 0.0,
                 "yanchor": "top",
                 "pad": {"t": 20},
                 "steps": steps,
-                "currentvalue": {"prefix": "motion entry: ", "font": {"size": 12}},
+                "currentvalue": {
+                    "prefix": "motion entry: ",
+                    "font": {"size": 12},
+                    "xanchor": "right",
+                },
             }
         ],
     )

@@ -52,11 +52,12 @@ def _resolve_tank(tank: str | Path | Tank | None, runs: list[RunData]) -> Tank:
 
 def _page(fig: Any, runs: Sequence[RunData], tank: Tank) -> str:
     rows = []
-    for run in runs:
+    for k, run in enumerate(runs):
         facts = ", ".join(f"{k} {v}" for k, v in run.facts.items())
         notes = "".join(f"<li class='note'>{html.escape(s)}</li>" for s in run.notes)
         rows.append(
-            f"<li><b>{html.escape(run.name)}</b> <span class='dir'>{html.escape(str(run.path))}"
+            f"<li><b>#{k + 1} {html.escape(run.name)}</b> "
+            f"<span class='dir'>{html.escape(str(run.path))}"
             f"</span><br>{html.escape(facts) or 'no facts recorded'}<ul>{notes}</ul></li>"
         )
     plot = fig.to_html(
@@ -64,6 +65,7 @@ def _page(fig: Any, runs: Sequence[RunData], tank: Tank) -> str:
         include_plotlyjs=True,
         div_id="aftir-view",
         auto_play=False,
+        default_height="85vh",  # most of the window, whatever its size
         config={"displaylogo": False, "responsive": True},
     )
     title = f"aftir_rl view: {len(runs)} run{'s' if len(runs) != 1 else ''} in {tank.name}"
@@ -75,8 +77,10 @@ def _page(fig: Any, runs: Sequence[RunData], tank: Tank) -> str:
         "</style></head><body>"
         f"<h1>{html.escape(title)}</h1>{plot}"
         f"<h2 style='font-size:15px'>Runs</h2><ul id='aftir-runs'>{''.join(rows)}</ul>"
-        "<p class='dir'>units cm; drag to rotate, scroll to zoom, click a legend entry to hide "
-        "it; the slider picks a posture of the motion (label: its entry index per run).</p>"
+        "<p class='dir'>units cm; diamonds are targets, a cell path starts at its green "
+        "marker; drag to rotate, scroll to zoom, click a legend entry to hide it; the page opens "
+        "on the last posture of each motion, ▶ plays it from the panel, and the slider picks a "
+        "posture (label: its entry index per run).</p>"
         "</body></html>\n"
     )
 
