@@ -21,13 +21,24 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.core.tank import Box, Tank
+from aftir_rl.core.tank import Box, Solid, Tank
+from aftir_rl.core.tank.meshes import is_walls
 
 if TYPE_CHECKING:
     from mpl_toolkits.mplot3d.art3d import Path3DCollection
     from mpl_toolkits.mplot3d.axes3d import Axes3D
 
-__all__ = ["draw_tank", "path_figure", "figure_to_rgb", "render_path", "PathRenderer", "save_gif"]
+__all__ = [
+    "solid_group",
+    "floor_view",
+    "clip_below",
+    "draw_tank",
+    "path_figure",
+    "figure_to_rgb",
+    "render_path",
+    "PathRenderer",
+    "save_gif",
+]
 
 #: Wireframe style of each kind of solid.
 _SOLID_STYLE: dict[str, dict[str, Any]] = {
@@ -40,20 +51,63 @@ _SOLID_STYLE: dict[str, dict[str, Any]] = {
 }
 
 
+#: The baffle: a translucent surface, so that the hatch reads as the hole in it.
+_BAFFLE_STYLE: dict[str, Any] = {"facecolor": (0.85, 0.55, 0.25, 0.28), "edgecolor": "none"}
+_BAFFLE_EDGES: dict[str, Any] = {"color": (0.55, 0.3, 0.1), "lw": 0.7}
+
+
+def solid_group(solid: Solid) -> str:
+    """What a solid is drawn as: ``walls``, ``baffle`` (a plate, a box named baffle*), its kind."""
+    if is_walls(solid):
+        return "walls"
+    if solid.kind == "plate" or (solid.kind == "box" and solid.name.startswith("baffle")):
+        return "baffle"
+    return solid.kind
+
+
+def floor_view(tank: Tank) -> float:
+    """The lowest z drawn: a little of the guide below the panel (30 % of the tank's height)."""
+    return float(tank.box_min[2] - 0.3 * (tank.box_max[2] - tank.box_min[2]))
+
+
+def clip_below(points: ArrayLike, z_lo: float) -> NDArray[np.float64]:
+    """``points`` from where the polyline first rises to ``z_lo`` (the guide below is cut)."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    above = np.flatnonzero(pts[:, 2] >= z_lo)
+    if not len(above) or above[0] == 0:
+        return pts[above[0] if len(above) else len(pts) :]
+    i = above[0]
+    a, b = pts[i - 1], pts[i]
+    cut = a + (b - a) * (z_lo - a[2]) / (b[2] - a[2])
+    return np.vstack([cut, pts[i:]])
+
+
 def draw_tank(ax: Axes3D, tank: Tank) -> None:
-    """Draw the tank's box, panel and solids on a 3D axes (wireframes, cm)."""
+    """Draw the tank's box, panel and solids on a 3D axes (cm).
+
+    Solids are wireframes, but the baffle is a translucent surface, its hatch cut out; the axes
+    reach 30 % of the tank's height below its floor (:func:`floor_view`).
+    """
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
     for edge in Box(tank.box_min, tank.box_max).wireframe():
         ax.plot(*edge.T, color="0.6", lw=0.6)
     t = np.linspace(0, 2 * np.pi, 40)
     c, r = tank.panel.center, tank.panel.radius
     ax.plot(c[0] + r * np.cos(t), c[1] + r * np.sin(t), np.full_like(t, c[2]), color="k", lw=1.0)
     for solid in tank.solids:
+        if solid_group(solid) == "baffle":
+            verts, faces = solid.mesh()
+            ax.add_collection3d(Poly3DCollection(verts[faces], **_BAFFLE_STYLE))
+        style = _BAFFLE_EDGES if solid_group(solid) == "baffle" else _SOLID_STYLE[solid.kind]
         for line in solid.wireframe():
-            ax.plot(*line.T, **_SOLID_STYLE[solid.kind])
+            ax.plot(*line.T, **style)
+    z_lo = floor_view(tank)
     ax.set_xlim(tank.box_min[0], tank.box_max[0])
     ax.set_ylim(tank.box_min[1], tank.box_max[1])
-    ax.set_zlim(min(tank.box_min[2], -10), tank.box_max[2])
-    ax.set_box_aspect(np.array(tank.box_max) - np.array(tank.box_min) + [0, 0, 10])
+    ax.set_zlim(z_lo, tank.box_max[2])
+    below = [0.0, 0.0, tank.box_min[2] - z_lo]
+    ax.set_box_aspect(np.array(tank.box_max) - np.array(tank.box_min) + below)
     ax.set_xlabel("x [cm]")
     ax.set_ylabel("y [cm]")
     ax.set_zlabel("z [cm]")
@@ -77,7 +131,7 @@ def path_figure(
     ax = fig.add_subplot(projection="3d")
     draw_tank(ax, tank)
     for i, arm in enumerate(arms):
-        arm = np.asarray(arm)
+        arm = clip_below(arm, floor_view(tank))
         ax.plot(*arm.T, color=_arm_color(i, len(arms)), lw=2.0)
     if points is not None and len(np.asarray(points)):
         pts = np.asarray(points, dtype=float)
@@ -86,10 +140,10 @@ def path_figure(
     if target is not None:
         ax.scatter(*np.asarray(target, float), color="tab:red", marker="*", s=120, label="target")
     if title:
-        ax.set_title(title, fontsize=9)
+        ax.set_title(title, fontsize=10)
     ax.view_init(elev=28, azim=-62)
     if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="upper left", fontsize=7)
+        ax.legend(loc="upper left", fontsize=9)
     fig.tight_layout()
     return fig
 
@@ -146,11 +200,11 @@ class PathRenderer:
         if has_target:
             self._target = ax.scatter(*anchor, color="tab:red", marker="*", s=120, label="target")
         if self.title:
-            ax.set_title(self.title, fontsize=9)
+            ax.set_title(self.title, fontsize=10)
         ax.view_init(elev=28, azim=-62)
         self._legend = None
         if ax.get_legend_handles_labels()[0]:
-            self._legend = ax.legend(loc="upper left", fontsize=7)
+            self._legend = ax.legend(loc="upper left", fontsize=9)
         fig.tight_layout()
         moving = [a for a in (self._path, self._start, self._target, self._legend) if a]
         for artist in moving:
@@ -170,6 +224,7 @@ class PathRenderer:
             self._overlay = (where, rgba[where][..., :3] * alpha, 1.0 - alpha)
             canvas.restore_region(self._background)
         self._arms: list[Any] = []  # the arms' Line3D artists
+        self._z_lo = floor_view(self.tank)
         self._kind = (has_points, has_target)
 
     def render(
@@ -192,7 +247,7 @@ class PathRenderer:
             self._arms.append(line)
         for i, arm in enumerate(arms):
             line = self._arms[i]
-            line.set_data_3d(*np.asarray(arm, dtype=float).T)
+            line.set_data_3d(*clip_below(arm, self._z_lo).T)
             line.set_color(_arm_color(i, len(arms)))
             ax.draw_artist(line)
         if has_points:
