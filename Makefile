@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml constraints.txt
 	@echo "making $(VENV) and installing the package with every extra (about 2 minutes)..."
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,all,docs,zoo]" -c constraints.txt
+	$(PY) -m pip install --progress-bar on -e ".[dev,all,docs,zoo]" -c constraints.txt
 	$(PY) -m ipykernel install --sys-prefix --name python3 >/dev/null
 	$(PY) scripts/warm_kernels.py  # numba's kernels, compiled once (1-2 minutes on 2 cores)
 	touch $(STAMP)

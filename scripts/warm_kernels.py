@@ -13,6 +13,7 @@ temporary folder, removed).
 from __future__ import annotations
 
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -35,9 +36,18 @@ from aftir_rl.rl.tabular.q_table_goal import train_all_targets
 def main() -> None:
     """Compile (or load) each family of kernels by running it once, saying which."""
     start = time.perf_counter()
+    now = ["starting"]
 
     def say(family: str) -> None:
+        now[0] = family
         print(f"  [{time.perf_counter() - start:5.0f} s] {family}", flush=True)
+
+    def still() -> None:  # a line every 10 s: no family takes that long without one
+        while not done.wait(10.0):
+            print(f"  [{time.perf_counter() - start:5.0f} s]   ...still on {now[0]}", flush=True)
+
+    done = threading.Event()
+    threading.Thread(target=still, daemon=True).start()
 
     print("compiling numba's kernels once, into their cache (1-2 minutes on 2 cores):", flush=True)
     tank = load_tank("b737_center")
@@ -66,6 +76,7 @@ def main() -> None:
         load_tank(str(Path(folder) / "t.yaml")).raster  # noqa: B018  (builds the mesh grids)
     say("goal-conditioned Q-learning")
     train_all_targets(tank="b737_center", episodes=1, seed=0)
+    done.set()
     print(f"numba kernels compiled or loaded in {time.perf_counter() - start:.1f} s")
 
 
