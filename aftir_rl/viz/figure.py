@@ -133,7 +133,7 @@ def _run_lines(
         path = {"color": color, "width": 3, "dash": "dash"}
         rest = len(cells_cm) - 1  # the start cell green and larger: one legend entry, not two
         marker = {"size": [6] + [3] * rest, "color": ["green"] + [color] * rest}
-        style = {"mode": "lines+markers", "name": "cell path"}
+        style: dict[str, object] = {"mode": "lines+markers", "name": "cell path"}
         lines.append((cells_cm, {**style, "line": path, "marker": marker}))
     if run.target is not None:
         marker = {"size": 6, "color": color, "symbol": "diamond"}
