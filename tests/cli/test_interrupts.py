@@ -415,9 +415,10 @@ def test_q_table_on_a_failing_disk(tmp_path, monkeypatch, capsys):
     line = _one_line(capsys.readouterr().err)
     assert "no space left on the device writing" in line and "q_table.npz" in line
     assert "Traceback" not in line and np.array_equal(read_q_table(good / "q_table.npz")[0], before)
-    # one failing write (path.json): the Q-table is saved beside the logs, and resumes
+    # one failing write (path.json, after unfinished.json, a checkpoint every 50 episodes and
+    # the one when learning ends): the Q-table is saved beside the logs, and resumes
     with monkeypatch.context() as m:
-        _fail_writes(m, 3, errno.EIO, after=False)
+        _fail_writes(m, 1 + 300 // 50 + 1 + 1, errno.EIO, after=False)
         assert train.main(_q_args(tmp_path / "eio", "--episodes", "300", "--no-postures")) == 2
     line = _one_line(capsys.readouterr().err)
     assert line.startswith("error: input/output error writing") and "path.json" in line

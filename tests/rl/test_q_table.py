@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -110,3 +112,39 @@ def test_corrupt_and_mismatched_checkpoints(tmp_path):
 def test_needs_discrete_spaces():
     with pytest.raises(TypeError, match="Discrete"):
         QLearning(gym.make("Pendulum-v1"))
+
+
+def test_a_run_that_dies_after_learning_leaves_a_checkpoint_to_finish(tmp_path, monkeypatch):
+    """The table is saved every log_interval episodes and before the motion is planned."""
+    from aftir_rl.rl.tabular import train as tabular_train
+
+    config = QLearningConfig(episodes=120, log_interval=50)
+    target = [(230, 72, 10)]
+    saved = []
+    real_save = QLearning.save
+    monkeypatch.setattr(
+        QLearning,
+        "save",
+        lambda self, *a, **k: saved.append(self.episodes_done) or real_save(self, *a, **k),
+    )
+
+    def killed(*args, **kwargs):
+        raise RuntimeError("killed while planning")
+
+    monkeypatch.setattr(tabular_train, "log_greedy_path", killed)
+    with pytest.raises(RuntimeError, match="killed"):
+        tabular_train.train_q_table(config, target, logdir=tmp_path, progress_bar=False)
+    assert saved == [50, 100, 120]
+    (partial,) = tmp_path.iterdir()
+    assert partial.name.endswith(".partial")
+    assert QLearning.read_checkpoint(partial / "q_table.npz")[1]["episodes_done"] == 120
+
+    monkeypatch.undo()  # finish it: nothing is left to learn, the motion is planned
+    (summary,) = tabular_train.train_q_table(
+        config, target, logdir=tmp_path, resume=partial, progress_bar=False, postures=False
+    )
+    finished = QLearning.read_checkpoint(f"{summary['run_dir']}/q_table.npz")
+    env = gym.make("AFTIR-Tank-v0", target=target[0], max_episode_steps=config.max_episode_steps)
+    straight = QLearning.from_config(env, config, seed=0).learn(120)
+    np.testing.assert_array_equal(finished[0], straight.q_table)
+    assert Path(summary["run_dir"]).is_dir()

@@ -91,11 +91,12 @@ class QLearning(TabularAgent):
 
         Args:
             episodes: number of episodes to run.
-            callback: called after every episode with the agent; returning False stops training.
+            callback: called with the agent every ``log_interval`` episodes (its ``q_table``
+                current); returning False stops training.
             progress_bar: show a tqdm bar over episodes.
             logger: an SB3 logger; gets ``rollout/ep_rew_mean``, ``rollout/ep_len_mean``,
                 ``rollout/exploration_rate`` and ``time/*`` every ``log_interval`` episodes.
-            log_interval: episodes between two logger dumps.
+            log_interval: episodes between two logger dumps and callback calls.
             reset_options: passed to every ``env.reset``.
 
         Returns:
@@ -120,13 +121,14 @@ class QLearning(TabularAgent):
                 lengths.append(ep_len)
                 if bar is not None:
                     bar.update(1)
-                if logger is not None and self.episodes_done % log_interval == 0:
-                    elapsed = time.perf_counter() - start
-                    self._log(logger, returns, lengths, self.episodes_done, elapsed)
-                if callback is not None:
-                    self.q_table = np.array(q)
-                    if callback(self) is False:
-                        break
+                if self.episodes_done % log_interval == 0:
+                    if logger is not None:
+                        elapsed = time.perf_counter() - start
+                        self._log(logger, returns, lengths, self.episodes_done, elapsed)
+                    if callback is not None:
+                        self.q_table = np.array(q)
+                        if callback(self) is False:
+                            break
                 if interrupts.requested():
                     break
         finally:

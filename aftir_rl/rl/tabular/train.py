@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
@@ -236,8 +236,10 @@ def _train_target_run(
 ) -> dict[str, Any]:
     """Train ``agent`` on one target, ``config.episodes`` from episode ``start``; its run dir.
 
-    On a stop request (or Ctrl-C) the Q-table so far is saved in the partial directory, which is
-    kept to resume from; any other failure leaves nothing, but a full disk (the logs).
+    The partial directory holds a checkpoint every ``config.log_interval`` episodes and when
+    learning ends; on a stop request (or Ctrl-C) the Q-table so far is saved there too. A run
+    that stops, fails or is killed after its first checkpoint leaves the partial directory to
+    resume from (``aftir runs`` lists it).
 
     Returns:
         The target's summary (what ``path.json`` holds, plus ``run_dir`` and ``seconds``).
@@ -254,10 +256,16 @@ def _train_target_run(
         try:
             params = {**dataclasses.asdict(config), "seed": seed, "target": list(target)}
             logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
+            extra["tank"] = keep_run_tank(extra["tank"], partial)
+
+            def save(agent: QLearning) -> bool:  # a checkpoint to resume from if killed
+                agent.save(partial / "q_table.npz", extra=extra)
+                return True
+
             summary, trajectory = _learn_target(
-                agent, env, config, target, seed, logger, episodes, progress_bar, options
+                agent, env, config, target, seed, logger, episodes, progress_bar, options, save
             )
-            _save_target_run(partial, agent, summary, trajectory, extra)
+            _save_target_run(partial, summary, trajectory, extra)
         except (KeyboardInterrupt, OSError) as exc:
             _keep_learnt(agent, partial, extra, exc)
             raise
@@ -274,8 +282,7 @@ def _keep_learnt(
         KeyboardInterrupt: ``exc`` is one (a stop request): once saved, saying where.
 
     """
-    if isinstance(exc, KeyboardInterrupt):  # a tank given by path is kept, as a finished run's
-        extra = {**extra, "tank": keep_run_tank(extra["tank"], partial)}
+    if isinstance(exc, KeyboardInterrupt):
         agent.save(partial / "q_table.npz", extra=extra)
         raise KeyboardInterrupt(
             f"the Q-table after {agent.episodes_done} episodes is saved in {partial}; "
@@ -298,8 +305,12 @@ def _learn_target(
     episodes: int,
     progress_bar: bool,
     options: MotionOptions,
+    save: Callable[[QLearning], bool],
 ) -> tuple[dict[str, Any], Any]:
     """Learn ``episodes`` episodes, replay the greedy path and plan its motion; log them.
+
+    ``save`` writes a checkpoint: every ``config.log_interval`` episodes and once learning ends,
+    before the motion is planned, so that a killed run leaves a table to resume from.
 
     Returns:
         The summary and the FTL plan or posture trajectory (``None`` without ``postures``).
@@ -312,11 +323,16 @@ def _learn_target(
     start = time.perf_counter()
     with interrupts.deferred():  # a stop request ends learning after the current episode
         agent.learn(
-            episodes, progress_bar=progress_bar, logger=logger, log_interval=config.log_interval
+            episodes,
+            callback=save,
+            progress_bar=progress_bar,
+            logger=logger,
+            log_interval=config.log_interval,
         )
     if interrupts.requested():
         raise KeyboardInterrupt
     seconds = time.perf_counter() - start
+    save(agent)
     summary = path_summary(agent, env, target, config.max_episode_steps)
     summary["seconds"] = seconds
     trajectory = log_greedy_path(logger, env, summary, target, seed, options)
@@ -349,19 +365,16 @@ def _checkpoint_extra(
 
 def _save_target_run(
     partial: Path,
-    agent: QLearning,
     summary: dict[str, Any],
     trajectory: Any,
     extra: dict[str, Any],
 ) -> None:
-    """Write the Q-table, ``path.json`` and (if any) ``trajectory.json`` into ``partial``.
+    """Write ``path.json`` and (if any) ``trajectory.json`` into ``partial``.
 
-    A tank given by path is copied into the run, which names it ``tank.yaml``
-    (:func:`~aftir_rl.core.tank.keep_run_tank`).
+    The Q-table is there already (saved when learning ended); ``extra["tank"]`` is what the run
+    keeps as its tank (:func:`~aftir_rl.core.tank.keep_run_tank`, done when the run started).
     """
-    tank = keep_run_tank(extra["tank"], partial)
-    agent.save(partial / "q_table.npz", extra={**extra, "tank": tank})
-    write_json(partial / "path.json", {**summary, "tank": tank})
+    write_json(partial / "path.json", {**summary, "tank": extra["tank"]})
     if trajectory is not None:
         write_json(partial / "trajectory.json", trajectory.to_json())
 
@@ -400,13 +413,18 @@ def train_q_table_all_targets(
         params = {**dataclasses.asdict(config), "seed": seed, "target": "all"}
         logger.record("hyperparameters", hyperparameter_text(params), exclude=("csv",))
         extra["tank"] = keep_run_tank(config.tank, partial)
+
+        def save(agent: GoalQLearning) -> bool:  # a checkpoint per sweep, to resume from
+            agent.save(partial / GOAL_TABLE, extra=extra)
+            return not interrupts.requested()
+
         with interrupts.deferred():  # a stop request ends learning after the current sweep
             agent, summary = train_all_targets(
                 config=config,
                 episodes=episodes,
                 logger=logger,
                 progress_bar=progress_bar,
-                callback=lambda _: not interrupts.requested(),
+                callback=save,
                 agent=agent,
             )
         if interrupts.requested():
