@@ -3,7 +3,9 @@
 :func:`cli` wraps the ``main`` of every command line: a user error prints one line and exits 2;
 Ctrl-C and SIGTERM ask the running loop to stop (:mod:`aftir_rl.core.interrupts`), then print
 "interrupted" (with where the run is kept) and exit 130, a second one exits at once; a closed
-or full output, or a failing disk, is one line naming the file and exit 2.
+or full output, or a failing disk, is one line naming the file and exit 2. Whatever a command
+writes to stdout and stderr passes :func:`~aftir_rl.core.config.printable`: a name or text read
+from a file cannot send the terminal a control sequence.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from contextlib import contextmanager
 from typing import Any, NoReturn, TypeVar
 
 from aftir_rl.core import interrupts
-from aftir_rl.core.config import shorten
+from aftir_rl.core.config import printable, shorten
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import describe_write_error
 
@@ -168,10 +170,42 @@ def cli(main: F) -> F:
     @functools.wraps(main)
     def wrapper(*args: Any, **kwargs: Any) -> int:
         _announce_compiling()
-        with _stop_signals():  # a second Ctrl-C while the first is reported exits at once too
+        with _stop_signals(), _printable_output():  # a second Ctrl-C exits at once too
             return _one_line_failures(main, args, kwargs)
 
     return wrapper  # type: ignore[return-value]
+
+
+class _Printable:
+    """A text stream that writes what it is given through :func:`printable` to ``stream``."""
+
+    def __init__(self, stream: Any, cursor_up: bool) -> None:
+        self._stream, self._cursor_up = stream, cursor_up
+
+    def write(self, text: str) -> int:
+        self._stream.write(printable(text, self._cursor_up))
+        return len(text)
+
+    def writelines(self, lines: Any) -> None:
+        for line in lines:
+            self.write(line)
+
+    def __getattr__(self, name: str) -> Any:  # flush, fileno, isatty, encoding...
+        return getattr(self._stream, name)
+
+
+@contextmanager
+def _printable_output() -> Iterator[None]:
+    """Send stdout and stderr through :class:`_Printable` (stderr keeps tqdm's cursor-up)."""
+    out, err = sys.stdout, sys.stderr
+    if isinstance(out, _Printable):  # a command called by another: already wrapped
+        yield
+        return
+    sys.stdout, sys.stderr = _Printable(out, False), _Printable(err, True)
+    try:
+        yield
+    finally:
+        sys.stdout, sys.stderr = out, err
 
 
 _ANNOUNCED: list[bool] = []

@@ -95,6 +95,23 @@ def one_line(text: str) -> str:
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 
 
+def printable(text: str, cursor_up: bool = False) -> str:
+    r"""``text`` safe for a terminal: control characters "?", but line ends and tabs.
+
+    Kept are ``\n``, ``\r`` and ``\t`` (lines, progress bars redrawing their line) and,
+    with ``cursor_up``, the ``ESC[A`` that tqdm writes between stacked bars (on stderr); every
+    other C0/C1 control character (an ``ESC`` that would start a sequence retitling or clearing
+    the terminal, a bell, a backspace) becomes "?".
+    """
+    if not cursor_up:
+        return _UNPRINTABLE.sub("?", text)
+    return _UNPRINTABLE_BUT_UP.sub(lambda m: m.group() if m.group() == "\x1b[A" else "?", text)
+
+
+_UNPRINTABLE = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f]")
+_UNPRINTABLE_BUT_UP = re.compile(r"\x1b\[A|" + _UNPRINTABLE.pattern)
+
+
 #: The deepest nesting read: lists and mappings inside each other, aliases followed.
 MAX_YAML_DEPTH = 64
 _TOO_DEEP = f"not valid YAML: nested too deeply (more than {MAX_YAML_DEPTH} levels)"

@@ -574,3 +574,27 @@ def test_ctrl_c_saves_a_resumable_partial_run(tmp_path):
     assert len(saved) == 2 and saved[0] > steps
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["timesteps"] == steps + 128
+
+
+@pytest.mark.parametrize("command", ["check", "evaluate", "export", "view", "rollout", "runs"])
+def test_names_from_files_reach_the_terminal_as_text(tmp_path, command, capsys):
+    """A run folder named with terminal escapes (retitle, bell, clear) is printed as text."""
+    import importlib
+
+    evil = tmp_path / "r\x1b]0;pwned\x07\x1b[2J\x9b"
+    (evil / "x").mkdir(parents=True)
+    (evil / "x" / "unfinished.json").write_text("{}")
+    main = importlib.import_module(f"aftir_rl.cli.{command}").main
+    output = ["-o", str(tmp_path / "out")]
+    args = {"runs": [str(evil)], "export": [str(evil), *output], "rollout": [str(evil), *output]}
+    code = main(args.get(command, [str(evil)]))
+    out, err = capsys.readouterr()
+    assert code == (0 if command == "runs" else 2) and "pwned" in out + err
+    assert not set(out + err) & {"\x1b", "\x07", "\x9b"}
+
+
+def test_printable_output_keeps_lines_and_progress_bars():
+    from aftir_rl.core.config import printable
+
+    assert printable("a\tb\r\nc\x1b[Ad\x08") == "a\tb\r\nc?[Ad?"
+    assert printable("bar\r\x1b[A\x1b]0;t\x07", cursor_up=True) == "bar\r\x1b[A?]0;t?"
