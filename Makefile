@@ -33,8 +33,9 @@ test-slow: $(STAMP)  ## only the tests marked slow: after `make test`, every tes
 test-all: $(STAMP)  ## every test, fast and slow
 	$(PYTEST)
 
-# Faults: the run-directory fuzzer, FUZZ_CASES mutated run directories for each of view,
-# evaluate, rollout and rank_checkpoints (test-all runs 5 each), then Ctrl-C at SIGINT_MOMENTS
+# Faults: the fuzzer, FUZZ_CASES mutated run directories for each of view, evaluate, rollout,
+# rank_checkpoints, check and export, as many tanks (tank show) and Minari datasets (--demos)
+# (test-all runs 5 each), then Ctrl-C at SIGINT_MOMENTS
 # random moments of each long command, one at a time so that no other process slows its exit
 # (about 40 minutes on 2 cores).
 FUZZ_CASES ?= 2000

@@ -2,8 +2,9 @@
 
 ``python -m tests.fuzz CLI SEED CASES WORKDIR RUN_DIR...`` copies a random ``RUN_DIR`` for every
 case, applies one to three random mutations (JSON fields and keys, file types, sizes, symlinks,
-bytes, zip and npz members), runs the command line ``CLI`` (view, evaluate, rollout or rank)
-in this process on it with a time limit, and prints one JSON object: every case's exit status,
+bytes, zip and npz members), runs the command line ``CLI`` (view, evaluate, rollout, rank,
+check, export, tank show, or the ``--demos`` reader of ``aftir train``) in this process on it
+with a time limit, and prints one JSON object: every case's exit status,
 stderr, seconds, mutations, the memory allocated before it and at its peak (:func:`allocated_mb`)
 and its peak resident size (``tests/cli/test_fuzz_runs.py`` asserts on them).
 """
@@ -342,6 +343,16 @@ def _commands(cli: str, out: Path) -> Callable[[Path], int]:
         from aftir_rl.cli import export
 
         return lambda run: export.main([str(run), "-o", str(out / "x.json")])
+    if cli == "demos":  # a Minari datasets root, as ``aftir train ppo --demos`` reads it
+        from aftir_rl.cli.guard import cli as guarded
+        from aftir_rl.rl.imitation import load_demos
+
+        @guarded
+        def demos(root: Path) -> int:
+            load_demos(root / "aftir" / "armftl-expert-v0", gamma=0.99)
+            return 0
+
+        return demos
     if cli == "tank":  # a tank folder: tank.yaml naming the mesh files beside it
         from aftir_rl.cli import tank
 

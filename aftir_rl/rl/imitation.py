@@ -105,6 +105,38 @@ def _episode_arrays(
     return obs, actions, rewards
 
 
+#: The largest file of a dataset read [bytes]: :data:`MAX_DEMO_STEPS` steps' HDF5, with room.
+MAX_DATASET_BYTES = 4_000_000_000
+#: The largest metadata file of a dataset read [bytes].
+MAX_METADATA_BYTES = 1_000_000
+
+
+def _check_dataset_files(path: Path) -> None:
+    """Refuse a dataset whose files Minari would open but are not plain files of a sane size.
+
+    Minari opens ``data/metadata.json``, ``data/main_data.hdf5`` and the namespace's
+    ``namespace_metadata.json`` as they are: a FIFO there blocks forever, a device or a sparse
+    file of terabytes is read. Every entry of ``data/`` and those files must be regular files
+    (not symbolic links), metadata at most :data:`MAX_METADATA_BYTES`, the rest at most
+    :data:`MAX_DATASET_BYTES`.
+
+    Raises:
+        ConfigError: one line naming the file.
+
+    """
+    import stat
+
+    entries = sorted((path / "data").iterdir())[:100]
+    namespace = path.parent / "namespace_metadata.json"
+    for entry in [*entries, *([namespace] if os.path.lexists(namespace) else [])]:
+        info = os.lstat(entry)
+        if not stat.S_ISREG(info.st_mode):
+            raise ConfigError(f"{entry}: not a regular file; not a dataset this package wrote")
+        cap = MAX_METADATA_BYTES if entry.suffix == ".json" else MAX_DATASET_BYTES
+        if info.st_size > cap:
+            raise ConfigError(f"{entry}: {info.st_size:,} bytes, more than {cap:,}")
+
+
 def load_demos(path: str | os.PathLike[str], gamma: float) -> Demos:
     """Read the Minari dataset in ``path`` (``ROOT/namespace/name-vN``), every episode checked.
 
@@ -123,6 +155,7 @@ def load_demos(path: str | os.PathLike[str], gamma: float) -> Demos:
     path = Path(path).resolve()
     if not (path / "data").is_dir():
         raise ConfigError(f"{path}: not a Minari dataset (no data/ folder)")
+    _check_dataset_files(path)
     os.environ["MINARI_DATASETS_PATH"] = str(path.parent.parent)
     try:
         dataset = minari.load_dataset(f"{path.parent.name}/{path.name}")
@@ -153,7 +186,10 @@ def load_demos(path: str | os.PathLike[str], gamma: float) -> Demos:
         returns.append(np.array(back[::-1], dtype=np.float32))
     if not actions:
         raise ConfigError(f"{path}: the dataset holds no episodes")
-    spec = dataset.spec.env_spec
+    try:
+        spec = dataset.spec.env_spec
+    except Exception as exc:  # noqa: BLE001 - Minari reads it from the metadata, unchecked
+        raise ConfigError(f"{path}: unreadable dataset metadata ({type(exc).__name__})") from None
     return Demos(
         observations={k: np.concatenate(v) for k, v in obs.items()},
         actions=np.concatenate(actions),

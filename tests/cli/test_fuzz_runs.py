@@ -1,5 +1,6 @@
 """Fuzzing the commands that read files a user may be handed: run directories (view, evaluate,
-rollout, rank_checkpoints, check, export) and tanks with their meshes (tank show).
+rollout, rank_checkpoints, check, export), tanks with their meshes (tank show) and Minari
+datasets (what ``aftir train ppo --demos`` reads).
 
 Real run directories (a Q-table run with its motion, PPO runs of ``AFTIR-ArmReach-v0`` and
 ``AFTIR-ArmFTL-v0`` with checkpoints) are mutated at random by :mod:`tests.fuzz` (JSON fields and
@@ -92,11 +93,13 @@ def sources(tmp_path_factory) -> dict[str, list[list[str]]]:
     _aftir("tank", "export", "--tank", "wing:2:3", "-o", str(tank / "solids.stl"),
            "--walls", str(tank / "walls.stl"), "--yaml", str(tank / "tank.yaml"),
            bars=False)  # fmt: skip
+    _aftir("dataset", "--episodes", "3", "--workers", "1", "-o", str(top / "demos" / "root"))
     timed = [r for r in runs["q"] if (Path(r) / "trajectory.json").exists()]
     return {
         "check": [timed],
         "export": [timed],
         "tank": [[str(tank)]],
+        "demos": [[str(top / "demos" / "root")]],
         "view": [runs["q"], runs["reach"], runs["ftl"]],
         "evaluate": [runs["q"], runs["reach"], runs["ftl"]],
         "rollout": [runs["reach"], runs["ftl"]],
@@ -126,7 +129,9 @@ def _fuzz(cli: str, seed: int, cases: int, work: Path, runs: list[str]) -> list[
     return results
 
 
-@pytest.mark.parametrize("cli", ["view", "evaluate", "rollout", "rank", "check", "export", "tank"])
+@pytest.mark.parametrize(
+    "cli", ["view", "evaluate", "rollout", "rank", "check", "export", "tank", "demos"]
+)
 def test_mutated_run_directories(cli, sources, tmp_path):
     kinds = sources[cli]
     _warm(cli, tmp_path / "warm", [run for runs in kinds for run in runs])

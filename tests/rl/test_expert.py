@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 
 import numpy as np
@@ -359,3 +360,25 @@ def test_corrupt_demonstrations_are_one_line(tmp_path, monkeypatch, edit, says):
     with pytest.raises(ConfigError, match=re.escape(says)) as info:
         load_demos(tmp_path / "aftir" / "demo-v0", 0.99)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("make", ["fifo", "link", "big", "folder"])
+def test_dataset_files_that_would_block_or_flood_are_refused_first(tmp_path, make):
+    """A FIFO (Minari's open would block), a link, a sparse giant or a folder in data/."""
+    from aftir_rl.rl.imitation import MAX_METADATA_BYTES, load_demos
+
+    data = tmp_path / "aftir" / "demo-v0" / "data"
+    data.mkdir(parents=True)
+    (data / "main_data.hdf5").write_bytes(b"")
+    meta = data / "metadata.json"
+    if make == "fifo":
+        os.mkfifo(meta)
+    elif make == "link":
+        meta.symlink_to(tmp_path / "elsewhere.json")
+    elif make == "big":
+        with open(meta, "wb") as fh:
+            fh.truncate(MAX_METADATA_BYTES + 1)
+    else:
+        meta.mkdir()
+    with pytest.raises(ConfigError, match="metadata.json: (not a regular file|1,000,001 bytes)"):
+        load_demos(data.parent, 0.99)
