@@ -1,4 +1,8 @@
-"""The README's commands, run as a user would: from a fresh directory, on the installed wheel."""
+"""The README's commands, run as a user would: from a fresh directory, on the installed wheel.
+
+The same wheel (one build, one cold numba cache) also shows that the package works outside the
+repository: configs shipped as package data, every env, ``aftir plan``.
+"""
 
 from __future__ import annotations
 
@@ -142,3 +146,23 @@ def test_readme_python_examples_run_from_a_wheel(installed) -> None:
         assert out.returncode == 0, out.stderr[-3000:]
         if "greedy_rollout" in code:
             assert out.stdout.splitlines()[0] == "True 22", out.stdout
+
+
+def test_wheel_makes_every_env_and_plans_from_outside_the_repo(installed) -> None:
+    cwd, env = installed
+    code = (
+        "import aftir_rl, gymnasium as gym\n"
+        "from aftir_rl.core.config import CONFIG_DIR\n"
+        "assert 'site' in aftir_rl.__file__, aftir_rl.__file__\n"
+        "assert CONFIG_DIR.is_relative_to(aftir_rl.__path__[0]), CONFIG_DIR\n"
+        "for env_id in aftir_rl.ENV_IDS:\n"
+        "    e = gym.make('aftir_rl:' + env_id); e.reset(seed=0); e.close()\n"
+        "print(len(aftir_rl.ENV_IDS))\n"
+    )
+    out = _run([sys.executable, "-c", code], cwd, env)
+    assert out.returncode == 0, out.stderr
+    assert int(out.stdout) >= 3
+    plan = [sys.executable, "-m", "aftir_rl.cli", "plan", "--target", "230", "140", "90", "--json"]
+    out = _run(plan, cwd, env)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout)["error_cm"] < 0.01
