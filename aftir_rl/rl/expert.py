@@ -29,6 +29,7 @@ from aftir_rl.core.collision import CollisionScene
 from aftir_rl.core.errors import ConfigError, PlanningError
 from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.envs.ftl.spec import MOTION_FREE_KWARGS
+from aftir_rl.planning.ftl.model import Route
 from aftir_rl.planning.ftl.plan import SEARCH_VARIANTS, warm_up
 from aftir_rl.planning.ftl.route import RouteSettings, plan_route
 
@@ -80,12 +81,15 @@ def route_actions(
     env: ArmFTLEnv,
     s0: float | None = None,
     steered: ArrayLike | None = None,
+    back_to: float = 0.0,
 ) -> NDArray[np.float32]:
     """The actions ``(T, 3)`` that deploy the lead-0 route ``kappa`` ``(M, 2)`` in ``env``.
 
     From the tip's arc length ``s0`` and the steered ``κ`` ``steered`` (default: ``env``'s
-    now): retract to the floor, then per route section bend the steered ``κ`` to the section's
-    at its start (no push: the body does not change) and push through it. With
+    now): retract to the arc length ``back_to`` (the floor; or the end of the whole sections
+    a continuation keeps, ``kappa`` then being the sections after them), then per route section
+    bend the steered ``κ`` to the section's at its start (no push: the body does not change)
+    and push through it. With
     ``steer="target"`` the steering actions name the section's bend, with ``"increment"`` they
     are the changes of ``κ`` (at most ``kappa_step`` per step and component, either way).
     """
@@ -96,9 +100,9 @@ def route_actions(
     by_target = b.steer == "target"
     acts: list[list[float]] = []
     hold = cur / tmax if by_target else np.zeros(2)
-    while s > 1e-9:
-        acts.append([hold[0], hold[1], -1.0])
-        s = max(0.0, s - push)
+    while s > back_to + 1e-9:
+        acts.append([hold[0], hold[1], -min(1.0, (s - back_to) / push)])
+        s = max(back_to, s - push)
     pushes = round(l / push)
     if abs(pushes * push - l) > 1e-9:
         raise ConfigError(f"push_step must divide the section length {l:g} cm, got {push:g}")
@@ -245,6 +249,53 @@ class FTLExpert:
                     )
         return None
 
+    def continue_plan(self, target: ArrayLike, state: ArmFTLEnv) -> ExpertPlan | None:
+        """A motion to ``target`` that keeps ``state``'s whole sections, or None.
+
+        The online teacher: the arm of ``state`` has traced ``k`` whole route sections and is
+        ``s − k·l`` into the next (:func:`arm_state`). The route search continues those ``k``
+        sections (:func:`~aftir_rl.planning.ftl.route.plan_route` with them as its prefix, a
+        search from one state instead of the whole tree), and the motion pulls back to the end
+        of section ``k``, bends the steered section to the first new one and pushes on; it is
+        replayed from ``state`` and kept only if that replay succeeds with the margin kept
+        (python-fcl), as :meth:`plan`'s. With no whole section yet it is :meth:`plan`.
+        """
+        kappa, k, _ = arm_state(state)
+        if k == 0:
+            return self.plan(target, state)
+        tank, l = self.sim.tank, self.sim.batch.l
+        warm_up(tank)
+        start = time.perf_counter()
+        target = np.asarray(target, dtype=np.float64)
+        prefix = Route(0.0, kappa[:k], l)
+        tries = 0
+        for settings in self.settings:
+            for slack in SLACKS:
+                left = self.max_seconds - (time.perf_counter() - start)
+                if left <= 0:
+                    return None
+                knobs = replace(settings, slack=slack, max_seconds=min(left, 8.0))
+                try:
+                    found = plan_route(tank, target, None, knobs, tank.arm, prefix)
+                except PlanningError:
+                    continue
+                tries += 1
+                actions = route_actions(found.route.kappa[k:], state, back_to=k * l)
+                arms: list[ArmState] = []
+                ok, steps, least = self.replay(target, actions, state, arms)
+                if ok:
+                    return ExpertPlan(
+                        target=target,
+                        actions=actions[:steps],
+                        route_kappa=found.route.kappa,
+                        slack=slack,
+                        min_clearance_cm=least,
+                        seconds=time.perf_counter() - start,
+                        tries=tries,
+                        arms=arms,
+                    )
+        return None
+
     def _start(self) -> ArmFTLEnv:
         """The sim at the start of an episode (its arm as every episode starts)."""
         self.sim.batch.reset_rows(np.array([0]), self.sim.batch.target[:1])
@@ -258,7 +309,8 @@ class ExpertPolicy:
     At an episode's first call (a new target) it plans from the arm as it is and plays the
     plan's actions, checking before each that the env's arm is where the plan's replay put it.
     When not (another action was taken, as a learner's in DAgger), it replans from the arm as it
-    is (pull back to the floor, deploy a new route: :meth:`FTLExpert.plan` with ``state``).
+    is: a route that keeps the arm's whole sections (:meth:`FTLExpert.continue_plan`), else one
+    from the floor (pull back, deploy a new route: :meth:`FTLExpert.plan` with ``state``).
     When that finds nothing within the budget it falls back: it pulls the arm back to the floor
     and plans once more from there; when that fails too it holds the arm still. Call
     :meth:`reset` (or ``predict`` with ``episode_start``) when an episode starts.
@@ -357,9 +409,15 @@ class ExpertPolicy:
         return self._next == 0 or _same_arm(arm, self._arms[self._next - 1])
 
     def _plan(self, target: NDArray[np.float64]) -> None:
-        """Plan from the env's arm; keep the actions and the arm the replay had after each."""
+        """Plan from the env's arm; keep the actions and the arm the replay had after each.
+
+        First as a continuation of the arm's whole sections (:meth:`FTLExpert.continue_plan`,
+        tens of milliseconds), else from the floor (:meth:`FTLExpert.plan`).
+        """
         self._actions, self._arms, self._next = np.zeros((0, 3), np.float32), [], 0
-        plan = self.expert.plan(target, state=self.env)
+        plan = self.expert.continue_plan(target, self.env)
+        if plan is None and arm_state(self.env)[1] > 0:
+            plan = self.expert.plan(target, state=self.env)
         if plan is not None:
             self._actions, self._arms = plan.actions, plan.arms
 

@@ -382,3 +382,46 @@ def test_dataset_files_that_would_block_or_flood_are_refused_first(tmp_path, mak
         meta.mkdir()
     with pytest.raises(ConfigError, match="metadata.json: (not a regular file|1,000,001 bytes)"):
         load_demos(data.parent, 0.99)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_teacher_continues_a_learners_whole_sections(seed):
+    """From an arm a noisy expert left mid-way, the continuation keeps its whole sections.
+
+    The arm: the expert's motion to a bay-2 target the env draws, played with its steering
+    perturbed, stopped at a random step. The continuation is replayed in a fresh env from that
+    arm: it succeeds with python-fcl's clearance at least the margin after every step, never
+    pulls the tip behind the end of the arm's whole sections, and its route starts with them.
+    """
+    expert = FTLExpert(max_seconds=10.0, **KWARGS)
+    env = ArmFTLEnv(**KWARGS)
+    rng = np.random.default_rng(seed)
+    for draw in range(20):  # a start whose noisy play survives with a whole section or more
+        env.reset(seed=1000 * seed + draw)
+        target = env.target.copy()
+        plan = expert.plan(target)
+        if plan is None:
+            continue
+        env.reset(seed=1000 * seed + draw)
+        stop = int(rng.integers(len(plan.actions) // 3, len(plan.actions)))
+        alive = True
+        for a in plan.actions[:stop]:
+            noisy = np.clip(a + np.r_[rng.normal(0.0, 0.08, 2), 0.0], -1.0, 1.0)
+            alive = not any(env.step(noisy.astype(np.float32))[2:4])
+            if not alive:
+                break
+        if alive and env.batch.k[0] > 0:
+            break
+    else:
+        pytest.fail("no noisy play kept a whole section")
+    kappa, k, s = env.route_kappa, int(env.batch.k[0]), env.insertion
+    more = expert.continue_plan(target, env)
+    assert more is not None
+    np.testing.assert_array_equal(more.route_kappa[:k], kappa[:k])
+    scene = CollisionScene(env.tank)
+    least_s = s
+    for a in more.actions:
+        _, _, term, trunc, info = env.step(a)
+        least_s = min(least_s, env.insertion)
+        assert scene.check(env.posture).clearance_cm >= 1.0 and not info["contact"]
+    assert term and info["is_success"] and least_s >= k * env.batch.l - 1e-9
