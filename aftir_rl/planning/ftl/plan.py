@@ -48,6 +48,7 @@ from aftir_rl.planning.timing import TimedMotion, time_motion
 
 __all__ = [
     "MotionPlan",
+    "deploy_route",
     "postures_clearance",
     "plan_motion",
     "motion_summary",
@@ -340,6 +341,35 @@ def _incomplete(
         reason=reason,
         timed_out=timed_out,
     )
+
+
+def deploy_route(
+    tank: Tank, target: ArrayLike, route: Route, margin: float = DEFAULT_MARGIN
+) -> MotionPlan:
+    """The follow-the-leader motion along ``route`` (a planner's or a policy's), checked.
+
+    Deployed and checked as :func:`plan_motion` deploys the route it found: the whole motion
+    keeps ``margin`` [cm] (python-fcl's exact distance) or the plan is incomplete, with why.
+    """
+    start = time.perf_counter()
+    target = np.asarray(target, dtype=np.float64)
+    h0 = min(float(tank.start_point[2]), 20.0)
+    found = RouteResult(
+        route=route,
+        n_sections=max(route.min_sections(), 1),
+        clearance_cm=float("nan"),
+        cost=float("nan"),
+        corridor="",
+        seconds=0.0,
+    )
+    deployed = _deploy(tank, target, None, margin, found, h0)
+    l = tank.arm.section_length
+    if isinstance(deployed, str):
+        why = f"Cannot reach the target with a margin of {margin:g} cm: {deployed}"
+        return _incomplete(target, margin, l, start, why)
+    plan = deployed[0]
+    plan.seconds = time.perf_counter() - start
+    return plan
 
 
 def _deploy(

@@ -43,7 +43,12 @@ __all__ = [
     "RouteResult",
     "RouteOutcome",
     "GuideField",
+    "RouteMoves",
+    "close_route",
+    "move_set",
+    "moves_ahead",
     "plan_route",
+    "route_moves",
     "search_route",
     "route_clearance",
 ]
@@ -189,9 +194,13 @@ class _Beam:
 
 @dataclass
 class _Candidates:
-    """The clear one-section extensions of a beam (``rep``: the state each extends)."""
+    """The clear one-section extensions of a beam.
+
+    ``rep``: the state each extends; ``move``: by which move of the move set.
+    """
 
     rep: NDArray[np.int64]
+    move: NDArray[np.int64]
     end_rot: NDArray[np.float64]
     end_pos: NDArray[np.float64]
     g: NDArray[np.float64]
@@ -366,7 +375,7 @@ def _expand(
     )
     h = search.guide(end_pos)
     hist = np.concatenate([beam.kap_hist[rep], new_k[:, None, :]], axis=1)
-    return count, _Candidates(rep, end_rot, end_pos, g, h, hist)
+    return count, _Candidates(rep, idx % c, end_rot, end_pos, g, h, hist)
 
 
 def _prune(
@@ -399,11 +408,25 @@ def _close_beam(
     search: _Search, beam: _Beam, togo: NDArray[np.float64], depth: int, best: _Best | None
 ) -> _Best | None:
     """Close the states nearest the target (``togo``: through free space) with 0 to 2 sections."""
+    for extra, picks in _close_bands(search, beam, togo, depth):
+        best = _close_picks(search, beam, picks, extra, best)
+    return best
+
+
+def _close_bands(
+    search: _Search, beam: _Beam, togo: NDArray[np.float64], depth: int, closings: int | None = None
+) -> list[tuple[int, list[int]]]:
+    """The states worth closing with each number of extra sections, nearest to go first.
+
+    At most ``closings`` (default the settings') per number of extra sections.
+    """
     l, max_sections = search.arm.section_length, search.arm.max_sections
     dist = np.linalg.norm(beam.pos - search.target, axis=1)
     in_guide = np.ceil(beam.lead / l - 1e-9)  # sections still straight below the floor
     # a prefix's sections stay: re-bending two sections needs two of this search's own
     own = depth + 1 - (search.prefix.n_route_sections if search.prefix is not None else 0)
+    limit = search.settings.closings if closings is None else closings
+    bands = []
     for extra, band in ((0, (0.0, 0.3)), (1, (0.3, 0.98)), (2, (0.6, 1.95))):
         if extra == 0 and own < 2:
             continue
@@ -416,10 +439,10 @@ def _close_beam(
             & (togo < 2.2 * l)
             & (depth + 1 + extra + in_guide <= max_sections)
         )
-        picks = list(near[np.argsort(togo[near])][: search.settings.closings])
+        picks = list(near[np.argsort(togo[near])][:limit])
         if picks:
-            best = _close_picks(search, beam, picks, extra, best)
-    return best
+            bands.append((extra, picks))
+    return bands
 
 
 def _close_picks(
@@ -443,3 +466,123 @@ def _close_picks(
         if out is not None:
             best = _keep(search, best, out[1], out[0], float(beam.cost[i]), extra)
     return best
+
+
+# ---------------------------------------------------------------- one state at a time
+
+
+def move_set(settings: RouteSettings | None = None) -> NDArray[np.float64]:
+    """The search's moves ``Δκ`` ``(25, 2)`` [rad] under ``settings``: none, 3 sizes x 8 ways."""
+    return _changes((settings or RouteSettings()).max_change)
+
+
+@dataclass(frozen=True)
+class RouteMoves:
+    """The next section of a route, for each move of :func:`move_set`.
+
+    Attributes:
+        kappa: the new section's ``κ`` ``(25, 2)`` [rad] (the last one plus the move, its norm
+            kept within ``θ_max``).
+        ok: whether the new section keeps ``radius + margin + slack`` from the tank and fits in
+            the arm ``(25,)``.
+        end_pos: the new route end ``(25, 3)`` [cm].
+        togo: the guide's distance-to-go from there ``(25,)`` [cm] (inf where it is cut off).
+
+    """
+
+    kappa: NDArray[np.float64]
+    ok: NDArray[np.bool_]
+    end_pos: NDArray[np.float64]
+    togo: NDArray[np.float64]
+
+
+def _one_state(
+    tank: Tank, route: Route, target: ArrayLike, settings: RouteSettings | None
+) -> tuple[_Search, _Beam]:
+    """A search of ``target`` and the beam of one state, the end of ``route``.
+
+    No prefix: the state's own sections may be re-bent when it is closed, as the search's are.
+    """
+    settings = settings or RouteSettings()
+    target = np.asarray(target, dtype=np.float64)
+    guide = guide_field(tank, target)
+    search = _Search(
+        tank, tank.arm, target, guide, settings, time.perf_counter(), kernel_grid(tank),
+        settings.max_expanded,
+    )  # fmt: skip
+    end = forward_kinematics(route.lead, *kappa_to_angles(route.kappa), route.section_length)
+    cost = np.array([route.lead + route.n_route_sections * route.section_length])
+    rot, pos = end[None, -1, :3, :3], end[None, -1, :3, 3]
+    return search, _Beam(rot, pos, route.kappa[None], np.array([route.lead]), cost)
+
+
+def route_moves(
+    tank: Tank, route: Route, target: ArrayLike, settings: RouteSettings | None = None
+) -> RouteMoves:
+    """Every move of :func:`move_set` from the end of ``route``, checked as the search does.
+
+    One state of the beam search of :func:`plan_route`: the same moves, clearance rule and
+    guide (the distance-to-go through free space to ``target``).
+    """
+    search, beam = _one_state(tank, route, target, settings)
+    changes = _changes(search.settings.max_change)
+    n, depth = len(changes), route.n_route_sections
+    kappa, end_pos = np.zeros((n, 2)), np.full((n, 3), np.nan)
+    ok, togo = np.zeros(n, dtype=bool), np.full(n, np.inf)
+    if depth < search.arm.max_sections:
+        _, cand = _expand(search, beam, changes, depth)
+        if cand is not None:
+            m = cand.move
+            ok[m], end_pos[m], togo[m], kappa[m] = True, cand.end_pos, cand.h, cand.hist[:, -1]
+    return RouteMoves(kappa, ok, end_pos, togo)
+
+
+def close_route(
+    tank: Tank, route: Route, target: ArrayLike, settings: RouteSettings | None = None
+) -> tuple[Route, float] | None:
+    """``route`` closed onto ``target`` as the search closes one of its states, or None.
+
+    With 0 to 2 more sections (0: its own last two re-bent, when it has two or more), or from
+    the panel with 1 to 3 (no section yet), when its end is near enough the target (the bands
+    of :func:`plan_route`'s closing); the closed route keeps ``margin + slack/2`` [cm] (a near
+    miss pushed away from the tank first, as the search does). Returns it with its clearance.
+    """
+    search, beam = _one_state(tank, route, target, settings)
+    depth = route.n_route_sections - 1
+    if depth < 0:
+        best = _close_near(search, np.array([route.lead]))
+    else:
+        best = _close_beam(search, beam, search.guide(beam.pos), depth, None)
+    return None if best is None else (best[1], best[2])
+
+
+def moves_ahead(
+    tank: Tank, route: Route, target: ArrayLike, settings: RouteSettings | None = None
+) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
+    """One step of look-ahead: for each move, would the route then close, how many moves on.
+
+    ``(closes (25,), onward (25,))``: whether :func:`close_route` closes the route grown by the
+    move, and the share of clear moves from its end; both 0 where the move is not clear. All
+    moves in two batched calls of the search's own expansion and closing.
+    """
+    search, beam = _one_state(tank, route, target, settings)
+    changes = _changes(search.settings.max_change)
+    n, depth = len(changes), route.n_route_sections
+    closes, onward = np.zeros(n, dtype=bool), np.zeros(n)
+    if depth >= search.arm.max_sections:
+        return closes, onward
+    _, cand = _expand(search, beam, changes, depth)
+    if cand is None:
+        return closes, onward
+    lead = beam.lead[cand.rep]
+    cost = lead + (depth + 1) * search.arm.section_length
+    after = _Beam(cand.end_rot, cand.end_pos, cand.hist, lead, cost)
+    if depth + 1 < search.arm.max_sections:
+        _, more = _expand(search, after, changes, depth + 1)
+        if more is not None:
+            onward[cand.move] = np.bincount(more.rep, minlength=len(cand.move)) / n
+    for extra, picks in _close_bands(search, after, cand.h, depth + 1, closings=n):
+        for i in picks:
+            if not closes[cand.move[i]]:
+                closes[cand.move[i]] = _close_picks(search, after, [i], extra, None) is not None
+    return closes, onward
