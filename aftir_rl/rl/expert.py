@@ -214,40 +214,7 @@ class FTLExpert:
         ``state``: an env whose arm the motion starts from (default: the start of an episode).
         The budget starts once the planner's kernels are compiled (:func:`warm_up`).
         """
-        tank = self.sim.tank
-        warm_up(tank)
-        start = time.perf_counter()
-        target = np.asarray(target, dtype=np.float64)
-        tries = 0
-        for settings in self.settings:
-            for slack in SLACKS:  # more slack while the env's deployment grazes
-                left = self.max_seconds - (time.perf_counter() - start)
-                if left <= 0:
-                    return None
-                knobs = replace(settings, slack=slack, max_seconds=min(left, 8.0))
-                try:
-                    found = plan_route(tank, target, None, knobs, tank.arm)
-                except PlanningError:  # the search changes with the slack: the next may find one
-                    continue
-                if abs(found.route.lead) > self.max_lead + 1e-9:  # closing moved it too far
-                    continue
-                tries += 1
-                origin = state if state is not None else self._start()
-                actions = route_actions(found.route.kappa, origin)
-                arms: list[ArmState] = []
-                ok, steps, least = self.replay(target, actions, state, arms)
-                if ok:
-                    return ExpertPlan(
-                        target=target,
-                        actions=actions[:steps],
-                        route_kappa=found.route.kappa,
-                        slack=slack,
-                        min_clearance_cm=least,
-                        seconds=time.perf_counter() - start,
-                        tries=tries,
-                        arms=arms,
-                    )
-        return None
+        return self._search(target, state, 0)
 
     def continue_plan(self, target: ArrayLike, state: ArmFTLEnv) -> ExpertPlan | None:
         """A motion to ``target`` that keeps ``state``'s whole sections, or None.
@@ -260,27 +227,35 @@ class FTLExpert:
         replayed from ``state`` and kept only if that replay succeeds with the margin kept
         (python-fcl), as :meth:`plan`'s. With no whole section yet it is :meth:`plan`.
         """
-        kappa, k, _ = arm_state(state)
-        if k == 0:
-            return self.plan(target, state)
+        return self._search(target, state, arm_state(state)[1])
+
+    def _search(self, target: ArrayLike, state: ArmFTLEnv | None, k: int) -> ExpertPlan | None:
+        """The first motion the env replays to success, each setting and slack in turn.
+
+        A route that keeps the first ``k`` sections of ``state``'s arm, deployed from the end
+        of them (from the floor when ``k`` is 0) and replayed from ``state``.
+        """
         tank, l = self.sim.tank, self.sim.batch.l
         warm_up(tank)
         start = time.perf_counter()
         target = np.asarray(target, dtype=np.float64)
-        prefix = Route(0.0, kappa[:k], l)
+        prefix = None if k == 0 or state is None else Route(0.0, arm_state(state)[0][:k], l)
         tries = 0
         for settings in self.settings:
-            for slack in SLACKS:
+            for slack in SLACKS:  # more slack while the env's deployment grazes
                 left = self.max_seconds - (time.perf_counter() - start)
                 if left <= 0:
                     return None
                 knobs = replace(settings, slack=slack, max_seconds=min(left, 8.0))
                 try:
                     found = plan_route(tank, target, None, knobs, tank.arm, prefix)
-                except PlanningError:
+                except PlanningError:  # the search changes with the slack: the next may find one
+                    continue
+                if abs(found.route.lead) > self.max_lead + 1e-9:  # closing moved it too far
                     continue
                 tries += 1
-                actions = route_actions(found.route.kappa[k:], state, back_to=k * l)
+                origin = state if state is not None else self._start()
+                actions = route_actions(found.route.kappa[k:], origin, back_to=k * l)
                 arms: list[ArmState] = []
                 ok, steps, least = self.replay(target, actions, state, arms)
                 if ok:
