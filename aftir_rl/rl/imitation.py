@@ -116,9 +116,9 @@ def _check_dataset_files(path: Path) -> None:
 
     Minari opens ``data/metadata.json``, ``data/main_data.hdf5`` and the namespace's
     ``namespace_metadata.json`` as they are: a FIFO there blocks forever, a device or a sparse
-    file of terabytes is read. Every entry of ``data/`` and those files must be regular files
-    (not symbolic links), metadata at most :data:`MAX_METADATA_BYTES`, the rest at most
-    :data:`MAX_DATASET_BYTES`.
+    file of terabytes is read. Those files and the first 100 entries of ``data/`` must be
+    regular files (not symbolic links), metadata at most :data:`MAX_METADATA_BYTES`, the rest
+    at most :data:`MAX_DATASET_BYTES`.
 
     Raises:
         ConfigError: one line naming the file.
@@ -126,9 +126,16 @@ def _check_dataset_files(path: Path) -> None:
     """
     import stat
 
-    entries = sorted((path / "data").iterdir())[:100]
-    namespace = path.parent / "namespace_metadata.json"
-    for entry in [*entries, *([namespace] if os.path.lexists(namespace) else [])]:
+    data = path / "data"
+    opened = [
+        data / "metadata.json",
+        data / "main_data.hdf5",
+        path.parent / "namespace_metadata.json",
+    ]
+    others = sorted(itertools.islice(data.iterdir(), 100))  # what else is there, a bounded look
+    for entry in dict.fromkeys([*opened, *others]):
+        if not os.path.lexists(entry):
+            continue
         info = os.lstat(entry)
         if not stat.S_ISREG(info.st_mode):
             raise ConfigError(f"{entry}: not a regular file; not a dataset this package wrote")

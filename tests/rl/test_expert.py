@@ -425,3 +425,17 @@ def test_the_teacher_continues_a_learners_whole_sections(seed):
         least_s = min(least_s, env.insertion)
         assert scene.check(env.posture).clearance_cm >= 1.0 and not info["contact"]
     assert term and info["is_success"] and least_s >= k * env.batch.l - 1e-9
+
+
+def test_a_crowded_data_folder_still_has_minaris_files_checked(tmp_path):
+    """Entries sorted before them do not hide a FIFO where Minari reads its data."""
+    from aftir_rl.rl.imitation import load_demos
+
+    data = tmp_path / "aftir" / "demo-v0" / "data"
+    data.mkdir(parents=True)
+    for i in range(150):
+        (data / f"a{i:03d}").write_bytes(b"")
+    (data / "metadata.json").write_text("{}")
+    os.mkfifo(data / "main_data.hdf5")
+    with pytest.raises(ConfigError, match="main_data.hdf5: not a regular file"):
+        load_demos(data.parent, 0.99)
