@@ -9,7 +9,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from aftir_rl.core.collision import CollisionScene
-from aftir_rl.core.errors import PlanningError
+from aftir_rl.core.errors import InvalidActionError, PlanningError
 from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.envs.ftl.route_env import ROUTE_SETTINGS, ArmRouteEnv
 from aftir_rl.planning.ftl.plan import deploy_route
@@ -82,6 +82,8 @@ def test_a_move_that_is_not_clear_ends_in_contact_and_restore_replays(env):
     np.testing.assert_array_equal(env.observation(), obs)
     again, *_ = env.step(int(clear[0]))
     np.testing.assert_array_equal(again, after)
+    with pytest.raises(InvalidActionError, match="a move 0 to 24"):
+        env.step(25)
     if len(blocked):
         env.restore(start)
         _, reward, terminated, _, info = env.step(int(blocked[0]))

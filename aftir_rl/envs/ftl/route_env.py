@@ -23,6 +23,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from aftir_rl.core.errors import InvalidActionError
 from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.planning.ftl.model import Route
 from aftir_rl.planning.ftl.route import (
@@ -118,6 +119,8 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         """Add the section of move ``action``; close the route if the planner's closing can."""
         a = int(action)
+        if not 0 <= a < len(self.moves):
+            raise InvalidActionError(f"action must be a move 0 to {len(self.moves) - 1}, got {a}")
         info: dict[str, Any] = {"is_success": False, "contact": False}
         if self.closed is not None:  # closable before any move (a target near the panel)
             info["is_success"] = True
