@@ -105,6 +105,8 @@ def _episode_arrays(
     return obs, actions, rewards
 
 
+#: The largest discounted return accepted (the envs' rewards are tens per step at most).
+MAX_RETURN = 1e9
 #: The largest file of a dataset read [bytes]: :data:`MAX_DEMO_STEPS` steps' HDF5, with room.
 MAX_DATASET_BYTES = 4_000_000_000
 #: The largest metadata file of a dataset read [bytes].
@@ -190,7 +192,13 @@ def load_demos(path: str | os.PathLike[str], gamma: float) -> Demos:
         for r in rewards[::-1]:
             g = float(r) + gamma * g
             back.append(g)
-        returns.append(np.array(back[::-1], dtype=np.float32))
+        back64 = np.array(back[::-1])
+        if not np.all(np.abs(back64) <= MAX_RETURN):  # (an inf or NaN sum fails this too)
+            raise ConfigError(
+                f"{path}: episode {i}: rewards sum to returns beyond ±{MAX_RETURN:g}; "
+                "not a dataset of this package's envs"
+            )
+        returns.append(back64.astype(np.float32))
     if not actions:
         raise ConfigError(f"{path}: the dataset holds no episodes")
     try:

@@ -334,6 +334,7 @@ def test_aftir_dataset_refuses_bad_input_in_one_line(tmp_path, capsys):
         (lambda e: e.__setattr__("actions", None), "episode 1: actions is not an array"),
         (lambda e: e.observations.pop("desired_goal"), "episode 1: observations must be a dict"),
         (lambda e: e.__setattr__("rewards", e.rewards * np.inf), "episode 1: rewards holds"),
+        (lambda e: e.__setattr__("rewards", e.rewards * 1e300), "episode 1: rewards sum to"),
         (
             lambda e: e.observations.__setitem__("observation", e.observations["observation"][:3]),
             "observations['observation'] must hold T + 1",
