@@ -146,6 +146,26 @@ def _check_dataset_files(path: Path) -> None:
             raise ConfigError(f"{entry}: {info.st_size:,} bytes, more than {cap:,}")
 
 
+def _returns(rewards: NDArray[Any], gamma: float, where: str) -> NDArray[np.float32]:
+    """The discounted return from each step, summed in float64 and checked to fit.
+
+    Raises:
+        ConfigError: a return beyond ±:data:`MAX_RETURN` (an inf or NaN sum included).
+
+    """
+    g, back = 0.0, []
+    for r in rewards[::-1]:
+        g = float(r) + gamma * g
+        back.append(g)
+    out = np.array(back[::-1])
+    if not np.all(np.abs(out) <= MAX_RETURN):
+        raise ConfigError(
+            f"{where}: rewards sum to returns beyond ±{MAX_RETURN:g}; "
+            "not a dataset of this package's envs"
+        )
+    return out.astype(np.float32)
+
+
 def load_demos(path: str | os.PathLike[str], gamma: float) -> Demos:
     """Read the Minari dataset in ``path`` (``ROOT/namespace/name-vN``), every episode checked.
 
@@ -188,17 +208,7 @@ def load_demos(path: str | os.PathLike[str], gamma: float) -> Demos:
         for key, value in o.items():
             obs.setdefault(key, []).append(value)
         actions.append(a)
-        g, back = 0.0, []
-        for r in rewards[::-1]:
-            g = float(r) + gamma * g
-            back.append(g)
-        back64 = np.array(back[::-1])
-        if not np.all(np.abs(back64) <= MAX_RETURN):  # (an inf or NaN sum fails this too)
-            raise ConfigError(
-                f"{path}: episode {i}: rewards sum to returns beyond ±{MAX_RETURN:g}; "
-                "not a dataset of this package's envs"
-            )
-        returns.append(back64.astype(np.float32))
+        returns.append(_returns(rewards, gamma, f"{path}: episode {i}"))
     if not actions:
         raise ConfigError(f"{path}: the dataset holds no episodes")
     try:

@@ -87,3 +87,20 @@ def test_a_closed_route_ends_on_the_target_and_keeps_the_margin(tank, seed):
         plan = deploy_route(tank, target, final)
         assert plan.complete and plan.min_clearance_cm >= 1.0 and plan.tip_error_cm < 0.01
     assert answered >= 1  # the planned route itself closes near its end
+
+
+def test_the_look_ahead_is_each_moves_own_closing_and_moves(tank):
+    """``ahead=True`` (batched) against growing the route by each move and asking again."""
+    target = (181.5, 111.6, 51.5)
+    route = _planned(tank, target)
+    for k in range(route.n_route_sections):
+        state = Route(0.0, route.kappa[:k], route.section_length)
+        moves = route_moves(tank, state, target, SETTINGS, ahead=True)
+        for j in range(len(moves.ok)):
+            if not moves.ok[j]:
+                assert not moves.closes[j] and moves.onward[j] == 0.0
+                continue
+            grown = Route(0.0, np.vstack([state.kappa, moves.kappa[j]]), state.section_length)
+            closes = close_route(tank, grown, target, SETTINGS) is not None
+            assert moves.closes[j] == closes, (k, j)
+            assert moves.onward[j] == route_moves(tank, grown, target, SETTINGS).ok.mean()

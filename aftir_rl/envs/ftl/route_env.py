@@ -17,7 +17,7 @@ levels are compared on the same targets.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -30,7 +30,6 @@ from aftir_rl.planning.ftl.route import (
     RouteSettings,
     close_route,
     move_set,
-    moves_ahead,
     route_moves,
 )
 
@@ -60,7 +59,7 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
     tip at the route's end (the arm, the tip's pose, clearances, the way to the target), then
     for each of the 25 moves: whether it is clear, the distance-to-go through free space from
     its end (cm/100, 10 where it is not clear), whether the route would then close, and the
-    share of moves clear after it (:func:`~aftir_rl.planning.ftl.route.moves_ahead`).
+    share of moves clear after it (:func:`~aftir_rl.planning.ftl.route.route_moves` with ``ahead``).
 
     ## Episode End
 
@@ -87,7 +86,8 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
         self.settings = settings
         self.moves = move_set(settings)
         n_moves = len(self.moves)
-        n_obs = self.inner.batch.observation().shape[1] + 4 * n_moves
+        inner_space = cast(gym.spaces.Dict, self.inner.observation_space)["observation"]
+        n_obs = int(np.prod(inner_space.shape or (0,))) + 4 * n_moves  # (no observation yet)
         self.action_space = gym.spaces.Discrete(n_moves)
         self.observation_space = gym.spaces.Box(-10.0, 10.0, (n_obs,), np.float32)
         self.route = Route(0.0, np.zeros((0, 2)), self.arm.section_length)
@@ -168,9 +168,10 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
             b.kappa[0, k] = self.route.kappa[-1] if k else 0.0
         b.k[0], b.s[0] = min(k, n - 1), k * self.arm.section_length
         b.refresh()
-        self._moves = moves = route_moves(self.tank, self.route, self.target, self.settings)
+        moves = route_moves(self.tank, self.route, self.target, self.settings, ahead=True)
+        self._moves = moves
         togo = np.where(moves.ok, np.minimum(moves.togo, _FAR), _FAR) / 100.0
-        closes, onward = moves_ahead(self.tank, self.route, self.target, self.settings)
         inner = b.observation()[0]
-        self._obs = np.concatenate([inner, moves.ok, togo, closes, onward]).astype(np.float32)
+        parts = [inner, moves.ok, togo, moves.closes, moves.onward]
+        self._obs = np.concatenate(parts).astype(np.float32)
         return self._obs

@@ -46,7 +46,6 @@ __all__ = [
     "RouteMoves",
     "close_route",
     "move_set",
-    "moves_ahead",
     "plan_route",
     "route_moves",
     "search_route",
@@ -487,6 +486,9 @@ class RouteMoves:
             the arm ``(25,)``.
         end_pos: the new route end ``(25, 3)`` [cm].
         togo: the guide's distance-to-go from there ``(25,)`` [cm] (inf where it is cut off).
+        closes: with ``ahead``, whether :func:`close_route` closes the route grown by the move
+            ``(25,)`` (else all False).
+        onward: with ``ahead``, the share of clear moves from the move's end ``(25,)`` (else 0).
 
     """
 
@@ -494,6 +496,8 @@ class RouteMoves:
     ok: NDArray[np.bool_]
     end_pos: NDArray[np.float64]
     togo: NDArray[np.float64]
+    closes: NDArray[np.bool_]
+    onward: NDArray[np.float64]
 
 
 def _one_state(
@@ -517,24 +521,56 @@ def _one_state(
 
 
 def route_moves(
-    tank: Tank, route: Route, target: ArrayLike, settings: RouteSettings | None = None
+    tank: Tank,
+    route: Route,
+    target: ArrayLike,
+    settings: RouteSettings | None = None,
+    ahead: bool = False,
 ) -> RouteMoves:
     """Every move of :func:`move_set` from the end of ``route``, checked as the search does.
 
     One state of the beam search of :func:`plan_route`: the same moves, clearance rule and
-    guide (the distance-to-go through free space to ``target``).
+    guide (the distance-to-go through free space to ``target``). With ``ahead``, one step of
+    look-ahead too: for each clear move, whether the route then closes and how many moves stay
+    clear after it (the search's own expansion and closing, batched over the moves).
     """
     search, beam = _one_state(tank, route, target, settings)
     changes = _changes(search.settings.max_change)
     n, depth = len(changes), route.n_route_sections
     kappa, end_pos = np.zeros((n, 2)), np.full((n, 3), np.nan)
     ok, togo = np.zeros(n, dtype=bool), np.full(n, np.inf)
-    if depth < search.arm.max_sections:
-        _, cand = _expand(search, beam, changes, depth)
-        if cand is not None:
-            m = cand.move
-            ok[m], end_pos[m], togo[m], kappa[m] = True, cand.end_pos, cand.h, cand.hist[:, -1]
-    return RouteMoves(kappa, ok, end_pos, togo)
+    closes, onward = np.zeros(n, dtype=bool), np.zeros(n)
+    cand = _expand(search, beam, changes, depth)[1] if depth < search.arm.max_sections else None
+    if cand is not None:
+        m = cand.move
+        ok[m], end_pos[m], togo[m], kappa[m] = True, cand.end_pos, cand.h, cand.hist[:, -1]
+        if ahead:
+            closes, onward = _ahead(search, beam, cand, changes, depth)
+    return RouteMoves(kappa, ok, end_pos, togo, closes, onward)
+
+
+def _ahead(
+    search: _Search,
+    beam: _Beam,
+    cand: _Candidates,
+    changes: NDArray[np.float64],
+    depth: int,
+) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
+    """For each move of ``cand`` (one state's clear moves): does it close, share of moves on."""
+    n = len(changes)
+    closes, onward = np.zeros(n, dtype=bool), np.zeros(n)
+    lead = beam.lead[cand.rep]
+    cost = lead + (depth + 1) * search.arm.section_length
+    after = _Beam(cand.end_rot, cand.end_pos, cand.hist, lead, cost)
+    if depth + 1 < search.arm.max_sections:
+        _, more = _expand(search, after, changes, depth + 1)
+        if more is not None:
+            onward[cand.move] = np.bincount(more.rep, minlength=len(cand.move)) / n
+    for extra, picks in _close_bands(search, after, cand.h, depth + 1, closings=n):
+        for i in picks:
+            if not closes[cand.move[i]]:
+                closes[cand.move[i]] = _close_picks(search, after, [i], extra, None) is not None
+    return closes, onward
 
 
 def close_route(
@@ -554,35 +590,3 @@ def close_route(
     else:
         best = _close_beam(search, beam, search.guide(beam.pos), depth, None)
     return None if best is None else (best[1], best[2])
-
-
-def moves_ahead(
-    tank: Tank, route: Route, target: ArrayLike, settings: RouteSettings | None = None
-) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
-    """One step of look-ahead: for each move, would the route then close, how many moves on.
-
-    ``(closes (25,), onward (25,))``: whether :func:`close_route` closes the route grown by the
-    move, and the share of clear moves from its end; both 0 where the move is not clear. All
-    moves in two batched calls of the search's own expansion and closing.
-    """
-    search, beam = _one_state(tank, route, target, settings)
-    changes = _changes(search.settings.max_change)
-    n, depth = len(changes), route.n_route_sections
-    closes, onward = np.zeros(n, dtype=bool), np.zeros(n)
-    if depth >= search.arm.max_sections:
-        return closes, onward
-    _, cand = _expand(search, beam, changes, depth)
-    if cand is None:
-        return closes, onward
-    lead = beam.lead[cand.rep]
-    cost = lead + (depth + 1) * search.arm.section_length
-    after = _Beam(cand.end_rot, cand.end_pos, cand.hist, lead, cost)
-    if depth + 1 < search.arm.max_sections:
-        _, more = _expand(search, after, changes, depth + 1)
-        if more is not None:
-            onward[cand.move] = np.bincount(more.rep, minlength=len(cand.move)) / n
-    for extra, picks in _close_bands(search, after, cand.h, depth + 1, closings=n):
-        for i in picks:
-            if not closes[cand.move[i]]:
-                closes[cand.move[i]] = _close_picks(search, after, [i], extra, None) is not None
-    return closes, onward
