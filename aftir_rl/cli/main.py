@@ -46,6 +46,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "one timed deployment that visits many targets (needs aftir_rl[robot])",
     ),
     "check": ("aftir_rl.cli.check", "re-check a timed motion: time, limits, clearance; exit 0/1"),
+    "simulate": (
+        "aftir_rl.cli.simulate",
+        "re-run a timed motion on a Cosserat rod under gravity (needs aftir_rl[physics])",
+    ),
     "runs": ("aftir_rl.cli.runs", "the runs under a folder, unfinished ones too; remove old ones"),
     "configs": (
         "aftir_rl.cli.configs",

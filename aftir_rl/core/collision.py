@@ -199,6 +199,43 @@ class CollisionScene:
             clearance = min(clearance, 0.0)
         return CollisionReport(touches or not panel, clearance, panel, hit or inside)
 
+    def polyline_clearance(
+        self, points: NDArray[np.float64]
+    ) -> tuple[float, NDArray[np.float64], str]:
+        """The clearance of a body given as a polyline ``(P, 3)`` [cm] of the arm's radius.
+
+        For a body that is not the constant-curvature arm (the physics check's simulated rod):
+        one capsule of the arm's radius along each chord, as long as the chord. Returns the
+        smallest distance to any solid or wall [cm] (≤ 0 on contact), the point of the body's
+        surface nearest the tank, and the name of the solid or wall it is nearest.
+        """
+        chords = points[1:] - points[:-1]
+        lengths = np.linalg.norm(chords, axis=1)
+        links = [
+            fcl.CollisionObject(fcl.Capsule(self.arm.radius, float(length)), fcl.Transform(rot, c))
+            for length, rot, c in zip(
+                lengths, rotation_z_to(chords), (points[1:] + points[:-1]) / 2
+            )
+        ]
+        manager = fcl.DynamicAABBTreeCollisionManager()
+        manager.registerObjects(links)
+        manager.setup()
+        data = fcl.DistanceData(fcl.DistanceRequest(enable_nearest_points=True))
+        with held():
+            self._scene.distance(manager, data, fcl.defaultDistanceCallback)
+        clearance = max(_finite_or_inf(data.result.min_distance), 0.0)  # -1: they touch
+        body = np.asarray(data.result.nearest_points[1], dtype=np.float64)
+        if self._hollow and any(s.contains(points).any() for s in self._hollow):
+            clearance = min(clearance, 0.0)
+        nearest, name = math.inf, ""
+        for obj in self._objects:  # which solid: the one at the smallest distance
+            one = fcl.DistanceData()
+            with held():
+                manager.distance(obj, one, fcl.defaultDistanceCallback)
+            if one.result.min_distance < nearest:
+                nearest, name = one.result.min_distance, self._names[id(obj)]
+        return clearance, body, name
+
     def _hit_name(self, manager: fcl.DynamicAABBTreeCollisionManager) -> str:
         for obj in self._objects:
             data = fcl.CollisionData()

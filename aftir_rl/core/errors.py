@@ -48,5 +48,9 @@ class PlanningTimeout(PlanningError):
     """
 
 
+class PhysicsError(AftirError, ValueError):
+    """The physics check could not simulate a motion (its rod left every finite bound)."""
+
+
 class MissingExtraError(AftirError, ImportError):
     """An optional dependency is not installed; the message names the extra that brings it."""

@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.actuation import ActuatorLimits
 from aftir_rl.core.camera import Camera
+from aftir_rl.core.rod import RodProperties
 
 __all__ = [
     "ArmSpec",
@@ -51,6 +52,7 @@ class ArmSpec:
         theta_max: bound on ``|θ_i|`` [rad].
         limits: the actuators' speed, acceleration and travel limits.
         camera: the tip camera (what an inspection sees).
+        rod: the body's mass and stiffnesses (the physics check's Cosserat rod).
 
     """
 
@@ -60,6 +62,7 @@ class ArmSpec:
     theta_max: float = math.pi / 2
     limits: ActuatorLimits = ActuatorLimits()
     camera: Camera = Camera()
+    rod: RodProperties = RodProperties()
 
     def __post_init__(self) -> None:
         if not self.section_length > 0:

@@ -65,6 +65,8 @@ class TimedRun:
     tank: str | None = None
     #: Whether the run held no timing and the motion was timed as it was read.
     timed_now: bool = False
+    #: The target the run's file names [cm], if any.
+    target: NDArray[np.float64] | None = None
 
 
 def _array(value: Any, shape: tuple[int, int], where: str, path: Path) -> NDArray[np.float64]:
@@ -134,6 +136,7 @@ def _timed_run(data: RunData, path: Path, tank: Tank | None) -> TimedRun:
         section_length=data.section_length,
         margin_cm=margin if math.isfinite(margin) else 1.0,
         tank=data.tank,
+        target=data.target,
     )
 
 
@@ -165,7 +168,9 @@ def _timed_now(data: RunData, tank: Tank, path: Path) -> TimedRun:
                               f"{exc}") from None  # fmt: skip
     margin = margin if math.isfinite(margin) else 1.0
     postures = (data.dis, data.theta, data.phi)
-    return TimedRun(*postures, timing, data.section_length, margin, data.tank, timed_now=True)
+    return TimedRun(
+        *postures, timing, data.section_length, margin, data.tank, True, target=data.target
+    )
 
 
 def _time_problems(run: TimedRun) -> list[str]:

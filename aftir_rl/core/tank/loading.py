@@ -33,6 +33,7 @@ from aftir_rl.core.config import (
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import atomic_open
 from aftir_rl.core.robot import ArmSpec
+from aftir_rl.core.rod import RodProperties
 from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank.generate import wing_tank
 from aftir_rl.core.tank.geometry import Panel, Tank
@@ -181,7 +182,7 @@ def _parse_cell_size(value: Any, lo: Vec3, hi: Vec3, src: str) -> float:
 
 def _parse_arm(data: Mapping[str, Any], src: str) -> ArmSpec:
     """The ``arm`` section (defaults for the keys it leaves out)."""
-    keys = {"section_length", "max_sections", "radius", "theta_max", "limits", "camera"}
+    keys = {"section_length", "max_sections", "radius", "theta_max", "limits", "camera", "rod"}
     arm = section(data, "arm", keys, src)
     try:
         return ArmSpec(
@@ -195,6 +196,7 @@ def _parse_arm(data: Mapping[str, Any], src: str) -> ArmSpec:
             theta_max=to_float(arm.get("theta_max", math.pi / 2), f"{src}: arm.theta_max"),
             limits=ActuatorLimits.from_mapping(arm.get("limits"), f"{src}: arm.limits"),
             camera=Camera.from_mapping(arm.get("camera"), f"{src}: arm.camera"),
+            rod=RodProperties.from_mapping(arm.get("rod"), f"{src}: arm.rod"),
         )
     except ValueError as exc:
         if isinstance(exc, ConfigError):
