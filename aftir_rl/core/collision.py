@@ -223,8 +223,10 @@ class CollisionScene:
         data = fcl.DistanceData(fcl.DistanceRequest(enable_nearest_points=True))
         with held():
             self._scene.distance(manager, data, fcl.defaultDistanceCallback)
-        clearance = max(_finite_or_inf(data.result.min_distance), 0.0)  # -1: they touch
+        clearance = _finite_or_inf(data.result.min_distance)
         body = np.asarray(data.result.nearest_points[1], dtype=np.float64)
+        if clearance <= 0:  # python-fcl says -1 and no points where they touch: the deepest
+            clearance, body = 0.0, points[int(np.argmin(point_clearance(self.tank, points)))]
         if self._hollow and any(s.contains(points).any() for s in self._hollow):
             clearance = min(clearance, 0.0)
         nearest, name = math.inf, ""

@@ -140,6 +140,14 @@ class RodModel:
         elements_per_section: int = ELEMENTS_PER_SECTION,
     ) -> None:
         ea = require("elastica", "physics")
+        self._args = (
+            n_sections,
+            section_length,
+            radius,
+            rod,
+            gravity_direction,
+            elements_per_section,
+        )
         self.k, self.l, self.props = int(elements_per_section), float(section_length), rod
         n = n_sections * self.k
         ds = self.l * CM / self.k
@@ -225,6 +233,12 @@ class RodModel:
         self.time = 0.0
         self.steps = 0
 
+    def fresh(self) -> RodModel:
+        """A new model of the same rod (after a divergence), keeping the count of steps."""
+        model = RodModel(*self._args)
+        model.steps = self.steps
+        return model
+
     def _lowest_mode(self, free_m: float) -> float:
         """The first bending frequency [rad/s] of a straight cantilever ``free_m`` long."""
         free_m = max(free_m, 2 * self.l * CM / self.k)
@@ -236,7 +250,7 @@ class RodModel:
         self,
         nodes: NDArray[np.float64],
         frames: NDArray[np.float64],
-        start: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+        start: NDArray[np.float64] | None = None,
         floor: float = 0.0,
     ) -> None:
         """Impose a kinematic body (:func:`kinematic_rod`, cm) as rest shape and guide.
@@ -247,8 +261,10 @@ class RodModel:
         the clamp and the first node at or above it are held where the kinematic body has them,
         and the bending stiffness at that node is scaled so that its joint is as compliant as
         the free rod from the clamp to the middle of the next element (a clamp between nodes,
-        to second order in the element length). The rod starts from ``start`` (nodes in cm and
-        directors) if given, else from the kinematic body.
+        to second order in the element length). The rod starts from the kinematic body, or
+        with ``start`` (directors ``(3, 3, N·k)``, PyElastica's layout) from the body those
+        directors make with the kinematic body's element lengths, chained from the base: a start
+        that is only bent, never stretched or sheared, which the explicit steps take calmly.
         """
         x, q = self._with_module(nodes, np.ascontiguousarray(frames.transpose(2, 1, 0)))
         r = self.rod
@@ -263,7 +279,11 @@ class RodModel:
         held = np.arange(clamp + 2)  # the module's node, the arm's nodes 0..clamp
         self.held.set(held, x, q)
         if start is not None:
-            x, q = self._with_module(start[0], start[1])
+            q = np.ascontiguousarray(np.dstack([q[..., :1], start]))
+            steps = np.linalg.norm(chord, axis=0) * q[2]  # each element's chord along its d3
+            x = np.ascontiguousarray(
+                x[:, :1] + np.hstack([np.zeros((3, 1)), np.cumsum(steps, axis=1)])
+            )
         r.position_collection[...] = x
         r.director_collection[...] = q
         r.velocity_collection[...] = 0.0
@@ -520,21 +540,21 @@ def simulate_motion(
     entries = snapshot_entries(run.timing.t, every_s, also=(tightest,))
     out = PhysicsReport([], [], [], [], [], [], [], [], [], [], margin, props)
     previous: tuple[Any, ...] | None = None
-    trend = np.zeros((k * n + 1, 3))  # how the sag grew per second between the last two
     worst = math.inf
     for i in tqdm(entries, desc="physics", unit="snapshot", disable=not progress, leave=False):
         nodes, frames = kinematic_rod(run.dis[i], run.theta[i], run.phi[i], l, k)
-        start_body = None
-        if previous is not None:  # the previous body moved with the motion, its sag extrapolated
-            p_t, p_nodes, p_frames, p_body, p_dirs = previous
-            sag = p_body - p_nodes + trend * (run.timing.t[i] - p_t)
-            start_body = (nodes + sag, _moved_directors(frames, p_frames, p_dirs))
-        model.set_posture(nodes, frames, start_body, floor)
-        steps, left = model.relax()
+        start_dirs = None if previous is None else _moved_directors(frames, *previous)
+        model.set_posture(nodes, frames, start_dirs, floor)
+        try:
+            steps, left = model.relax()
+        except PhysicsError:
+            if start_dirs is None:
+                raise
+            model = model.fresh()  # again, from the kinematic body
+            model.set_posture(nodes, frames, None, floor)
+            steps, left = model.relax()
         body, dirs = model.body()
-        if previous is not None and run.timing.t[i] > previous[0]:
-            trend = (body - nodes - (previous[3] - previous[1])) / (run.timing.t[i] - previous[0])
-        previous = (run.timing.t[i], nodes, frames, body, dirs)
+        previous = (frames, dirs)
         above = nodes[:, 2] > floor
         gap = np.linalg.norm(body - nodes, axis=1)
         clearance, point, solid = scene.polyline_clearance(_curve(body, dirs))
