@@ -32,6 +32,8 @@ __all__ = ["DEFAULT_MAX_FRAMES", "tank_traces", "build_figure"]
 DEFAULT_MAX_FRAMES = 120
 _MAX_ROUTE_POINTS = 2000
 _COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#e377c2", "#8c564b")
+#: The simulated body of physics.json (aftir simulate), in every run: an amber beside the arms.
+_SIMULATED = "#f0a202"
 #: The legend groups of the tank's solids, in order: (label, colour, opacity), by kind.
 _SOLID_GROUPS = {
     "baffle": ("baffle", "#c8a165", 0.35),
@@ -152,6 +154,11 @@ def _run_lines(
         arm = run.backbones(frames[-1:])[0]  # the page opens on the deployed arm
         line = {"color": color, "width": 9}
         lines.append((arm, {"mode": "lines", "name": "arm", "line": line, "hoverinfo": "name"}))
+        body = run.simulated_body(int(frames[-1]))
+        if body is not None:  # aftir simulate's rod under gravity, beside the kinematic arm
+            line = {"color": _SIMULATED, "width": 6}
+            style = {"mode": "lines", "name": "simulated body", "hoverinfo": "name"}
+            lines.append((body, {**style, "line": line}))
     return lines
 
 
@@ -196,8 +203,9 @@ def build_figure(runs: Sequence[RunData], tank: Tank, max_frames: int = DEFAULT_
         for i, (points, style) in enumerate(lines):
             title = {} if i else {"legendgrouptitle_text": titles[n]}  # on the group's first
             traces.append(_line(points, legendgroup=f"run{n}", **title, **style))
-        if frames is not None:
-            animated.append((len(traces) - 1, run, frames))
+        if frames is not None:  # the arm, then the simulated body if there is one
+            arm = len(traces) - 1 - (run.physics is not None)
+            animated.append((arm, run, frames))
     fig = go.Figure(data=traces)
     if animated:
         _add_frames(fig, animated)
@@ -255,14 +263,20 @@ def _add_frames(fig: Any, animated: list[tuple[int, RunData, NDArray[np.int64]]]
     arms = [run.backbones(idx) for _, run, idx in animated]
     frames, steps = [], []
     for k in range(n_frames):
-        data, label = [], []
-        for (_, _, idx), pts in zip(animated, arms):
+        data, label, moved = [], [], []
+        for (trace, run, idx), pts in zip(animated, arms):
             j = round(k * (len(idx) - 1) / max(1, n_frames - 1))
             arm = np.round(pts[j], 2)
             data.append(go.Scatter3d(x=arm[:, 0], y=arm[:, 1], z=arm[:, 2]))
+            moved.append(trace)
+            body = run.simulated_body(int(idx[j]))
+            if body is not None:
+                body = np.round(body, 2)
+                data.append(go.Scatter3d(x=body[:, 0], y=body[:, 1], z=body[:, 2]))
+                moved.append(trace + 1)
             label.append(str(int(idx[j])))
         name = str(k)
-        frames.append(go.Frame(data=data, traces=[i for i, _, _ in animated], name=name))
+        frames.append(go.Frame(data=data, traces=moved, name=name))
         steps.append(_slider_step(name, "/".join(label)))
     fig.frames = frames
     _add_animation_controls(fig, steps)

@@ -30,7 +30,7 @@ from aftir_rl.core.files import read_json, run_file
 from aftir_rl.core.robot import body_points
 from aftir_rl.core.tank.parts import MAX_SECTIONS
 
-__all__ = ["RUN_FILES", "RunData", "read_run", "unique_names"]
+__all__ = ["PHYSICS_FILE", "RUN_FILES", "RunData", "read_run", "unique_names"]
 
 #: The files a run directory is recognised by.
 RUN_FILES = ("path.json", "trajectory.json", "summary.json", "config.json")
@@ -58,6 +58,8 @@ class RunData:
         tank: the tank named by the run's files, if any.
         kept: the top-level values of ``trajectory.json`` asked for by :func:`read_run`'s
             ``keep``, as read (unchecked).
+        physics: the bodies simulated by ``aftir simulate`` (``physics.json``): the motion
+            entries and, for each, the rod's nodes [cm] ``(P, 3)``; None without the file.
 
     """
 
@@ -76,6 +78,7 @@ class RunData:
     notes: list[str] = field(default_factory=list)
     tank: str | None = None
     kept: dict[str, Any] = field(default_factory=dict)
+    physics: tuple[list[int], list[NDArray[np.float64]]] | None = None
 
     @property
     def n_motion(self) -> int:
@@ -90,6 +93,17 @@ class RunData:
             self.dis[idx], self.theta[idx], self.phi[idx], self.section_length, _POINTS_PER_SECTION
         )
 
+    def simulated_body(self, entry: int) -> NDArray[np.float64] | None:
+        """The simulated body shown at motion entry ``entry``, or None without ``physics.json``.
+
+        The body of the last instant simulated at or before ``entry`` (the first if none is).
+        """
+        if self.physics is None:
+            return None
+        entries, bodies = self.physics
+        k = max(0, int(np.searchsorted(entries, entry, side="right")) - 1)
+        return bodies[k]
+
     def tips(self) -> NDArray[np.float64]:
         """Tip of every motion entry [cm], shape ``(M, 3)``."""
         return self.backbones(np.arange(self.n_motion))[:, -1, :]
@@ -98,6 +112,13 @@ class RunData:
 def _bad(path: Path, what: str) -> CheckpointError:
     return CheckpointError(f"{path}: {what}")
 
+
+#: The most simulated instants read from a ``physics.json`` (a 40-minute motion at 1 s: 2,400).
+MAX_SNAPSHOTS = 20_000
+#: The most points of one simulated body (12 sections of 20 elements, and more).
+MAX_BODY_POINTS = 1_000
+#: The file ``aftir simulate`` writes beside ``trajectory.json``.
+PHYSICS_FILE = "physics.json"
 
 #: The most targets of a tour drawn from its ``trajectory.json``.
 MAX_TARGETS = 10_000
@@ -247,11 +268,40 @@ def read_run(run_dir: str | Path, keep: Sequence[str] = ()) -> RunData:
         _read_path(run, run_file(path, "path.json"))
     if "trajectory.json" in present:
         _read_trajectory(run, run_file(path, "trajectory.json"), keep)
+        if run.dis is not None and (path / PHYSICS_FILE).is_file():
+            _read_physics(run, run_file(path, PHYSICS_FILE))
     if run.cells_cm is None and run.cells is None and run.dis is None:
         run.notes.append(
             f"no path.json or trajectory.json (found {', '.join(present)}): no path to draw"
         )
     return run
+
+
+def _read_physics(run: RunData, path: Path) -> None:
+    """The simulated bodies of ``physics.json`` and its verdict (``aftir simulate``)."""
+    data = read_json(path, path.name)
+    snapshots = data.get("snapshots") if isinstance(data, dict) else None
+    if not isinstance(snapshots, list) or not 0 < len(snapshots) <= MAX_SNAPSHOTS:
+        raise _bad(path, f"expected 1 to {MAX_SNAPSHOTS:,} snapshots")
+    entries: list[int] = []
+    bodies: list[NDArray[np.float64]] = []
+    for i, snap in enumerate(snapshots):
+        entry = snap.get("entry") if isinstance(snap, dict) else None
+        body = snap.get("body") if isinstance(snap, dict) else None
+        if not isinstance(entry, int) or isinstance(entry, bool) or not isinstance(body, list):
+            raise _bad(path, f"snapshots[{i}]: expected an integer entry and a body")
+        if not 2 <= len(body) <= MAX_BODY_POINTS or (entries and entry < entries[-1]):
+            raise _bad(path, f"snapshots[{i}]: a body of 2 to {MAX_BODY_POINTS} points, entries "
+                       "in order")  # fmt: skip
+        entries.append(entry)
+        bodies.append(_points(body, path, f"snapshots[{i}].body").reshape(-1, 3))
+    run.physics = (entries, bodies)
+    summary = data.get("summary")
+    if isinstance(summary, dict) and isinstance(summary.get("least_clearance_cm"), int | float):
+        held = "held" if summary.get("margin_held") is True else "lost"
+        run.facts["physics"] = (
+            f"margin {held} on the simulated body ({float(summary['least_clearance_cm']):.2f} cm)"
+        )
 
 
 def _read_facts(run: RunData, file: Path) -> None:

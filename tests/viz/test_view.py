@@ -96,6 +96,34 @@ def test_read_run_and_figure(tmp_path, tank):
     assert fig.data[arm].legendgroup == "run0"
 
 
+def test_a_simulated_body_is_drawn_beside_the_arm(tmp_path, tank):
+    """physics.json (aftir simulate) adds the rod's body: the last instant at or before each
+    frame's entry, animated with the arm; a malformed one is a one-line error naming it."""
+    folder = _q_table_run(tmp_path, tank)
+    motion = _motion()
+    entries = [0, 40, len(motion) - 1]
+    bodies = [np.array(motion[e].points(L, 5)) - [0.0, 0.0, 1.0 + e] for e in entries]
+    physics = {
+        "summary": {"margin_held": True, "least_clearance_cm": 3.5},
+        "snapshots": [{"entry": e, "body": b.tolist()} for e, b in zip(entries, bodies)],
+    }
+    (folder / "physics.json").write_text(json.dumps(physics))
+    run = read_run(folder)
+    assert "margin held on the simulated body (3.50 cm)" in run.facts["physics"]
+    assert np.allclose(run.simulated_body(39), bodies[0])
+    assert np.allclose(run.simulated_body(len(motion) - 1), bodies[2])
+    fig = build_figure([run], tank, max_frames=20)
+    names = [t.name for t in fig.data]
+    arm, body = names.index("arm"), names.index("simulated body")
+    assert body == arm + 1 and fig.frames[-1].traces == (arm, body)
+    assert np.allclose(np.array(fig.data[body].z), bodies[2][:, 2], atol=0.01)
+    assert np.allclose(np.array(fig.frames[0].data[1].z), bodies[0][:, 2], atol=0.01)
+    physics["snapshots"][1]["body"] = [[0.0, 0.0, float("nan")]] * 3
+    (folder / "physics.json").write_text(json.dumps(physics).replace("NaN", '"x"'))
+    with pytest.raises(CheckpointError, match="physics.json: snapshots"):
+        read_run(folder)
+
+
 def test_rollout_and_tour_pages_show_their_targets(tmp_path, tank):
     """A run with only trajectory.json (a rollout, a tour) still draws its target(s)."""
     motion = [p.to_dict() for p in _motion()]
