@@ -62,7 +62,7 @@ docs: $(STAMP)
 # The benchmark tables of docs/benchmarks.md. `make bench`: every script and every method on
 # smaller fixed sets with shorter budgets (--quick, said above each table), about 2 minutes on
 # 2 cores; `make bench-full`: the full sets and the 10 s budgets, the numbers of the docs
-# (10-12 minutes).
+# (25-30 minutes, half of it the physics check's 24 motions).
 bench: $(STAMP)  ## every benchmark table, quick
 	$(PY) benchmarks/bench_tank.py --quick
 	$(PY) benchmarks/bench_posture.py --quick
@@ -74,6 +74,7 @@ bench: $(STAMP)  ## every benchmark table, quick
 	$(PY) benchmarks/bench_render.py --quick
 	$(PY) benchmarks/bench_arm_ftl.py --quick
 	$(PY) benchmarks/bench_fields.py --quick
+	$(PY) benchmarks/bench_physics.py --quick
 	$(PY) -m aftir_rl.bench --quick
 
 bench-full: $(STAMP)  ## every benchmark table of docs/benchmarks.md, full
@@ -87,6 +88,7 @@ bench-full: $(STAMP)  ## every benchmark table of docs/benchmarks.md, full
 	$(PY) benchmarks/bench_render.py
 	$(PY) benchmarks/bench_arm_ftl.py
 	$(PY) benchmarks/bench_fields.py
+	$(PY) benchmarks/bench_physics.py
 	$(PY) -m aftir_rl.bench
 
 tensorboard: $(STAMP)

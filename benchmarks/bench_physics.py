@@ -21,6 +21,7 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
+from quick_mode import parse_args, print_header  # benchmarks/ is the script's own folder
 
 from aftir_rl.core.rod import RodProperties
 from aftir_rl.core.tank import load_tank
@@ -32,6 +33,8 @@ from aftir_rl.planning.ftl.plan import plan_motion
 #: Stiffness factors tried, in order from the default outwards.
 FACTORS = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 MARGIN = 1.0
+#: make bench's quick set: the four corners and one random target, an instant every 4 s.
+QUICK = {"n_random": 1, "every": 4.0}
 
 
 def _motion(job: tuple[str, list[float], float]) -> dict[str, Any]:
@@ -92,7 +95,8 @@ def main() -> None:
     parser.add_argument("--every", type=float, default=1.0, help="seconds between instants")
     parser.add_argument("--workers", type=int, default=2, help="processes")
     parser.add_argument("--json", help="where the rows go")
-    args = parser.parse_args()
+    args = parse_args(parser, QUICK)
+    print_header(args, QUICK)
     tank = load_tank("b737_center")
     sets = target_sets(args.n_random, args.seed)
     jobs = [("reference", [float(v) for v in t], args.every) for t in tank.targets]

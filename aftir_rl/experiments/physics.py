@@ -53,6 +53,8 @@ __all__ = [
 
 #: The file the physics check writes beside ``trajectory.json``.
 PHYSICS_FILE = "physics.json"
+#: The most instants one motion is simulated at (a 40-minute tour at one every 0.5 s).
+MAX_SNAPSHOTS = 5_000
 #: Rod elements per section (10 cm at the default 50 cm sections).
 ELEMENTS_PER_SECTION = 5
 #: The relaxation stops when the body is estimated this near its equilibrium [cm].
@@ -488,10 +490,11 @@ def snapshot_entries(t: NDArray[np.float64], every_s: float, also: Sequence[int]
     """The entries simulated (indices into the motion's times ``t``).
 
     The first entry at or after each multiple of ``every_s`` [s], the entries ``also``, and the
-    last.
+    last: never more than there are entries.
     """
-    marks = np.arange(0.0, float(t[-1]) + 1e-9, every_s)
-    chosen = set(np.searchsorted(t, marks - 1e-9).tolist()) | set(also) | {len(t) - 1}
+    bucket = np.floor(np.asarray(t, dtype=np.float64) / every_s)
+    first = np.flatnonzero(np.concatenate([[True], bucket[1:] != bucket[:-1]]))
+    chosen = set(first.tolist()) | set(also) | {len(t) - 1}
     return sorted(i for i in chosen if 0 <= i < len(t))
 
 
@@ -531,13 +534,17 @@ def simulate_motion(
     scene = CollisionScene(tank, links_per_section=20)
     k, l = model.k, run.section_length
     floor = float(tank.panel.center[2])
-    kin_clear = {}
+    entries = snapshot_entries(run.timing.t, every_s)
+    if len(entries) + 1 > MAX_SNAPSHOTS:
+        raise PhysicsError(
+            f"the motion lasts {run.timing.t[-1]:.0f} s: {len(entries):,} instants at one every "
+            f"{every_s:g} s, more than {MAX_SNAPSHOTS:,}; simulate fewer (a larger every_s)"
+        )
     # The tightest entry of the kinematic motion joins the snapshots: where sag matters most.
-    coarse = snapshot_entries(run.timing.t, every_s / 4)
-    for i in coarse:
+    kin_clear = {}
+    for i in snapshot_entries(run.timing.t, every_s / 4):
         kin_clear[i] = scene.check(Posture(run.dis[i], run.theta[i], run.phi[i])).clearance_cm
-    tightest = min(kin_clear, key=kin_clear.__getitem__)
-    entries = snapshot_entries(run.timing.t, every_s, also=(tightest,))
+    entries = sorted(set(entries) | {min(kin_clear, key=kin_clear.__getitem__)})
     out = PhysicsReport([], [], [], [], [], [], [], [], [], [], margin, props)
     previous: tuple[Any, ...] | None = None
     worst = math.inf

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from aftir_rl.core.config import DEFAULT_MARGIN
-from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.errors import ConfigError, PhysicsError
 from aftir_rl.core.robot import body_points
 from aftir_rl.core.rod import RodProperties
 from aftir_rl.core.tank import load_tank
@@ -100,6 +100,26 @@ def test_the_clamp_moves_with_the_floor_crossing():
     assert physics._clamp(z - 30.0, 0.0, 10.0)[0] == 3
 
 
+def test_instants_are_bounded_by_the_entries_and_a_cap():
+    t = np.array([0.0, 0.4, 0.9, 1.0, 2.5, 2.6, 7.0])
+    assert physics.snapshot_entries(t, 1.0) == [0, 3, 4, 6]
+    assert physics.snapshot_entries(t, 1.0, also=(5,)) == [0, 3, 4, 5, 6]
+    huge = np.array([0.0, 1e300])  # a file's times: never one instant per second of them
+    assert physics.snapshot_entries(huge, 0.1) == [0, 1]
+    from types import SimpleNamespace
+
+    n = 2
+    many = SimpleNamespace(
+        timing=SimpleNamespace(t=np.arange(physics.MAX_SNAPSHOTS + 1.0)),
+        dis=np.zeros(physics.MAX_SNAPSHOTS + 1),
+        theta=np.zeros((physics.MAX_SNAPSHOTS + 1, n)),
+        phi=np.zeros((physics.MAX_SNAPSHOTS + 1, n)),
+        section_length=L_SECTION,
+    )
+    with pytest.raises(PhysicsError, match="more than 5,000; simulate fewer"):
+        physics.simulate_motion(many, load_tank("b737_center"), every_s=1.0)
+
+
 def test_rod_properties_from_yaml_are_checked():
     assert RodProperties.from_mapping(None, "arm.rod") == RodProperties()
     got = RodProperties.from_mapping({"bending_stiffness": 500, "gravity": 0}, "arm.rod")
@@ -156,6 +176,25 @@ def test_with_gravity_the_body_sags_down_and_softer_sags_more(timed_run):
     assert stiff.summary()["unsettled_snapshots"] == 0
     again = physics.simulate_motion(run, tank, every_s=5.0)
     assert again.clearance == stiff.clearance  # the same inputs, the same answer
+
+
+@pytest.mark.slow
+def test_a_diverging_warm_start_is_simulated_again_from_the_kinematic_body(timed_run, monkeypatch):
+    _, run = timed_run
+    tank = load_tank("b737_center")
+    plain = physics.simulate_motion(run, tank, every_s=10.0)
+    relax, failed = physics.RodModel.relax, []
+
+    def once(self, tolerance_cm=physics.TOLERANCE_CM):
+        if not failed and self.steps > 0:
+            failed.append(True)
+            raise PhysicsError("diverged")
+        return relax(self, tolerance_cm)
+
+    monkeypatch.setattr(physics.RodModel, "relax", once)
+    again = physics.simulate_motion(run, tank, every_s=10.0)
+    assert failed and again.entries == plain.entries
+    assert np.allclose(again.clearance, plain.clearance, atol=0.02)
 
 
 @pytest.mark.slow
