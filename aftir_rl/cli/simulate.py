@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 from aftir_rl.cli.args import OneLineParser, add_margin_option, bounded_float, check_margin
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import AftirError, ConfigError
+from aftir_rl.core.extras import require
 
 if TYPE_CHECKING:
     from aftir_rl.experiments.physics import PhysicsReport
@@ -61,6 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="X",
         help="multiply every stiffness of the body by X (default 1): how stiff it must be",
     )
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     parser.add_argument(
         "--replan",
         metavar="DIR",
@@ -75,6 +77,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``aftir simulate``."""
     args = build_parser().parse_args(argv)
     check_margin(args.margin)
+    require("elastica", "physics")  # before any run is read: the one thing missing, said first
     if args.replan is not None and len(args.runs) != 1:
         raise ConfigError("--replan takes one run")
     if len(args.runs) == 1:  # one run: an unreadable one is the command's one-line error
@@ -108,7 +111,7 @@ def _simulate(path: str, args: argparse.Namespace) -> int:
     # the body's properties: the user's tank, never the run's own files (a check trusts only
     # what it is given)
     rod = (tank.arm.rod if args.tank else RodProperties()).scaled(args.stiffness)
-    report = simulate_motion(run, tank, args.margin, args.every, rod, progress=True)
+    report = simulate_motion(run, tank, args.margin, args.every, rod, progress=not args.no_progress)
     write_json(folder / PHYSICS_FILE, report.to_json(), compact=True)
     print(f"{path}: {_line(report)}")
     if report.held or args.replan is None:
@@ -118,7 +121,7 @@ def _simulate(path: str, args: argparse.Namespace) -> int:
         raise ConfigError(f"{path}: trajectory.json names no target to plan again")
     out = check_writable_dir(args.replan, "--replan")
     plan, report, margin = replan_for_physics(
-        tank, target.tolist(), report, run.margin_cm, args.every, rod, progress=True
+        tank, target.tolist(), report, run.margin_cm, args.every, rod, progress=not args.no_progress
     )
     tank_ref = args.tank or (resolve_run_tank(run.tank, folder) if run.tank else DEFAULT_TANK)
     write_json(new[0], plan.to_json())

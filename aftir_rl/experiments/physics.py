@@ -504,6 +504,7 @@ def simulate_motion(
     margin: float = DEFAULT_MARGIN,
     every_s: float = 1.0,
     rod: RodProperties | None = None,
+    *,
     elements_per_section: int = ELEMENTS_PER_SECTION,
     gravity_direction: Sequence[float] = (0.0, 0.0, -1.0),
     progress: bool = False,
@@ -630,6 +631,7 @@ def replan_for_physics(
     planned_margin: float,
     every_s: float = 1.0,
     rod: RodProperties | None = None,
+    *,
     progress: bool = False,
 ) -> tuple[Any, PhysicsReport, float]:
     """Plan ``target``'s motion again with the margin the simulated body lacked, and re-check.

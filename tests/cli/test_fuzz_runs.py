@@ -95,6 +95,7 @@ def sources(tmp_path_factory) -> dict[str, list[list[str]]]:
            bars=False)  # fmt: skip
     _aftir("dataset", "--episodes", "3", "--workers", "1", "-o", str(top / "demos" / "root"))
     timed = [r for r in runs["q"] if (Path(r) / "trajectory.json").exists()]
+    _aftir("simulate", timed[0], "--every", "10")  # physics.json, for view's mutations too
     return {
         "check": [timed],
         "export": [timed],

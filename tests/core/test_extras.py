@@ -31,6 +31,13 @@ def _python(code: str) -> subprocess.CompletedProcess[str]:
             "ompl",
         ),
         (
+            "elastica",
+            "from aftir_rl.experiments.physics import RodModel\n"
+            "from aftir_rl.core.rod import RodProperties\n"
+            "RodModel(2, 50.0, 2.5, RodProperties())",
+            "physics",
+        ),
+        (
             "trimesh",
             "from aftir_rl.core.tank import load_tank\n"
             "from aftir_rl.core.tank.meshes import export_tank_mesh\n"
@@ -62,6 +69,19 @@ def test_view_without_plotly_exits_2(tmp_path):
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0 and "aftir_rl[view]" in out.stderr
     assert not (tmp_path / "v.html").exists()
+
+
+def test_simulate_without_pyelastica_exits_2_and_writes_nothing(tmp_path):
+    (tmp_path / "trajectory.json").write_text("{}")
+    code = (
+        "import sys; sys.modules['elastica'] = None\n"
+        "from aftir_rl.cli.simulate import main\n"
+        f"sys.exit(main([{str(tmp_path)!r}]))"
+    )
+    out = _python(code)
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.strip().count("\n") == 0 and "aftir_rl[physics]" in out.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["trajectory.json"]
 
 
 def test_bench_without_ompl_stops_before_any_work():

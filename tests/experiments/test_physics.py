@@ -201,13 +201,15 @@ def test_a_diverging_warm_start_is_simulated_again_from_the_kinematic_body(timed
 def test_simulate_cli_writes_physics_json_and_judges_the_margin(timed_run, capsys, tmp_path):
     from aftir_rl.cli import simulate
 
-    folder, _ = timed_run
+    folder, run = timed_run
     assert simulate.main([str(folder), "--every", "5"]) == 0
     out = capsys.readouterr().out
     assert out.count("\n") == 1 and "margin held" in out
     data = json.loads((folder / physics.PHYSICS_FILE).read_text())
     assert data["summary"]["margin_held"] and data["summary"]["margin_cm"] == DEFAULT_MARGIN
-    assert len(data["snapshots"][0]["body"]) == 5 * 3 + 1 or data["snapshots"][0]["body"]
+    assert data["settings"]["elements_per_section"] == physics.ELEMENTS_PER_SECTION
+    nodes = physics.ELEMENTS_PER_SECTION * run.theta.shape[1] + 1
+    assert all(len(snap["body"]) == nodes for snap in data["snapshots"])
     # a body a hundred times softer sags onto the tank: exit 1, one line
     assert simulate.main([str(folder), "--every", "5", "--stiffness", "0.01"]) == 1
     assert "MARGIN LOST" in capsys.readouterr().out
