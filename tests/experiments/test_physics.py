@@ -23,19 +23,20 @@ from aftir_rl.core.tank import load_tank
 
 pytest.importorskip("elastica")
 physics = pytest.importorskip("aftir_rl.experiments.physics")
+rod_model = pytest.importorskip("aftir_rl.experiments.rod_model")
 
 L_SECTION = 50.0
 
 
-def _straight(n: int, dis: float, model: physics.RodModel) -> tuple[np.ndarray, np.ndarray]:
-    return physics.kinematic_rod(dis, np.zeros(n), np.zeros(n), L_SECTION, model.k)
+def _straight(n: int, dis: float, model: rod_model.RodModel) -> tuple[np.ndarray, np.ndarray]:
+    return rod_model.kinematic_rod(dis, np.zeros(n), np.zeros(n), L_SECTION, model.k)
 
 
 @pytest.mark.parametrize("dis", [0.0, -37.0, 25.0])
 def test_a_cantilever_sags_as_the_closed_form(dis):
     """Gravity across a straight arm clamped at the floor: the beam's deflection curve."""
     n, props = 4, RodProperties()
-    model = physics.RodModel(n, L_SECTION, 2.5, props, gravity_direction=(-1.0, 0.0, 0.0))
+    model = rod_model.RodModel(n, L_SECTION, 2.5, props, gravity_direction=(-1.0, 0.0, 0.0))
     nodes, frames = _straight(n, dis, model)
     model.set_posture(nodes, frames)
     model.relax(tolerance_cm=1e-4)
@@ -59,12 +60,12 @@ def test_imposed_curvature_rests_on_the_constant_curvature_arcs():
     """No gravity: from a straight start, the rod relaxes onto the kinematic body (0.1 cm)."""
     rng = np.random.default_rng(7)
     n = 4
-    model = physics.RodModel(n, L_SECTION, 2.5, RodProperties(gravity=0.0))
+    model = rod_model.RodModel(n, L_SECTION, 2.5, RodProperties(gravity=0.0))
     _, flat = _straight(n, 10.0, model)
     start = np.ascontiguousarray(flat.transpose(2, 1, 0))  # straight, as PyElastica stores it
     for _ in range(3):
         theta, phi = rng.uniform(-1.5, 1.5, n), rng.uniform(-np.pi, np.pi, n)
-        nodes, frames = physics.kinematic_rod(10.0, theta, phi, L_SECTION, model.k)
+        nodes, frames = rod_model.kinematic_rod(10.0, theta, phi, L_SECTION, model.k)
         model.set_posture(nodes, frames, start)
         model.relax(tolerance_cm=1e-3)
         body, _ = model.body()
@@ -75,7 +76,7 @@ def test_imposed_curvature_rests_on_the_constant_curvature_arcs():
 def test_a_push_along_the_axis_moves_the_body_rigidly():
     """Gravity along the axis, the module pushing: every node at its place on the axis."""
     n = 3
-    model = physics.RodModel(n, L_SECTION, 2.5, RodProperties())
+    model = rod_model.RodModel(n, L_SECTION, 2.5, RodProperties())
     previous = None
     for dis in (-120.0, -80.0, -30.0, 0.0, 20.0):
         nodes, frames = _straight(n, dis, model)
@@ -93,11 +94,37 @@ def test_the_clamp_moves_with_the_floor_crossing():
     """The clamp sits where the body crosses the floor, with a joint between half and one and a
     half elements of free rod."""
     z = np.array([-12.0, -2.0, 8.0, 18.0])
-    assert physics._clamp(z, 0.0, 10.0) == (2, pytest.approx(0.5 + 0.8))  # 8 cm above + half
-    assert physics._clamp(z + 7.0, 0.0, 10.0) == (1, pytest.approx(1.0))
-    assert physics._clamp(z + 2.0, 0.0, 10.0) == (1, pytest.approx(0.5))  # a node on the floor
-    assert physics._clamp(z + 20.0, 0.0, 10.0) == (0, 0.5)
-    assert physics._clamp(z - 30.0, 0.0, 10.0)[0] == 3
+    assert rod_model._clamp(z, 0.0, 10.0) == (2, pytest.approx(0.5 + 0.8))  # 8 cm above + half
+    assert rod_model._clamp(z + 7.0, 0.0, 10.0) == (1, pytest.approx(1.0))
+    assert rod_model._clamp(z + 2.0, 0.0, 10.0) == (1, pytest.approx(0.5))  # a node on the floor
+    assert rod_model._clamp(z + 20.0, 0.0, 10.0) == (0, 0.5)
+    assert rod_model._clamp(z - 30.0, 0.0, 10.0)[0] == 3
+
+
+def test_the_clearance_curve_lies_on_the_arcs():
+    """Where a chord cuts 0.39 cm inside an arc, the curve the clearance is taken on does not;
+    turned and moved with its element, its bow goes along."""
+    rng = np.random.default_rng(3)
+    theta, phi = rng.uniform(-1.57, 1.57, 4), rng.uniform(-np.pi, np.pi, 4)
+    k, m = rod_model.ELEMENTS_PER_SECTION, rod_model.CURVE_POINTS
+    nodes, frames = rod_model.kinematic_rod(-20.0, theta, phi, L_SECTION, k)
+    directors = np.ascontiguousarray(frames.transpose(2, 1, 0))
+    arcs = body_points(-20.0, theta, phi, L_SECTION, k * m)
+    curve = rod_model.body_curve(nodes, directors, arcs, frames)
+    dense = body_points(-20.0, theta, phi, L_SECTION, 2000)
+    gaps = np.linalg.norm(curve[:, None] - dense[None], axis=2).min(axis=1)
+    assert len(curve) == 4 * k * m + 1 and gaps.max() < 1e-3
+    mids = (nodes[1:] + nodes[:-1]) / 2  # a chord's middle: up to 0.39 cm inside the arc
+    assert np.linalg.norm(mids[:, None] - dense[None], axis=2).min(axis=1).max() > 0.3
+    # the whole body turned about the base and moved: the curve turns and moves with it
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    moved = rod_model.body_curve(
+        nodes @ turn.T + 5.0,
+        np.einsum("ij,eja->iae", turn, frames).transpose(1, 0, 2),
+        arcs,
+        frames,
+    )
+    assert np.allclose(moved, curve @ turn.T + 5.0, atol=1e-9)
 
 
 def test_instants_are_bounded_by_the_entries_and_a_cap():
@@ -183,15 +210,15 @@ def test_a_diverging_warm_start_is_simulated_again_from_the_kinematic_body(timed
     _, run = timed_run
     tank = load_tank("b737_center")
     plain = physics.simulate_motion(run, tank, every_s=10.0)
-    relax, failed = physics.RodModel.relax, []
+    relax, failed = rod_model.RodModel.relax, []
 
-    def once(self, tolerance_cm=physics.TOLERANCE_CM):
+    def once(self, tolerance_cm=rod_model.TOLERANCE_CM):
         if not failed and self.steps > 0:
             failed.append(True)
             raise PhysicsError("diverged")
         return relax(self, tolerance_cm)
 
-    monkeypatch.setattr(physics.RodModel, "relax", once)
+    monkeypatch.setattr(rod_model.RodModel, "relax", once)
     again = physics.simulate_motion(run, tank, every_s=10.0)
     assert failed and again.entries == plain.entries
     assert np.allclose(again.clearance, plain.clearance, atol=0.02)
@@ -207,8 +234,8 @@ def test_simulate_cli_writes_physics_json_and_judges_the_margin(timed_run, capsy
     assert out.count("\n") == 1 and "margin held" in out
     data = json.loads((folder / physics.PHYSICS_FILE).read_text())
     assert data["summary"]["margin_held"] and data["summary"]["margin_cm"] == DEFAULT_MARGIN
-    assert data["settings"]["elements_per_section"] == physics.ELEMENTS_PER_SECTION
-    nodes = physics.ELEMENTS_PER_SECTION * run.theta.shape[1] + 1
+    assert data["settings"]["elements_per_section"] == rod_model.ELEMENTS_PER_SECTION
+    nodes = rod_model.ELEMENTS_PER_SECTION * run.theta.shape[1] + 1
     assert all(len(snap["body"]) == nodes for snap in data["snapshots"])
     # a body a hundred times softer sags onto the tank: exit 1, one line
     assert simulate.main([str(folder), "--every", "5", "--stiffness", "0.01"]) == 1
