@@ -62,7 +62,7 @@ docs: $(STAMP)
 # The benchmark tables of docs/benchmarks.md. `make bench`: every script and every method on
 # smaller fixed sets with shorter budgets (--quick, said above each table), about 2 minutes on
 # 2 cores; `make bench-full`: the full sets and the 10 s budgets, the numbers of the docs
-# (25-30 minutes, half of it the physics check's 24 motions).
+# (about 22 minutes, 11 of them the physics check's 24 motions).
 bench: $(STAMP)  ## every benchmark table, quick
 	$(PY) benchmarks/bench_tank.py --quick
 	$(PY) benchmarks/bench_posture.py --quick

@@ -120,7 +120,8 @@ def main() -> None:
                      f"{'held' if r['replan_held'] else 'lost'}" if "replan_held" in r
                      else r.get("replan_error", "?"))  # fmt: skip
         target = ", ".join(f"{v:.0f}" for v in r["target"])
-        least = "—" if r["least_stiffness"] is None else f"×{r['least_stiffness']:g}"
+        least = r["least_stiffness"]
+        least = "—" if least is None else f"{'≤ ' if least == FACTORS[0] else ''}×{least:g}"
         held = "yes" if r["held"] else "no"
         print(
             f"| {r['set']} | ({target}) | {r['sections']} | {r['duration_s']:.0f} | "

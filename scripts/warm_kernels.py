@@ -5,13 +5,14 @@
 Run by ``make install``: the follow-the-leader planner's kernels, the camera's line of sight,
 the ``AFTIR-ArmFTL-v0`` step (with and without the guide), the posture planners' planar search,
 the posture collision pre-check, the posture chain's tip Jacobian, the mesh tanks' distance
-kernels and the goal-conditioned Q-learning sweep otherwise compile on first use (about a
-minute in all on 2 cores). Nothing is written but numba's cache files (and a mesh in a
-temporary folder, removed).
+kernels, the goal-conditioned Q-learning sweep and (with the physics extra) PyElastica's rod
+otherwise compile on first use (about a minute in all on 2 cores). Nothing is written but
+numba's cache files (and a mesh in a temporary folder, removed).
 """
 
 from __future__ import annotations
 
+import importlib.util
 import tempfile
 import threading
 import time
@@ -76,6 +77,14 @@ def main() -> None:
         load_tank(str(Path(folder) / "t.yaml")).raster  # noqa: B018  (builds the mesh grids)
     say("goal-conditioned Q-learning")
     train_all_targets(tank="b737_center", episodes=1, seed=0)
+    if importlib.util.find_spec("elastica") is not None:  # the physics extra: PyElastica's own
+        say("the physics check's Cosserat rod (PyElastica)")
+        from aftir_rl.core.rod import RodProperties
+        from aftir_rl.experiments.rod_model import RodModel, kinematic_rod
+
+        model = RodModel(2, 50.0, 2.5, RodProperties())
+        model.set_posture(*kinematic_rod(-20.0, np.array([0.3, 0.0]), np.zeros(2), 50.0, model.k))
+        model.relax()
     done.set()
     print(f"numba kernels compiled or loaded in {time.perf_counter() - start:.1f} s")
 

@@ -1,25 +1,13 @@
 """A timed motion re-run on a Cosserat rod under gravity: the clearance the arm's body keeps.
 
-Every check of the planner is made on the constant-curvature model: sections are exact arcs and
-nothing sags. :func:`simulate_motion` re-runs a timed motion (:class:`TimedRun`) on a Cosserat
-rod of the arm (PyElastica, the ``physics`` extra): the rod has the arm's section length and
-radius and the body's mass and stiffnesses (:class:`~aftir_rl.core.rod.RodProperties`, the tank
-YAML's ``arm.rod``); the part of the rod below the tank's floor is held by the linear module and
-the panel's guide where the motion puts it (the module's timed ``dis``); each section's bend is
-imposed as its rest curvature (the timed bending vectors: what the cables impose); gravity pulls
-along −z.
-
-The motion is slow against the body's own vibration (a few cm/s against a first natural period
-of about half a second at the defaults), so the body is taken to be at rest in equilibrium at
-each instant: at every snapshot (every ``every_s`` seconds of the motion, the motion's tightest
-entry and its last) the rod is relaxed under damping to equilibrium, starting from the previous
-snapshot's body moved with the motion. The relaxation runs in fixed chunks of steps until the
-body is estimated within :data:`TOLERANCE_CM` of equilibrium or :data:`MAX_TIME_CONSTANTS`
-lowest-mode time constants have passed: the same inputs give the same answer.
-
-The simulated body is checked against the tank with python-fcl (capsules of the arm's radius
-along it), and compared with the kinematic body at the same material points. docs/robot.md
-("Physics") describes the model, its validation against closed forms and the measured results.
+Every other check is made on the constant-curvature model, whose sections are exact arcs that
+never sag. :func:`simulate_motion` takes a timed motion (:class:`TimedRun`) to a rod of the arm
+(:class:`~aftir_rl.experiments.rod_model.RodModel`: PyElastica, the ``physics`` extra) at
+instants of the motion: every ``every_s`` seconds, its tightest entry and its last. The motion
+is slow against the body's vibration, so at each instant the rod is relaxed to rest under the
+joints' bends, the module's push and gravity. The body found is checked against the tank with
+python-fcl and compared with the kinematic body; :func:`replan_for_physics` plans a motion that
+lost its margin again with more. docs/robot.md ("Physics") has the model and its validation.
 """
 
 from __future__ import annotations
@@ -49,6 +37,7 @@ from aftir_rl.experiments.rod_model import (
     carried_directors,
     kinematic_rod,
 )
+from aftir_rl.viz.runs import PHYSICS_FILE
 
 __all__ = [
     "PHYSICS_FILE",
@@ -58,8 +47,6 @@ __all__ = [
     "snapshot_entries",
 ]
 
-#: The file the physics check writes beside ``trajectory.json``.
-PHYSICS_FILE = "physics.json"
 #: The most instants one motion is simulated at (a 40-minute tour at one every 0.5 s).
 MAX_SNAPSHOTS = 5_000
 

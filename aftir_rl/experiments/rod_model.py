@@ -140,27 +140,11 @@ class RodModel:
         direction = direction / np.linalg.norm(direction)
         self.held = _Held(n + 1)
 
-        class Guide(ea.ConstraintBase):  # type: ignore[name-defined]
-            """The module and the panel's guide: what lies below the floor is held in place."""
-
-            def __init__(self, held: _Held, **kwargs: Any) -> None:
-                super().__init__(**kwargs)
-                self.held = held
-
-            def constrain_values(self, system: Any, time: Any) -> None:
-                system.position_collection[:, self.held.nodes] = self.held.positions
-                system.director_collection[:, :, self.held.elements] = self.held.directors
-
-            def constrain_rates(self, system: Any, time: Any) -> None:
-                system.velocity_collection[:, self.held.nodes] = 0.0
-                system.omega_collection[:, self.held.elements] = 0.0
-
-        class Arm(ea.BaseSystemCollection, ea.Constraints, ea.Forcing, ea.Damping):  # type: ignore[name-defined]
-            pass
+        guide, arm = _elastica_classes(ea)
 
         # Element 0 is the end of the linear module's rod, always held: the arm's base (node 1)
         # is clamped where the module holds it, and the arm's elements are 1..N·k.
-        self.system = Arm()
+        self.system = arm()
         self.rod = ea.CosseratRod.straight_rod(
             n + 1,
             np.array([0.0, 0.0, -ds]),
@@ -173,7 +157,7 @@ class RodModel:
             shear_modulus=1.0,
         )
         self.system.append(self.rod)
-        self.system.constrain(self.rod).using(Guide, held=self.held)
+        self.system.constrain(self.rod).using(guide, held=self.held)
         if rod.gravity > 0:
             self.system.add_forcing_to(self.rod).using(
                 ea.GravityForces, acc_gravity=rod.gravity * direction
@@ -298,6 +282,30 @@ class RodModel:
         return self.rod.position_collection[:, 1:].T / CM, self.rod.director_collection[
             ..., 1:
         ].copy()
+
+
+def _elastica_classes(ea: Any) -> tuple[type, type]:
+    """The guide's constraint and the simulator: PyElastica classes, made once it is imported."""
+
+    class Guide(ea.ConstraintBase):
+        """The module and the panel's guide: what lies below the clamp is held in place."""
+
+        def __init__(self, held: _Held, **kwargs: Any) -> None:
+            super().__init__(**kwargs)
+            self.held = held
+
+        def constrain_values(self, system: Any, time: Any) -> None:
+            system.position_collection[:, self.held.nodes] = self.held.positions
+            system.director_collection[:, :, self.held.elements] = self.held.directors
+
+        def constrain_rates(self, system: Any, time: Any) -> None:
+            system.velocity_collection[:, self.held.nodes] = 0.0
+            system.omega_collection[:, self.held.elements] = 0.0
+
+    class Arm(ea.BaseSystemCollection, ea.Constraints, ea.Forcing, ea.Damping):
+        """The simulator: one rod, its constraint, gravity and damping."""
+
+    return Guide, Arm
 
 
 def explicit_step(
