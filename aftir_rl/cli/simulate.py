@@ -121,7 +121,7 @@ def _simulate(path: str, args: argparse.Namespace) -> int:
         raise ConfigError(f"{path}: trajectory.json names no target to plan again")
     out = check_writable_dir(args.replan, "--replan")
     plan, report, margin = replan_for_physics(
-        tank, target.tolist(), report, run.margin_cm, args.every, rod, progress=not args.no_progress
+        tank, target.tolist(), report, args.margin, args.every, rod, progress=not args.no_progress
     )
     tank_ref = args.tank or (resolve_run_tank(run.tank, folder) if run.tank else DEFAULT_TANK)
     write_json(new[0], plan.to_json())

@@ -359,7 +359,7 @@ def replan_for_physics(
         plan = plan_motion(tank, target, margin=margin)
         if not plan.complete or plan.motion is None:
             raise PlanningError(
-                f"Cannot reach the target: no motion keeps {margin:g} cm ({plan.reason})"
+                plan.reason or f"Cannot reach the target: no motion keeps {margin:g} cm"
             )
         if plan.timing is None:
             raise PhysicsError(f"the new motion has no timing ({plan.timing_note})")

@@ -132,12 +132,16 @@ class RodModel:
             gravity_direction,
             elements_per_section,
         )
+        direction = np.asarray(gravity_direction, dtype=np.float64)
+        if isinstance(elements_per_section, bool) or not 1 <= elements_per_section <= 50:
+            raise ValueError(f"elements_per_section must be 1 to 50, got {elements_per_section}")
+        if direction.shape != (3,) or not np.linalg.norm(direction) > 0:
+            raise ValueError(f"gravity_direction must be a non-zero 3-vector, got {direction}")
+        direction = direction / np.linalg.norm(direction)
         self.k, self.l, self.props = int(elements_per_section), float(section_length), rod
         n = n_sections * self.k
         ds = self.l * CM / self.k
         area = math.pi * (radius * CM) ** 2
-        direction = np.asarray(gravity_direction, dtype=np.float64)
-        direction = direction / np.linalg.norm(direction)
         self.held = _Held(n + 1)
 
         guide, arm = _elastica_classes(ea)
@@ -179,6 +183,8 @@ class RodModel:
         r.mass_second_moment_of_inertia[...] *= self.inertia_scale
         r.inv_mass_second_moment_of_inertia[...] /= self.inertia_scale
         self.stepper = ea.PositionVerlet()
+        # PyElastica's own curvature of a director chain, so that the rest curvature imposed is
+        # measured exactly as the rod measures its own (private in PyElastica 1.0)
         self._strains = ea.rod.cosserat_rod._compute_bending_twist_strains
         self.time = 0.0
         self.steps = 0
@@ -279,9 +285,8 @@ class RodModel:
 
     def body(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The arm's nodes [cm] ``(N·k + 1, 3)`` and directors ``(3, 3, N·k)`` now."""
-        return self.rod.position_collection[:, 1:].T / CM, self.rod.director_collection[
-            ..., 1:
-        ].copy()
+        nodes = self.rod.position_collection[:, 1:].T / CM
+        return nodes, self.rod.director_collection[..., 1:].copy()
 
 
 def _elastica_classes(ea: Any) -> tuple[type, type]:

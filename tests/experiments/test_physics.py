@@ -242,3 +242,34 @@ def test_simulate_cli_writes_physics_json_and_judges_the_margin(timed_run, capsy
     assert "MARGIN LOST" in capsys.readouterr().out
     # --replan may not write over the run it reads
     assert simulate.main([str(folder), "--stiffness", "0.01", "--replan", str(folder)]) == 2
+
+
+@pytest.mark.slow
+def test_a_motion_that_loses_the_margin_is_planned_again_and_keeps_it(tmp_path):
+    """The reference corner (-50, 72, 90) sags onto bay 2's floor stringer with the default
+    body (bench_physics: 0.75 cm); planned again with the margin it lacked, it keeps 1 cm."""
+    pytest.importorskip("toppra")
+    from aftir_rl.cli import simulate
+    from aftir_rl.planning.ftl.plan import plan_motion
+
+    tank = load_tank("b737_center")
+    plan = plan_motion(tank, (-50.0, 72.0, 90.0))
+    folder = tmp_path / "corner"
+    folder.mkdir()
+    (folder / "trajectory.json").write_text(json.dumps(plan.to_json()))
+    again = tmp_path / "again"
+    assert (
+        simulate.main([str(folder), "--every", "2", "--replan", str(again), "--no-progress"]) == 0
+    )
+    lost = json.loads((folder / physics.PHYSICS_FILE).read_text())["summary"]
+    kept = json.loads((again / physics.PHYSICS_FILE).read_text())["summary"]
+    assert not lost["margin_held"] and lost["least_clearance_cm"] < DEFAULT_MARGIN
+    assert kept["margin_held"] and kept["least_clearance_cm"] >= DEFAULT_MARGIN
+    planned = json.loads((again / "summary.json").read_text())["planned_margin_cm"]
+    new = json.loads((again / "trajectory.json").read_text())
+    assert (
+        new["margin_cm"] == planned > DEFAULT_MARGIN + DEFAULT_MARGIN - lost["least_clearance_cm"]
+    )
+    from aftir_rl.cli import check
+
+    assert check.main([str(again)]) == 0  # the new motion passes the kinematic check too

@@ -353,6 +353,12 @@ def test_page_draws_in_headless_chromium(tmp_path, tank):
     from PIL import Image
 
     runs = [_q_table_run(tmp_path, tank), _sb3_run(tmp_path)]
+    motion = _motion()  # aftir simulate's bodies: the arm sagged 3 cm, at three instants
+    snapshots = [
+        {"entry": e, "body": (np.array(motion[e].points(L, 5)) - [0, 0, 3.0]).tolist()}
+        for e in (0, len(motion) // 2, len(motion) - 1)
+    ]
+    (runs[0] / "physics.json").write_text(json.dumps({"snapshots": snapshots}))
     page = write_view(runs, tmp_path / "view.html", max_frames=40)
     fig = build_figure([read_run(r) for r in runs], tank, max_frames=40)
     assert 30 < len(fig.frames) <= 40
@@ -377,6 +383,7 @@ def test_page_draws_in_headless_chromium(tmp_path, tank):
                 and state["share"] > 0.75  # the scene fills most of the window
             )
             assert "#1 q_table" in state["legend"] and "arm" in state["legend"]  # short titles
+            assert "simulated body" in state["legend"]
             assert "no path to draw" in browser.evaluate(session, "document.body.innerText")
             opened, first = browser.evaluate(session, _ANIMATE)
             assert opened == pytest.approx(_motion()[-1].tip(L)[2], abs=0.01)  # deployed
@@ -391,6 +398,8 @@ def test_page_draws_in_headless_chromium(tmp_path, tank):
     # the first run's colour (#1f77b4: the arm, tip route and cell path) is on the screen
     blue = np.all(np.abs(pixels.astype(int) - [31, 119, 180]) < 40, axis=-1)
     assert blue.sum() > 200, f"only {blue.sum()} pixels of the run's colour"
+    amber = np.all(np.abs(pixels.astype(int) - [240, 162, 2]) < 40, axis=-1)  # the rod's body
+    assert amber.sum() > 100, f"only {amber.sum()} pixels of the simulated body's colour"
 
 
 @pytest.mark.parametrize(
