@@ -24,6 +24,15 @@ class ConfigError(AftirError, ValueError):
         self.param = param
 
 
+class UnexpectedArgumentError(ConfigError, TypeError):
+    """A keyword argument a constructor does not take.
+
+    Also a ``TypeError``, as Python's own for an unexpected keyword argument, and worded like it:
+    wrappers that try an argument and drop it on that error (TorchRL's ``GymEnv`` passes
+    ``frameskip`` to every env) go on without it.
+    """
+
+
 class TargetError(AftirError, ValueError):
     """A target is outside the tank, inside an obstacle, or unreachable from the start."""
 

@@ -20,7 +20,7 @@ import types
 import typing
 from typing import Any, Union
 
-from aftir_rl.core.errors import ConfigError
+from aftir_rl.core.errors import ConfigError, UnexpectedArgumentError
 from aftir_rl.envs.ftl.reward import MAX_STEP_COST, SHAPING_KINDS, RewardSpec
 from aftir_rl.envs.ftl.state import STEER_MODES, TaskSpec
 from aftir_rl.envs.ftl.targets import TrainingSpec
@@ -60,7 +60,11 @@ class FTLSpec:
 
     @classmethod
     def from_kwargs(cls, **kwargs: Any) -> FTLSpec:
-        """Route each keyword argument to its spec; an unknown one is a :class:`ConfigError`."""
+        """Route each keyword argument to its spec.
+
+        An unknown one is an :class:`UnexpectedArgumentError`, a :class:`ConfigError` and a
+        ``TypeError``.
+        """
         parts: list[dict[str, Any]] = [{} for _ in _SPECS]
         for key, value in kwargs.items():
             for part, spec in zip(parts, _SPECS):
@@ -69,7 +73,9 @@ class FTLSpec:
                     break
             else:
                 known = ", ".join(sorted(n for s in _SPECS for n in _FIELDS[s]))
-                raise ConfigError(f"unknown argument {key!r} of AFTIR-ArmFTL-v0; use {known}")
+                raise UnexpectedArgumentError(
+                    f"unexpected keyword argument {key!r} of AFTIR-ArmFTL-v0; use {known}"
+                )
         task, reward, training = (spec(**part) for spec, part in zip(_SPECS, parts))
         return cls(task, reward, training)
 
