@@ -21,7 +21,7 @@ import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import Logger
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from aftir_rl.core import interrupts
 from aftir_rl.core.errors import AftirError
@@ -181,17 +181,40 @@ def _make_venv(env_id: str, config: SB3Config, seed: int) -> VecEnv:
     venv = make_batched_vec_env(
         env_id, config.n_envs, seed, config.env_kwargs, None if config.her else ()
     )
-    if venv is not None:
-        return venv
-    vec_cls = SubprocVecEnv if config.n_envs > 1 else DummyVecEnv
-    with _ctrl_c_held():
-        return make_vec_env(
-            env_id,
-            n_envs=config.n_envs,
-            seed=seed,
-            vec_env_cls=vec_cls,
-            env_kwargs=config.env_kwargs,
-        )
+    if venv is None:
+        vec_cls = SubprocVecEnv if config.n_envs > 1 else DummyVecEnv
+        with _ctrl_c_held():
+            venv = make_vec_env(
+                env_id,
+                n_envs=config.n_envs,
+                seed=seed,
+                vec_env_cls=vec_cls,
+                env_kwargs=config.env_kwargs,
+            )
+    return _FiniteActions(venv)
+
+
+class ActionsNotFinite(ValueError):
+    """The policy asked for a NaN action: its outputs overflowed (its weights may be finite)."""
+
+
+class _FiniteActions(VecEnvWrapper):
+    """The training envs, refusing a NaN action before any env sees it.
+
+    A policy whose weights grew huge but stayed finite can still put out NaN; an env would refuse
+    it in a worker process, and the main process would see only a closed pipe.
+    """
+
+    def step_async(self, actions: np.ndarray) -> None:
+        if not np.all(np.isfinite(np.asarray(actions, dtype=np.float64))):
+            raise ActionsNotFinite("the policy's actions are NaN")
+        self.venv.step_async(actions)
+
+    def reset(self) -> Any:
+        return self.venv.reset()
+
+    def step_wait(self) -> Any:
+        return self.venv.step_wait()
 
 
 @contextmanager
@@ -382,7 +405,8 @@ def _diverged(model: BaseAlgorithm, watch: _StopOnDivergence, partial: Path) -> 
     write_json(partial / DIVERGED, {"step": step, "last_finite_step": watch.finite_step})
     kept = f"; the last finite checkpoint is in {folder}" if _has_checkpoint(partial) else ""
     raise TrainingDiverged(
-        f"training diverged at step {step:,}: the policy's weights became NaN or infinite "
+        f"training diverged at step {step:,}: the policy's weights or actions became NaN or "
+        "infinite "
         f"(a smaller learning_rate or max_grad_norm helps); the logs are kept in {partial}{kept}"
     )
 
@@ -461,8 +485,8 @@ def _learn(
         )
     except KeyboardInterrupt:
         pass  # a stop requested during an evaluation: saved as between two steps
-    except ValueError:  # torch's distributions refuse NaN parameters (an evaluation, a rollout)
-        if _finite(model):
+    except ValueError as exc:  # torch's distributions refuse NaN parameters; NaN actions
+        if _finite(model) and not isinstance(exc, ActionsNotFinite):
             raise
         _diverged(model, watch, partial)
     if watch.diverged_step is not None or not _finite(model):
