@@ -48,6 +48,8 @@ def _small(line: str) -> str:
         line += " --eval-episodes 2 --no-progress"
     if line.startswith("aftir dataset"):
         line = re.sub(r"--episodes \d+", "--episodes 1", line) + " --no-progress"
+    if line.startswith("aftir simulate"):  # an instant every 10 s of the motion, not every 1 s
+        line += " --every 10"
     if line.startswith("python -m rl_zoo3.train"):  # one rollout of its 128 envs, evaluated once
         line += " -n 1 --eval-freq 256 --eval-episodes 2 --n-eval-envs 1"
     return re.sub(r"--random \d+", "--random 1", line)
