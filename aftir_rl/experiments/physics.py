@@ -278,8 +278,8 @@ def simulate_motion(
             steps, left = model.relax()
         body, dirs = model.body()
         previous = (frames, dirs)
-        if i not in kinematic:
-            kinematic[i] = scene.check(Posture(run.dis[i], run.theta[i], run.phi[i])).clearance_cm
+        if i not in kinematic:  # the last entry, where it starts no interval
+            kinematic[i] = _kinematic_clearance(scene, run, i)
         arcs = body_points(run.dis[i], run.theta[i], run.phi[i], l, model.k * CURVE_POINTS)
         found = scene.polyline_clearance(body_curve(body, dirs, arcs, frames))
         out.record(i, float(run.timing.t[i]), (nodes, body), found, kinematic[i], (steps, left))
@@ -314,9 +314,14 @@ def _instants(
             f"{every_s:g} s, more than {MAX_SNAPSHOTS:,}; simulate fewer (a larger every_s)"
         )
     kinematic = {}
-    for i in snapshot_entries(run.timing.t, every_s / 4):
-        kinematic[i] = scene.check(Posture(run.dis[i], run.theta[i], run.phi[i])).clearance_cm
+    for i in snapshot_entries(run.timing.t, every_s / 4):  # the instants above among them
+        kinematic[i] = _kinematic_clearance(scene, run, i)
     return sorted(set(entries) | {min(kinematic, key=kinematic.__getitem__)}), kinematic
+
+
+def _kinematic_clearance(scene: CollisionScene, run: TimedRun, i: int) -> float:
+    """python-fcl's clearance [cm] of the kinematic arm at entry ``i``."""
+    return scene.check(Posture(run.dis[i], run.theta[i], run.phi[i])).clearance_cm
 
 
 #: Margin [cm] added on top of what a simulated body lacked when a motion is planned again.

@@ -228,7 +228,7 @@ class RodModel:
         self._strains(q, r.rest_voronoi_lengths, r.rest_kappa)
         chord = np.diff(x, axis=1)
         r.rest_sigma[...] = np.einsum("ije,je->ie", q, chord) / ds - np.array([[0.0], [0.0], [1.0]])
-        clamp, joint = _clamp(nodes[:, 2], floor, self.l / self.k)
+        clamp, joint = _clamp(nodes[:, 2], floor)
         r.bend_matrix[...] = self._bend
         if clamp < len(nodes) - 1:
             r.bend_matrix[..., clamp] *= 1.0 / joint  # the Voronoi of rod node clamp + 1
@@ -336,7 +336,7 @@ def explicit_step(
     return STEP / translation, max(1.0, (rotation / translation) ** 2), shear, axial
 
 
-def _clamp(z: NDArray[np.float64], floor: float, ds: float) -> tuple[int, float]:
+def _clamp(z: NDArray[np.float64], floor: float) -> tuple[int, float]:
     """Where the body is clamped: the first node at or above ``floor`` (z of the nodes, cm).
 
     Returns its index ``c`` and the length of free rod its joint stands for, from the clamp to
