@@ -152,7 +152,7 @@ def add_target_option(parser: argparse.ArgumentParser, help: str, required: bool
 
 
 def add_int_option(
-    parser: argparse.ArgumentParser,
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup,
     flag: str,
     bounds: tuple[int, int],
     help: str,

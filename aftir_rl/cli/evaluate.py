@@ -1,8 +1,8 @@
 """``python -m aftir_rl.evaluate RUN_DIR [RUN_DIR ...]``: compare trained agents in one table.
 
 Each run directory is loaded and measured by :func:`aftir_rl.experiments.runs.evaluate_run`: a
-Q-learning run on the target it was trained for (its greedy cells made into a motion), an SB3 run
-on its env's evaluation targets, ``--target`` or ``--random N --seed S``. One row per run:
+Q-learning run on the target it was trained for (its greedy cells made into a motion), an SB3 or
+RLlib run on its env's evaluation targets, ``--target`` or ``--random N --seed S``. One row per run:
 success rate, tip error, tip path length, least clearance and seconds per target, also logged to
 TensorBoard as ``eval/<metric>``, one folder per run (and ``results.json``). What success and
 each column mean: docs/reference.md, "Evaluating runs".

@@ -28,7 +28,9 @@ __all__ = ["build_parser", "main"]
 
 def build_parser() -> argparse.ArgumentParser:
     """The options of ``aftir record``."""
-    parser = policy_parser("aftir record", "Record an SB3 run's policy going to targets as a GIF.")
+    parser = policy_parser(
+        "aftir record", "Record an SB3 or RLlib run's policy going to targets as a GIF."
+    )
     parser.add_argument("-o", "--output", required=True, metavar="FILE.gif", help="the GIF")
     parser.add_argument(
         "--every",
@@ -47,7 +49,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``aftir record``."""
     from aftir_rl.core.files import check_outputs
     from aftir_rl.experiments.rollout import record_frames
-    from aftir_rl.rl.sb3 import load_run
+    from aftir_rl.experiments.runs import load_policy_run
     from aftir_rl.viz.plotting import save_gif
 
     args = build_parser().parse_args(argv)
@@ -55,7 +57,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise ConfigError(f"-o {args.output}: write a .gif")
     run = policy_run(args)
     check_outputs([args.output], [run])
-    _, config, env_id, model = load_run(run)
+    loaded = load_policy_run(run)
+    config, env_id, model = loaded.config, loaded.env_id, loaded.model
     env_kwargs = policy_env_kwargs(args, config.env_kwargs)
     frames = []
     targets = policy_targets(args, env_id, env_kwargs)

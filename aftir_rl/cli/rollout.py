@@ -49,7 +49,7 @@ def policy_parser(prog: str, what: str) -> argparse.ArgumentParser:
     """The options ``rollout`` and ``record`` share: the run, and ``--target`` or ``--random``."""
     parser = OneLineParser(prog=prog, description=what)
     parser.add_argument(
-        "run", nargs="?", metavar="RUN_DIR", help="an SB3 run directory (or its best/)"
+        "run", nargs="?", metavar="RUN_DIR", help="an SB3 or RLlib run directory (or its best/)"
     )
     parser.add_argument(
         "--pretrained",
@@ -126,7 +126,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The options of ``aftir rollout``."""
     parser = policy_parser(
         "aftir rollout",
-        "Roll out an SB3 run's policy to targets; write each "
+        "Roll out an SB3 or RLlib run's policy to targets; write each "
         "motion as trajectory.json for aftir view.",
     )
     parser.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
@@ -137,11 +137,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``aftir rollout``."""
     from aftir_rl.experiments.rollout import rollout
-    from aftir_rl.rl.sb3 import load_run
+    from aftir_rl.experiments.runs import load_policy_run
 
     args = build_parser().parse_args(argv)
     run = policy_run(args)
-    algo, config, env_id, model = load_run(run)
+    loaded = load_policy_run(run)
+    algo, config, env_id, model = loaded.algo, loaded.config, loaded.env_id, loaded.model
     env_kwargs = policy_env_kwargs(args, config.env_kwargs)
     targets = policy_targets(args, env_id, env_kwargs)
     out = check_writable_dir(args.output, "--output")

@@ -214,6 +214,33 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
     )
     _add_run_numbers(p)
     add_run_dir_options(p, "parent of the run directory", "model.zip")
+    if algo == "ppo":
+        _add_rllib_options(p)
+
+
+def _add_rllib_options(p: argparse.ArgumentParser) -> None:
+    """``--rllib``, ``--ray ADDRESS`` and ``--env-runners N``: the same config with RLlib."""
+    group = p.add_argument_group(
+        "RLlib", "the same config trained by RLlib's PPO, here or on a Ray cluster"
+    )
+    group.add_argument(
+        "--rllib",
+        action="store_true",
+        help="train with RLlib instead of SB3 (needs aftir_rl[rllib]); --resume takes an RLlib run",
+    )
+    group.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="with --rllib: local (default, a Ray on this machine), auto or HOST:PORT (a "
+        "cluster's head node, started with ray start --head)",
+    )
+    add_int_option(
+        group,
+        "--env-runners",
+        (0, 256),
+        "with --rllib: env runner processes sharing --n-envs, each a Ray actor with one CPU "
+        "anywhere on the cluster; 0: the trainer samples itself (default 1)",
+    )
 
 
 def _add_run_numbers(p: argparse.ArgumentParser) -> None:
@@ -283,7 +310,44 @@ def _train_config(args: argparse.Namespace) -> TrainConfig:
     )
 
 
+def _main_rllib(args: argparse.Namespace) -> int:
+    """``ppo --rllib``: the config resolved as SB3's, trained by RLlib (one stage)."""
+    run = _train_config(args)
+    if len(run.stages) > 1 or run.demos is not None:
+        raise ConfigError("--rllib trains one config: no stage file and no --demos")
+    with interrupts.held():  # torch and Ray: Ctrl-C is taken once they are imported
+        from aftir_rl.experiments.distributed import ray_session
+        from aftir_rl.rl.rllib.train import require_rllib, train_rllib
+
+    (config,) = run.stages
+    runners = 1 if args.env_runners is None else args.env_runners
+    require_rllib()
+    address = args.ray or "local"  # local: a Ray of one CPU per env runner
+    with ray_session(address, max(runners, 1) if address == "local" else None):
+        s = train_rllib(
+            config,
+            seed=run.seed,
+            logdir=run.logdir,
+            resume=run.resume,
+            env_runners=runners,
+            progress_bar=run.progress_bar,
+        )
+    print(
+        f"PPO (RLlib, {runners} env runners) on {s['env_id']}: {s['timesteps']} steps "
+        f"in {s['seconds']:.0f} s; evaluation: success {s['success_rate']:.0%}, tip error "
+        f"{s['tip_error_cm']:.1f} cm, path {s['path_length_cm']:.0f} cm, collisions "
+        f"{s['collision_rate']:.0%}"
+    )
+    print(f"  run dir: {s['run_dir']}")
+    return 0
+
+
 def _main_sb3(args: argparse.Namespace) -> int:
+    if getattr(args, "rllib", False):
+        return _main_rllib(args)
+    for flag in ("ray", "env_runners"):
+        if getattr(args, flag, None) is not None:
+            raise ConfigError(f"--{flag.replace('_', '-')} is an RLlib option: add --rllib")
     with interrupts.held():  # torch: Ctrl-C is taken once it is imported
         from aftir_rl.rl.sb3.train import train_run
 

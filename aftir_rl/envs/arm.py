@@ -290,7 +290,7 @@ class ArmEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         info = {"is_success": success, "collision": collided, "distance_cm": distance}
         return self._obs(clearance, pts), reward, bool(collided or success), False, info
 
-    def render(self) -> NDArray[np.uint8] | None:
+    def render(self) -> NDArray[np.uint8] | None:  # type: ignore[override]
         """The tank, the arm, its tip path and the target (``rgb_array``)."""
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode= to make()")

@@ -113,7 +113,7 @@ class TankGoalEnv(gym.Env[GoalObs, int]):
         self.action_space = self.grid.action_space
         cell_space = spaces.MultiDiscrete(np.array(self.raster.shape, dtype=np.int64), np.int64)
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
-        self.observation_space = spaces.Dict(  # type: ignore[assignment]
+        self.observation_space = spaces.Dict(
             {
                 "observation": cell_space,
                 "achieved_goal": copy.deepcopy(cell_space),
@@ -185,7 +185,7 @@ class TankGoalEnv(gym.Env[GoalObs, int]):
         info["hit"] = bool(terminated and not info["is_success"])
         return self._obs(int(state)), reward, terminated, truncated, info
 
-    def render(self) -> str | NDArray[np.uint8] | None:
+    def render(self) -> str | NDArray[np.uint8] | None:  # type: ignore[override]
         """The tank and the tip's path so far, as the grid world renders them."""
         return self.grid.render()
 

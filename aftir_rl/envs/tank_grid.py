@@ -253,7 +253,7 @@ class TankGridEnv(gym.Env[int, int]):
         """Cells visited by the tip in this episode, start first."""
         return [self.raster.cell(s) for s in self._path]
 
-    def render(self) -> str | NDArray[np.uint8] | None:
+    def render(self) -> str | NDArray[np.uint8] | None:  # type: ignore[override]
         """Render the tank and the tip's path so far (``ansi`` or ``rgb_array``)."""
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode= to make()")

@@ -427,9 +427,10 @@ def evaluate_on_ray(
     from aftir_rl.experiments.runs import evaluate_run, run_kind
 
     for r in runs:  # a path that is no run directory is the user's error, before any task
-        if run_kind(r) not in ("q_table", "sb3"):
+        if run_kind(r) not in ("q_table", "sb3", "rllib"):
             raise CheckpointError(
-                f"{r}: not a run directory (no q_table.npz, nor model.zip with config.json)"
+                f"{r}: not a run directory (no q_table.npz, nor model.zip or rllib.json with "
+                "config.json)"
             )
 
     def report(k: int, result: Any) -> None:

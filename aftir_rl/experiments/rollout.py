@@ -30,7 +30,7 @@ __all__ = ["rollout", "record_frames"]
 @contextmanager
 def _episode(
     env_id: str, env_kwargs: dict[str, Any] | None, target: Any, render: bool = False
-) -> Iterator[tuple[gym.Env, Any, Any, dict[str, Any]]]:
+) -> Iterator[tuple[gym.Env[Any, Any], Any, Any, dict[str, Any]]]:
     """The evaluation env reset to ``target``: ``(env, its unwrapped arm env, obs, info)``."""
     kwargs = evaluation_env_kwargs(env_kwargs)
     env = gym.make(env_id, render_mode="rgb_array" if render else None, **kwargs)
@@ -102,7 +102,8 @@ def record_frames(
 ) -> list[NDArray[np.uint8]]:
     """The ``rgb_array`` frames of one episode of ``model`` to ``target`` (as :func:`rollout`)."""
     with _episode(env_id, env_kwargs, target, render=True) as (env, _, obs, _):
-        frames, done, deterministic = [env.render()], False, sampling(policy_seed)
+        frames: list[Any] = [env.render()]  # rgb_array frames
+        done, deterministic = False, sampling(policy_seed)
         while not done:
             action, _ = model.predict(obs, deterministic=deterministic)
             obs, _, terminated, truncated, _ = env.step(action)

@@ -2,8 +2,10 @@
 
 The kinds (:func:`run_kind`; their files: docs/design.md §9): ``q_table`` (``q_table.npz``, one
 target, :func:`load_q_table_run`), ``q_table_goal`` (``q_table_goal.npz``, every reachable cell,
-:func:`load_goal_run`) and ``sb3`` (``model.zip`` with ``config.json``, :func:`load_sb3_run`:
-the config checked key by key, the model loaded without unpickling).
+:func:`load_goal_run`), ``sb3`` (``model.zip`` with ``config.json``, :func:`load_sb3_run`:
+the config checked key by key, the model loaded without unpickling) and ``rllib``
+(``rllib.json`` with ``config.json``, :func:`load_rllib_run`: the same config, the weights read
+as tensors only). :func:`load_policy_run` loads either policy run.
 
 The workflow shared by ``train``, ``evaluate`` and ``bench``: a tabular agent's greedy cells
 (:func:`greedy_cells`, :func:`learn_cells`) become a follow-the-leader motion
@@ -50,11 +52,18 @@ __all__ = [
     "load_q_table_run",
     "load_goal_run",
     "load_sb3_run",
+    "load_rllib_run",
+    "load_policy_run",
     "evaluate_run",
 ]
 
 #: The file that marks each kind of run directory.
-RUN_FILES = {"q_table": "q_table.npz", "q_table_goal": "q_table_goal.npz", "sb3": "model.zip"}
+RUN_FILES = {
+    "q_table": "q_table.npz",
+    "q_table_goal": "q_table_goal.npz",
+    "sb3": "model.zip",
+    "rllib": "rllib.json",
+}
 
 
 def load_q_table_config(path: str | Path) -> Any:
@@ -74,7 +83,7 @@ class QTableRun:
 
     run_dir: Path
     agent: QLearning
-    env: gym.Env
+    env: gym.Env[Any, Any]
     target: list[float]
 
 
@@ -84,25 +93,32 @@ class GoalRun:
 
     run_dir: Path
     agent: GoalQLearning
-    env: gym.Env
+    env: gym.Env[Any, Any]
 
 
 @dataclass
 class SB3Run:
-    """An ``sb3`` run: its algorithm, checked config, ``aftir_rl:``-prefixed env id and model."""
+    """An ``sb3`` run: its algorithm, checked config, ``aftir_rl:``-prefixed env id and model.
+
+    An ``rllib`` run loads as one too (:func:`load_rllib_run`): ``model`` is then its policy
+    with SB3's ``predict`` and ``library`` is ``"rllib"``.
+    """
 
     run_dir: Path
     algo: str
     config: SB3Config
     env_id: str
     model: BaseAlgorithm
+    library: str = "sb3"
 
 
 def run_kind(run_dir: str | Path) -> str | None:
-    """``"q_table"``, ``"sb3"``, ``"q_table_goal"`` or None (not a run directory)."""
+    """``"q_table"``, ``"sb3"``, ``"rllib"``, ``"q_table_goal"`` or None (not a run directory)."""
     run = Path(run_dir)
     if (run / RUN_FILES["q_table"]).exists():
         return "q_table"
+    if (run / RUN_FILES["rllib"]).exists() and (run / "config.json").exists():
+        return "rllib"
     if (run / RUN_FILES["sb3"]).exists() and (run / "config.json").exists():
         return "sb3"
     if (run / RUN_FILES["q_table_goal"]).exists():
@@ -123,11 +139,17 @@ def load_run(
     kind = run_kind(run)
     if kind is None or kind not in kinds:
         files = " nor ".join(
-            "model.zip with config.json" if k == "sb3" else RUN_FILES[k] for k in kinds
+            f"{RUN_FILES[k]} with config.json" if k in ("sb3", "rllib") else RUN_FILES[k]
+            for k in kinds
         )
         raise CheckpointError(f"{run}: not a run directory (no {files})")
     loaders: dict[str, Callable[[Path], QTableRun | GoalRun | SB3Run]]
-    loaders = {"q_table": load_q_table_run, "sb3": load_sb3_run, "q_table_goal": load_goal_run}
+    loaders = {
+        "q_table": load_q_table_run,
+        "sb3": load_sb3_run,
+        "rllib": load_rllib_run,
+        "q_table_goal": load_goal_run,
+    }
     return loaders[kind](run)
 
 
@@ -170,6 +192,33 @@ def load_sb3_run(run_dir: str | Path) -> SB3Run:
 
     algo, config, env_id, model = load_sb3(run_dir)
     return SB3Run(Path(run_dir), algo, config, env_id, model)
+
+
+def load_rllib_run(run_dir: str | Path) -> SB3Run:
+    """An RLlib run (``aftir train ppo --rllib``), its ``model`` with SB3's ``predict``.
+
+    The config is checked as an SB3 run's, the policy's weights read as tensors only.
+
+    Raises:
+        CheckpointError: unreadable files.
+        ConfigError: RLlib (``aftir_rl[rllib]``) is not installed.
+
+    """
+    from aftir_rl.rl.rllib.train import load_rllib_run as load
+
+    run = load(run_dir)
+    model = cast("BaseAlgorithm", run.model)  # only its predict is called
+    return SB3Run(Path(run_dir), run.algo, run.config, run.env_id, model, "rllib")
+
+
+def load_policy_run(run_dir: str | Path) -> SB3Run:
+    """An SB3 or RLlib run directory: ``aftir rollout`` and ``record`` replay its policy.
+
+    Raises:
+        CheckpointError: neither, or unreadable files.
+
+    """
+    return cast(SB3Run, load_run(run_dir, ("sb3", "rllib")))
 
 
 # ---------------------------------------------------------------- measuring
@@ -239,7 +288,8 @@ def _evaluate_sb3(
     )
     note = f"{metrics['collision_rate']:.1%} collided" if metrics["collision_rate"] else ""
     sampled = "" if policy_seed is None else f", sampled from seed {policy_seed}"
-    agent = f"{run.algo} ({run.config.env_id}{sampled})"
+    library = " RLlib" if run.library == "rllib" else ""
+    agent = f"{run.algo}{library} ({run.config.env_id}{sampled})"
     return {"agent": agent, "targets": len(targets), **metrics, "note": note}
 
 
@@ -253,7 +303,7 @@ def evaluate_run(
     policy_seed: int | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
-    """Evaluate one run directory (Q-table or SB3): one row of ``python -m aftir_rl.evaluate``.
+    """Evaluate one run directory (Q-table, SB3 or RLlib): a row of ``python -m aftir_rl.evaluate``.
 
     A Q-table run is evaluated on the target it was trained for: its greedy path becomes a
     follow-the-leader motion keeping ``margin`` [cm] (``motion="ftl"``) or the papers' postures
@@ -272,7 +322,7 @@ def evaluate_run(
             whose env takes none (its ``param`` names which).
 
     """
-    run = load_run(run_dir, ("q_table", "sb3"))
+    run = load_run(run_dir, ("q_table", "sb3", "rllib"))
     if isinstance(run, QTableRun):
         if tank is not None:
             raise ConfigError(

@@ -87,7 +87,7 @@ def _targets(env_kwargs: dict[str, Any], first_seed: int) -> Iterator[tuple[int,
         seed += 1
 
 
-def _episode(env: gym.Env, seed: int, actions: NDArray[np.float32]) -> Any:
+def _episode(env: gym.Env[Any, Any], seed: int, actions: NDArray[np.float32]) -> Any:
     """Step ``env`` from ``reset(seed)`` through ``actions``: Minari's buffer of the episode.
 
     The infos hold the same keys at reset and at every step: what ``compute_reward`` reads
@@ -167,7 +167,7 @@ def _resume_point(
     return done, (max(int(m["seed"]) for m in metas) + 1 if done else seed)
 
 
-def _save(minari: Any, dataset_id: str, buffers: list[Any], env: gym.Env) -> None:
+def _save(minari: Any, dataset_id: str, buffers: list[Any], env: gym.Env[Any, Any]) -> None:
     """Add ``buffers`` to the dataset on disk, or create it with them."""
     if dataset_id in minari.list_local_datasets():
         minari.load_dataset(dataset_id).storage.update_episodes(buffers)

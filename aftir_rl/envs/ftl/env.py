@@ -166,7 +166,7 @@ class ArmFTLEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
         self._use(spec if self.pool is None else self.pool.spec_for(spec, 0))
         self.arm = self.tank.arm
         # gymnasium types a Dict space's elements as dict[str, Space], not dict[str, element]
-        self.action_space, self.observation_space = spaces_of(self.batch)  # type: ignore[assignment]
+        self.action_space, self.observation_space = spaces_of(self.batch)
         self._tips: list[NDArray[np.float64]] = []
         #: The shaping's potential at the tip (NaN: not known; see ``FTLReward.step``).
         self._potential: NDArray[np.float64] | None = np.full(1, np.nan)
@@ -289,7 +289,7 @@ class ArmFTLEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
         obs = {k: v[0] for k, v in rows.items()}
         return obs, float(reward[0]), success or hit, False, info
 
-    def render(self) -> NDArray[np.uint8] | None:
+    def render(self) -> NDArray[np.uint8] | None:  # type: ignore[override]
         """The tank, the arm, its tip path and the target (``rgb_array``)."""
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode= to make()")

@@ -28,7 +28,9 @@ __all__ = ["ArmFTLPoolVectorEnv", "make_vector_env"]
 Obs = dict[str, NDArray[np.float32]]
 
 
-def make_vector_env(num_envs: int = 1, max_episode_steps: int = 300, **kwargs: Any) -> VectorEnv:
+def make_vector_env(
+    num_envs: int = 1, max_episode_steps: int = 300, **kwargs: Any
+) -> VectorEnv[Any, Any, Any]:
     """The batched env of ``AFTIR-ArmFTL-v0``: :class:`ArmFTLPoolVectorEnv` for a pool."""
     if pool_specs(kwargs.get("tank")) is not None:
         return ArmFTLPoolVectorEnv(num_envs, max_episode_steps, **kwargs)
@@ -137,8 +139,8 @@ class ArmFTLPoolVectorEnv(VectorEnv[Obs, NDArray[np.float32], Any]):
         )
 
     def close_extras(self, **kwargs: Any) -> None:
-        """Close every group."""
-        for group in self.groups:
+        """Close every group (none when the constructor refused its arguments)."""
+        for group in getattr(self, "groups", ()):
             group.close()
 
 

@@ -171,7 +171,7 @@ def _pool_option(arm: Any, i: int) -> dict[str, int] | None:
 
 def _run_target(
     model: Predictor,
-    env: gym.Env,
+    env: gym.Env[Any, Any],
     arm: Any,
     options: dict[str, Any],
     clearance: bool,

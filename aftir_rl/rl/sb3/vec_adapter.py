@@ -46,7 +46,9 @@ class SB3VectorEnv(VecEnv):
     """
 
     def __init__(
-        self, venv: gym.vector.VectorEnv, running_info_keys: Sequence[str] | None = None
+        self,
+        venv: gym.vector.VectorEnv[Any, Any, Any],
+        running_info_keys: Sequence[str] | None = None,
     ) -> None:
         if venv.metadata.get("autoreset_mode") is not AutoresetMode.SAME_STEP:
             raise ConfigError("SB3VectorEnv needs a vector env with autoreset_mode='SameStep'")
@@ -130,7 +132,7 @@ class SB3VectorEnv(VecEnv):
         return [getattr(self.venv, method_name)(*method_args, **kwargs)]
 
     def env_is_wrapped(
-        self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None
+        self, wrapper_class: type[gym.Wrapper[Any, Any, Any, Any]], indices: VecEnvIndices = None
     ) -> list[bool]:
         """Rows are not gymnasium-wrapped."""
         return [False] * len(self._indices(indices))

@@ -73,7 +73,7 @@ class GoalTable(TabularAgent):
 
     def __init__(
         self,
-        env: TankGoalEnv | gym.Env,
+        env: TankGoalEnv | gym.Env[Any, Any],
         learning_rate: float = _DEFAULT.learning_rate,
         gamma: float = _DEFAULT.gamma,
         exploration_initial_eps: float = _DEFAULT.exploration_initial_eps,
@@ -100,7 +100,7 @@ class GoalTable(TabularAgent):
             seed,
         )
 
-    def _setup(self, env: TankGoalEnv | gym.Env) -> None:
+    def _setup(self, env: TankGoalEnv | gym.Env[Any, Any]) -> None:
         base = _goal_env(env)
         self.raster = base.raster
         self.tank: Tank = base.tank
@@ -240,7 +240,7 @@ class GoalTable(TabularAgent):
         self.q_table = q_table
 
 
-def _goal_env(env: TankGoalEnv | gym.Env) -> TankGoalEnv:
+def _goal_env(env: TankGoalEnv | gym.Env[Any, Any]) -> TankGoalEnv:
     """The ``TankGoalEnv`` under ``env``'s wrappers; a TypeError if there is none."""
     base = env.unwrapped
     if not isinstance(base, TankGoalEnv):

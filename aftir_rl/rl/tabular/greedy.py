@@ -26,7 +26,7 @@ Dynamics = tuple[NDArray[np.int64], NDArray[np.bool_]]
 
 def greedy_rollout(
     agent: Predictor,
-    env: gym.Env,
+    env: gym.Env[Any, Any],
     max_steps: int = 1000,
     options: dict[str, Any] | None = None,
     stop_on_cycle: bool = True,

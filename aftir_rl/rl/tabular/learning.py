@@ -111,7 +111,7 @@ class TabularAgent(ABC):
 
     def __init__(
         self,
-        env: gym.Env,
+        env: gym.Env[Any, Any],
         learning_rate: float = 1.0,
         gamma: float = 0.95,
         exploration_initial_eps: float = 1.0,
@@ -134,7 +134,7 @@ class TabularAgent(ABC):
         self._setup(env)
 
     @abstractmethod
-    def _setup(self, env: gym.Env) -> None:
+    def _setup(self, env: gym.Env[Any, Any]) -> None:
         """Make the table (and the random generator) for ``env``."""
 
     @classmethod
@@ -144,7 +144,7 @@ class TabularAgent(ABC):
 
     @classmethod
     def from_config(
-        cls: type[A], env: gym.Env, config: QLearningConfig, seed: int | None = None
+        cls: type[A], env: gym.Env[Any, Any], config: QLearningConfig, seed: int | None = None
     ) -> A:
         """An untrained agent with the hyperparameters of a :class:`QLearningConfig`."""
         return cls(env, seed=seed, **{key: getattr(config, key) for key in cls._keywords()})
@@ -234,7 +234,7 @@ class TabularAgent(ABC):
         """
 
     @classmethod
-    def load(cls: type[A], path: str | os.PathLike[str], env: gym.Env) -> A:
+    def load(cls: type[A], path: str | os.PathLike[str], env: gym.Env[Any, Any]) -> A:
         """Load a checkpoint for ``env``; training can then resume with ``learn``.
 
         Raises:

@@ -37,7 +37,7 @@ class MotionOptions:
 
 def log_greedy_path(
     logger: Any,
-    env: gym.Env,
+    env: gym.Env[Any, Any],
     summary: dict[str, Any],
     target: Sequence[float],
     seed: int,

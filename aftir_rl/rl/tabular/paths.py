@@ -19,7 +19,9 @@ if TYPE_CHECKING:
 __all__ = ["greedy_cells", "learn_cells", "path_summary"]
 
 
-def greedy_cells(agent: QLearning, env: gym.Env, max_steps: int = 1000) -> tuple[list[Any], bool]:
+def greedy_cells(
+    agent: QLearning, env: gym.Env[Any, Any], max_steps: int = 1000
+) -> tuple[list[Any], bool]:
     """The raster cells of a Q-table's greedy path (start first), and whether it reaches."""
     from aftir_rl.rl.tabular.q_table import greedy_rollout
 
@@ -48,7 +50,7 @@ def learn_cells(
 
 
 def path_summary(
-    agent: QLearning, env: gym.Env, target: Sequence[float], max_steps: int
+    agent: QLearning, env: gym.Env[Any, Any], target: Sequence[float], max_steps: int
 ) -> dict[str, Any]:
     """The greedy path of a trained agent as ``path.json`` holds it, with its BFS optimum."""
     base = cast("TankGridEnv", env.unwrapped)

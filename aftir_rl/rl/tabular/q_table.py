@@ -41,7 +41,7 @@ from aftir_rl.rl.tabular.learning import QLearningConfig, TabularAgent, episode_
 __all__ = ["QLearningConfig", "QLearning", "greedy_rollout"]
 
 
-def _discrete_sizes(env: gym.Env) -> tuple[int, int]:
+def _discrete_sizes(env: gym.Env[Any, Any]) -> tuple[int, int]:
     if not isinstance(env.observation_space, spaces.Discrete) or not isinstance(
         env.action_space, spaces.Discrete
     ):
@@ -71,7 +71,7 @@ class QLearning(TabularAgent):
 
     FORMAT = Q_TABLE_FORMAT
 
-    def _setup(self, env: gym.Env) -> None:
+    def _setup(self, env: gym.Env[Any, Any]) -> None:
         n_states, n_actions = _discrete_sizes(env)
         self.q_table: NDArray[np.float64] = np.full((n_states, n_actions), self.initial_q)
         self._rng = random.Random(self.seed)
@@ -139,7 +139,7 @@ class QLearning(TabularAgent):
 
     def _run_episode(
         self,
-        env: gym.Env,
+        env: gym.Env[Any, Any],
         rng: random.Random,
         q: list[list[float]],
         alpha: float,

@@ -102,7 +102,9 @@ def train_q_table(
     return summaries
 
 
-def _make_target_envs(config: QLearningConfig, targets: Sequence[Sequence[float]]) -> list[gym.Env]:
+def _make_target_envs(
+    config: QLearningConfig, targets: Sequence[Sequence[float]]
+) -> list[gym.Env[Any, Any]]:
     """Make one ``AFTIR-Tank-v0`` env per target (which validates every target)."""
     import gymnasium as gym
 
@@ -185,7 +187,7 @@ def resumed_config(resume: str | Path, all_targets: bool = False) -> Any | None:
 
 
 def _make_agent(
-    config: QLearningConfig, env: gym.Env, checkpoint: Path | None, seed: int
+    config: QLearningConfig, env: gym.Env[Any, Any], checkpoint: Path | None, seed: int
 ) -> QLearning:
     """A fresh agent, or the checkpoint's after checking it was trained for this target and tank.
 
@@ -225,7 +227,7 @@ def _run_start(agent: TabularAgent, checkpoint: Path | None) -> int:
 
 def _train_target_run(
     agent: QLearning,
-    env: gym.Env,
+    env: gym.Env[Any, Any],
     config: QLearningConfig,
     target: Sequence[float],
     seed: int,
@@ -297,7 +299,7 @@ def _keep_learnt(
 
 def _learn_target(
     agent: QLearning,
-    env: gym.Env,
+    env: gym.Env[Any, Any],
     config: QLearningConfig,
     target: Sequence[float],
     seed: int,
@@ -349,7 +351,7 @@ def _has_goal_table(partial: Path) -> bool:
 
 
 def _checkpoint_extra(
-    env: gym.Env, config: QLearningConfig, target: Sequence[float]
+    env: gym.Env[Any, Any], config: QLearningConfig, target: Sequence[float]
 ) -> dict[str, Any]:
     """What a target's ``q_table.npz`` holds besides the agent's own metadata."""
     base = cast("TankGridEnv", env.unwrapped)

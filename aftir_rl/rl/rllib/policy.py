@@ -1,0 +1,160 @@
+"""An RLlib run's policy as SB3's ``predict``, and its files read without unpickling.
+
+An RLlib run keeps its weights and its learner's state as tensors only: ``rllib_module.pt``
+(the module's ``state_dict``) and ``checkpoints/learner_<steps>.pt`` (module and optimizer
+state, the form ``LearnerGroup.get_state`` gives, numpy arrays as tensors). Both are read with
+``torch.load(weights_only=True)``, at most :data:`MAX_STATE_BYTES` inflated: nothing in a run
+directory runs code when it is read, unlike RLlib's own checkpoints (pickles).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from aftir_rl.core.archives import BoundedZip
+from aftir_rl.core.config import read_limited, shorten
+from aftir_rl.core.errors import CheckpointError
+from aftir_rl.core.files import atomic_open
+
+if TYPE_CHECKING:
+    import gymnasium as gym
+
+__all__ = [
+    "MODULE_FILE",
+    "MAX_STATE_BYTES",
+    "RLlibPolicy",
+    "as_tensors",
+    "save_tensors",
+    "load_tensors",
+    "learner_checkpoints",
+]
+
+#: The weights of an RLlib run's policy (its RLModule's ``state_dict``).
+MODULE_FILE = "rllib_module.pt"
+#: The largest weights or learner state read [bytes] (the FTL env's 2 × 256 module with Adam's
+#: moments is about 2 MB; the trainer's largest networks under 50 MB).
+MAX_STATE_BYTES = 256_000_000
+#: The most records (tensors and the pickle) of one such file (about 60 for PPO's learner).
+MAX_RECORDS = 4096
+_CHECKPOINT = re.compile(r"^learner_(\d{1,15})\.pt$")
+
+
+def as_tensors(value: Any) -> Any:
+    """``value`` with numpy arrays and scalars as tensors and numbers (tuples as lists)."""
+    import torch
+
+    if isinstance(value, dict):
+        return {k: as_tensors(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [as_tensors(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return torch.from_numpy(np.ascontiguousarray(value))
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def save_tensors(state: Any, path: Path) -> Path:
+    """Write ``state`` (nested dicts of arrays, tensors, numbers) to ``path``, atomically."""
+    import torch
+
+    buffer = io.BytesIO()
+    torch.save(as_tensors(state), buffer)
+    with atomic_open(path, "wb") as fh:
+        fh.write(buffer.getvalue())
+    return path
+
+
+def load_tensors(path: str | os.PathLike[str], what: str) -> Any:
+    """Read what :func:`save_tensors` wrote, with ``torch.load(weights_only=True)``.
+
+    Raises:
+        CheckpointError: missing, too large, or not such a file (nothing unpickled but tensors,
+            numbers, strings, lists and dicts).
+
+    """
+    import torch
+
+    path = Path(path)
+    raw = read_limited(path, MAX_STATE_BYTES, CheckpointError, what, what)
+    # torch allocates what a record's directory entry declares: read a re-packed copy whose
+    # records are stored, each as long as its directory says (aftir_rl.rl.sb3.loading's way)
+    with BoundedZip(raw, str(path), MAX_STATE_BYTES, MAX_RECORDS, "tensor file") as archive:
+        del raw
+        packed = archive.repack()
+    try:
+        return torch.load(packed, weights_only=True, map_location="cpu")
+    except Exception as exc:  # torch's unpickler raises many kinds; none may escape as a crash
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise CheckpointError(
+            f"{path}: not an RLlib run's {what} ({shorten(first, 120)})"
+        ) from None
+
+
+def learner_checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
+    """``(steps, path)`` of a run's ``checkpoints/learner_<steps>.pt``, oldest first."""
+    found = []
+    for path in (Path(run_dir) / "checkpoints").glob("learner_*.pt"):
+        match = _CHECKPOINT.match(path.name)
+        if match and path.is_file():
+            found.append((int(match.group(1)), path))
+    return sorted(found)
+
+
+class RLlibPolicy:
+    """An RLlib PPO module with SB3's ``predict`` (what evaluate, rollout and record call).
+
+    The observation is flattened as RLlib's ``FlattenObservations`` connector does in
+    training; the action is the distribution's mean (``deterministic``) or a sample (torch's
+    generator), then mapped from RLlib's normalised actions into the action space, as the env
+    runners do (``unsquash_action``).
+    """
+
+    def __init__(self, module: Any, space: gym.Space[Any], action_space: gym.Space[Any]) -> None:
+        from ray.rllib.utils.spaces.space_utils import get_base_struct_from_space
+
+        self.module, self.space, self.action_space = module, space, action_space
+        self._struct = get_base_struct_from_space(space)
+        self._dist = module.get_inference_action_dist_cls()
+
+    def predict(self, observation: Any, *, deterministic: bool = True) -> tuple[Any, None]:
+        """``(action, None)`` for one observation (SB3's signature)."""
+        import torch
+        from ray.rllib.core.columns import Columns
+        from ray.rllib.utils.numpy import flatten_inputs_to_1d_tensor
+        from ray.rllib.utils.spaces.space_utils import unsquash_action
+
+        flat = flatten_inputs_to_1d_tensor(observation, self._struct, batch_axis=False)
+        obs = torch.as_tensor(np.asarray(flat, dtype=np.float32))[None]
+        with torch.no_grad():
+            out = self.module.forward_inference({Columns.OBS: obs})
+        dist = self._dist.from_logits(out[Columns.ACTION_DIST_INPUTS])
+        if deterministic:
+            dist = dist.to_deterministic()
+        action = np.asarray(dist.sample()[0])
+        return unsquash_action(action, self.action_space), None
+
+    def load_weights(self, weights: dict[str, Any], source: str) -> None:
+        """Set the module's weights from a ``state_dict`` (every tensor, shapes as built).
+
+        Raises:
+            CheckpointError: a missing, unknown or misshapen tensor.
+
+        """
+        import torch
+
+        own = self.module.state_dict()
+        if not isinstance(weights, dict) or set(weights) != set(own):
+            raise CheckpointError(f"{source}: not this run's network (its tensors differ)")
+        for key, value in weights.items():
+            if not isinstance(value, torch.Tensor) or value.shape != own[key].shape:
+                raise CheckpointError(f"{source}: {shorten(key, 60)} has the wrong shape")
+            if not torch.isfinite(value).all():
+                raise CheckpointError(f"{source}: {shorten(key, 60)} is not finite")
+        self.module.load_state_dict(weights)

@@ -1,0 +1,210 @@
+"""RLlib's PPO through ``aftir train ppo --rllib``: on a two-node Ray cluster, resumed, evaluated.
+
+The cluster is real: a head node and a worker node, each a raylet of its own with one CPU
+(Ray's ``cluster_utils.Cluster``), and two env runners, so one runs on each node. The
+commands run in subprocesses that join it by address, as a user's would.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from aftir_rl.core.errors import CheckpointError, ConfigError
+from aftir_rl.rl.sb3.config import SB3Config
+
+ROOT = Path(__file__).resolve().parents[2]
+#: A few short PPO updates of the batched FTL env: 8 rows × 64 steps per update.
+SMALL = [
+    "--env", "AFTIR-ArmFTL-v0", "--n-envs", "8", "--eval-episodes", "2", "--no-progress",
+    "--hyperparams", "n_steps:64", "batch_size:256", "n_epochs:1",
+]  # fmt: skip
+
+
+def _aftir(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "RAY_USAGE_STATS_ENABLED": "0"}
+    return subprocess.run(
+        [sys.executable, "-m", "aftir_rl.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+        env=env,
+    )
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A Ray cluster of two nodes (head and worker, one CPU each); its address."""
+    from ray.cluster_utils import Cluster
+
+    nodes = Cluster(
+        initialize_head=True,
+        head_node_args={"num_cpus": 1, "include_dashboard": False},
+    )
+    nodes.add_node(num_cpus=1)
+    nodes.wait_for_nodes()
+    try:
+        yield nodes.address
+    finally:
+        nodes.shutdown()
+
+
+def _runs(logdir: Path) -> list[Path]:
+    return sorted(logdir.glob("rllib-ppo__AFTIR-ArmFTL-v0__*"))
+
+
+def _tags(run_dir: Path) -> set[str]:
+    events = EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
+    events.Reload()
+    return set(events.Tags()["scalars"])
+
+
+@pytest.mark.slow
+def test_ppo_on_a_two_node_cluster_resumes_and_is_evaluated(cluster, tmp_path):
+    import ray
+
+    ray.init(address=cluster, logging_level="error")
+    try:
+        nodes = [n for n in ray.nodes() if n["Alive"]]
+        assert len(nodes) == 2 and all(n["Resources"]["CPU"] == 1 for n in nodes)
+    finally:
+        ray.shutdown()
+    logdir = tmp_path / "runs"
+    train = ["train", "ppo", "--rllib", "--ray", cluster, "--env-runners", "2", *SMALL]
+    out = _aftir(*train, "--total-timesteps", "1024", "--save-freq", "512", "--logdir", str(logdir))
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "Traceback" not in out.stderr
+    (run,) = _runs(logdir)
+    config = json.loads((run / "config.json").read_text())
+    assert config["algo"] == "ppo" and config["n_envs"] == 8
+    meta = json.loads((run / "rllib.json").read_text())
+    assert meta["env_runners"] == 2 and meta["nodes"] == 2 and meta["cpus"] == 2
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["timesteps"] >= 1024 and summary["library"] == "rllib"
+    saved = sorted(int(p.stem.split("_")[1]) for p in (run / "checkpoints").glob("learner_*.pt"))
+    assert saved[0] >= 512 and saved[-1] == summary["timesteps"]
+    tags = _tags(run)
+    for tag in ("eval/success_rate", "eval/min_clearance_cm", "train/loss", "time/fps"):
+        assert tag in tags, sorted(tags)
+    assert (run / "best" / "rllib_module.pt").exists()
+
+    # the SB3 commands read it: evaluate (here two held-out targets), rollout
+    out = _aftir("evaluate", str(run), "--random", "2", "--seed", "7", "--logdir", str(tmp_path))
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "ppo RLlib (AFTIR-ArmFTL-v0)" in out.stdout
+    out = _aftir("rollout", str(run / "best"), "--random", "1", "-o", str(tmp_path / "roll"))
+    assert out.returncode == 0, out.stderr[-2000:]
+    (motion,) = (tmp_path / "roll").glob("*/trajectory.json")
+    assert json.loads(motion.read_text())["motion"]
+
+    # resumed with no steps to train: the learner's weights are the checkpoint's, exactly
+    again = tmp_path / "again"
+    resume = ["--resume", str(run), "--logdir", str(again)]
+    out = _aftir(*train, "--total-timesteps", "0", *resume)
+    assert out.returncode == 0, out.stderr[-3000:]
+    (resumed,) = _runs(again)
+    before = torch.load(run / "rllib_module.pt", weights_only=True)
+    after = torch.load(resumed / "rllib_module.pt", weights_only=True)
+    assert before.keys() == after.keys()
+    assert all(torch.equal(before[k], after[k]) for k in before)
+    # and resumed to train on: its steps go on from the checkpoint's
+    out = _aftir(*train, "--total-timesteps", "512", *resume)
+    assert out.returncode == 0, out.stderr[-3000:]
+    last = max(_runs(again), key=lambda p: p.stat().st_mtime)
+    assert json.loads((last / "summary.json").read_text())["timesteps"] >= saved[-1] + 512
+
+
+def test_the_sb3_config_becomes_rllibs_ppo_settings():
+    from aftir_rl.rl.rllib.config import SB3_PPO_DEFAULTS, check_rllib_config, ppo_config
+
+    config = SB3Config(
+        env_id="AFTIR-ArmFTL-v0",
+        n_envs=8,
+        hyperparameters={
+            "learning_rate": 1e-4,
+            "n_steps": 32,
+            "batch_size": 64,
+            "gamma": 0.98,
+            "policy_kwargs": {"net_arch": [32, 16]},
+        },
+        env_kwargs={"bay": 1},
+    )
+    check_rllib_config(config, 2)
+    ppo = ppo_config(config, "AFTIR-ArmFTL-v0", seed=3, env_runners=2)
+    assert ppo.lr == 1e-4 and ppo.gamma == 0.98 and ppo.minibatch_size == 64
+    assert ppo.train_batch_size_per_learner == 32 * 8  # SB3's rollout: n_steps × n_envs
+    assert ppo.num_envs_per_env_runner == 4 and ppo.rollout_fragment_length == 32
+    assert ppo.num_epochs == SB3_PPO_DEFAULTS["n_epochs"]  # left out: SB3's default
+    assert ppo.clip_param == SB3_PPO_DEFAULTS["clip_range"] and not ppo.use_kl_loss
+    assert ppo.model_config["fcnet_hiddens"] == [32, 16]
+    assert ppo.gym_env_vectorize_mode == "vector_entry_point"  # the batched env, not copies
+    assert ppo.env_config == {"bay": 1} and ppo.seed == 3
+    reach = ppo_config(SB3Config(env_id="AFTIR-ArmReach-v0", n_envs=2), "AFTIR-ArmReach-v0", 0, 1)
+    assert reach.gym_env_vectorize_mode == "sync"
+
+
+@pytest.mark.parametrize(
+    ("config", "runners", "message"),
+    [
+        (SB3Config(her=True), 1, "no replay buffer"),
+        (SB3Config(hyperparameters={"use_sde": True}), 1, "no counterpart in RLlib"),
+        (SB3Config(hyperparameters={"learning_rate": "lin_3e-4"}), 1, "must be a number"),
+        (SB3Config(hyperparameters={"policy_kwargs": {"ortho_init": False}}), 1, "net_arch only"),
+        (SB3Config(n_envs=3), 2, "cannot be shared by 2 env runners"),
+    ],
+)
+def test_what_rllib_cannot_train_as_sb3_would_is_refused(config, runners, message):
+    from aftir_rl.rl.rllib.config import check_rllib_config
+
+    with pytest.raises(ConfigError, match=message):
+        check_rllib_config(config, runners)
+
+
+class _Boom:
+    def __reduce__(self):
+        return (os.system, ("touch /tmp/aftir-rllib-pwned",))
+
+
+def test_weights_are_read_as_tensors_only(tmp_path):
+    from aftir_rl.rl.rllib.policy import as_tensors, load_tensors, save_tensors
+
+    state = {"learner": {"w": np.arange(6.0).reshape(2, 3), "step": np.float32(2.0), 7: [1, 2]}}
+    path = save_tensors(state, tmp_path / "ok.pt")
+    back = load_tensors(path, "weights")
+    assert torch.equal(back["learner"]["w"], as_tensors(state)["learner"]["w"])
+    assert back["learner"][7] == [1, 2] and back["learner"]["step"] == 2.0
+    hostile = tmp_path / "rllib_module.pt"
+    buffer = io.BytesIO()
+    torch.save({"w": _Boom()}, buffer, pickle_protocol=2)
+    hostile.write_bytes(buffer.getvalue())
+    Path("/tmp/aftir-rllib-pwned").unlink(missing_ok=True)
+    with pytest.raises(CheckpointError, match="not an RLlib run's weights"):
+        load_tensors(hostile, "weights")
+    assert not Path("/tmp/aftir-rllib-pwned").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--ray", "local"], "--ray is an RLlib option: add --rllib"),
+        (["--env-runners", "2"], "--env-runners is an RLlib option: add --rllib"),
+        (["--rllib", "--env", "AFTIR-ArmFTL-v0", "--n-envs", "3", "--env-runners", "2"],
+         "cannot be shared by 2 env runners"),
+    ],
+)  # fmt: skip
+def test_rllib_options_are_checked_in_one_line(args, message, tmp_path):
+    out = _aftir("train", "ppo", *args, "--logdir", str(tmp_path), timeout=120)
+    assert out.returncode == 2, out.stderr[-2000:]
+    assert message in out.stderr and "Traceback" not in out.stderr
+    assert out.stderr.strip().count("\n") == 0
+    assert not any(tmp_path.iterdir())
