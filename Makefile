@@ -60,9 +60,9 @@ docs: $(STAMP)
 	@echo "open docs/_build/html/index.html"
 
 # The benchmark tables of docs/benchmarks.md. `make bench`: every script and every method on
-# smaller fixed sets with shorter budgets (--quick, said above each table), about 2 minutes on
+# smaller fixed sets with shorter budgets (--quick, said above each table), about 4 minutes on
 # 2 cores; `make bench-full`: the full sets and the 10 s budgets, the numbers of the docs
-# (about 22 minutes, 11 of them the physics check's 24 motions).
+# (about 28 minutes, 11 of them the physics check's 24 motions, 6 RLlib beside SB3).
 bench: $(STAMP)  ## every benchmark table, quick
 	$(PY) benchmarks/bench_tank.py --quick
 	$(PY) benchmarks/bench_posture.py --quick
@@ -75,6 +75,7 @@ bench: $(STAMP)  ## every benchmark table, quick
 	$(PY) benchmarks/bench_arm_ftl.py --quick
 	$(PY) benchmarks/bench_fields.py --quick
 	$(PY) benchmarks/bench_physics.py --quick
+	OMP_NUM_THREADS=1 $(PY) benchmarks/bench_rllib.py --quick
 	$(PY) -m aftir_rl.bench --quick
 
 bench-full: $(STAMP)  ## every benchmark table of docs/benchmarks.md, full
@@ -89,6 +90,7 @@ bench-full: $(STAMP)  ## every benchmark table of docs/benchmarks.md, full
 	$(PY) benchmarks/bench_arm_ftl.py
 	$(PY) benchmarks/bench_fields.py
 	$(PY) benchmarks/bench_physics.py
+	OMP_NUM_THREADS=1 $(PY) benchmarks/bench_rllib.py --json benchmarks/results/rllib.json
 	$(PY) -m aftir_rl.bench
 
 tensorboard: $(STAMP)
