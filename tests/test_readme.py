@@ -50,8 +50,9 @@ def _small(line: str) -> str:
         line = re.sub(r"--episodes \d+", "--episodes 1", line) + " --no-progress"
     if line.startswith("aftir simulate"):  # an instant every 10 s of the motion, not every 1 s
         line += " --every 10"
-    if line.startswith("python -m rl_zoo3.train"):  # one rollout of its 128 envs, evaluated once
+    if line.startswith("python -m rl_zoo3.train"):  # one rollout of 8 envs, not the entry's 128
         line += " -n 1 --eval-freq 256 --eval-episodes 2 --n-eval-envs 1"
+        line += " -params n_envs:8 batch_size:1024"  # RL Zoo's per-run override of the entry
     return re.sub(r"--random \d+", "--random 1", line)
 
 

@@ -68,6 +68,7 @@ def test_the_union_of_routes_counts_shared_prefixes_once():
 def test_a_tour_visits_every_target_and_passes_the_check(tmp_path, capsys):
     out = tmp_path / "tour"
     argv = ["--random", "4", "--bay", "2", "--seed", "3", "-o", str(out), "--quiet"]
+    argv += ["--solver-seconds", "0.2"]  # OR-Tools settles the order of 5 nodes at once
     assert tour_cli.main(argv) == 0
     assert "% of" in capsys.readouterr().out
     report = json.loads((out / "tour.json").read_text())
