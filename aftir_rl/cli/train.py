@@ -317,11 +317,11 @@ def _main_rllib(args: argparse.Namespace) -> int:
         raise ConfigError("--rllib trains one config: no stage file and no --demos")
     with interrupts.held():  # torch and Ray: Ctrl-C is taken once they are imported
         from aftir_rl.experiments.distributed import ray_session
-        from aftir_rl.rl.rllib.train import require_rllib, train_rllib
+        from aftir_rl.rl.rllib.train import check_rllib_run, train_rllib
 
     (config,) = run.stages
     runners = 1 if args.env_runners is None else args.env_runners
-    require_rllib()
+    check_rllib_run(config, runners)  # before Ray starts
     address = args.ray or "local"  # local: a Ray of one CPU per env runner
     with ray_session(address, max(runners, 1) if address == "local" else None):
         s = train_rllib(

@@ -18,7 +18,7 @@ import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -57,7 +57,14 @@ from aftir_rl.rl.sb3.config import SB3_ENV_IDS, Origins, SB3Config, check_sb3_va
 if TYPE_CHECKING:
     from stable_baselines3.common.logger import Logger
 
-__all__ = ["RLLIB_FILE", "RLlibRun", "require_rllib", "train_rllib", "load_rllib_run"]
+__all__ = [
+    "RLLIB_FILE",
+    "RLlibRun",
+    "check_rllib_run",
+    "require_rllib",
+    "train_rllib",
+    "load_rllib_run",
+]
 
 #: The file that marks an RLlib run directory: the library, its version and the env runners.
 RLLIB_FILE = "rllib.json"
@@ -76,6 +83,21 @@ def require_rllib() -> None:
         import ray.rllib  # noqa: F401
     except ImportError:
         raise ConfigError(f"--rllib needs RLlib: {INSTALL_HINT}") from None
+
+
+def check_rllib_run(config: SB3Config, env_runners: int) -> str:
+    """Check a run before Ray starts; the env's bare id.
+
+    Raises:
+        ConfigError: an env RLlib's PPO does not train here, a value out of range, what RLlib
+            cannot train as SB3 would (:func:`check_rllib_config`), or RLlib missing.
+
+    """
+    bare = check_env_id(config.env_id, SB3_ENV_IDS, "ppo")
+    check_sb3_values(config, "ppo", bare, Origins("config"))
+    check_rllib_config(config, env_runners)
+    require_rllib()
+    return bare
 
 
 @dataclass
@@ -138,13 +160,11 @@ def load_rllib_run(run_dir: str | Path) -> RLlibRun:
 
 def _module_weights(state: Any, source: str) -> dict[str, Any]:
     """The policy's ``state_dict`` in a learner state (``LearnerGroup.get_state``'s form)."""
-    try:
-        weights = state["learner"]["rl_module"]["default_policy"]
-    except (KeyError, TypeError):
-        raise CheckpointError(f"{source}: not an RLlib learner state") from None
-    if not isinstance(weights, dict):
-        raise CheckpointError(f"{source}: not an RLlib learner state")
-    return weights
+    for key in ("learner", "rl_module", "default_policy"):
+        if not isinstance(state, dict) or not isinstance(state.get(key), dict):
+            raise CheckpointError(f"{source}: not an RLlib learner state")
+        state = state[key]
+    return cast(dict[str, Any], state)
 
 
 def _learner_state(algo: Any) -> dict[str, Any]:
@@ -216,10 +236,7 @@ def train_rllib(
             is kept when it holds a checkpoint).
 
     """
-    bare = check_env_id(config.env_id, SB3_ENV_IDS, "ppo")
-    check_sb3_values(config, "ppo", bare, Origins("config"))
-    check_rllib_config(config, env_runners)
-    require_rllib()
+    bare = check_rllib_run(config, env_runners)
     import ray
 
     from aftir_rl.rl.sb3.evaluation import evaluation_targets
@@ -238,15 +255,34 @@ def train_rllib(
         algo: Any = ppo_config(config, env_id, seed, env_runners).build_algo()
     try:
         if resumed is not None:
-            algo.learner_group.set_state(resumed.state)
-            algo.env_runner_group.sync_weights(
-                from_worker_or_learner_group=algo.learner_group, inference_only=True
-            )
+            _restore(algo, resumed, policy)
         trainer = _Trainer(algo, config, env_id, policy, targets, seed, resumed)
         run_dir = folder / run_name(RUN_PREFIX, bare, "random", seed)
         return trainer.run(run_dir, progress_bar, {"env_runners": env_runners, **cluster})
     finally:
         algo.stop()
+
+
+def _restore(algo: Any, resumed: _Resumed, policy: RLlibPolicy) -> None:
+    """The learner and the env runners' weights as the checkpoint has them.
+
+    The weights are checked against ``policy`` (this config's network) first.
+
+    Raises:
+        CheckpointError: the checkpoint does not fit this config's network or optimizer.
+
+    """
+    policy.load_weights(_module_weights(resumed.state, str(resumed.path)), str(resumed.path))
+    try:
+        algo.learner_group.set_state(resumed.state)
+    except Exception as exc:  # RLlib's and torch's errors for a state of another network
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise CheckpointError(
+            f"{resumed.path}: does not fit this run's network or optimizer ({first[:160]})"
+        ) from None
+    algo.env_runner_group.sync_weights(
+        from_worker_or_learner_group=algo.learner_group, inference_only=True
+    )
 
 
 def _cluster(env_runners: int) -> dict[str, int]:
