@@ -333,7 +333,7 @@ def _main_rllib(args: argparse.Namespace) -> int:
             progress_bar=run.progress_bar,
         )
     print(
-        f"PPO (RLlib, {runners} env runners) on {s['env_id']}: {s['timesteps']} steps "
+        f"PPO (RLlib, {runners} env runner{'s' * (runners != 1)}) on {s['env_id']}: {s['timesteps']} steps "
         f"in {s['seconds']:.0f} s; evaluation: success {s['success_rate']:.0%}, tip error "
         f"{s['tip_error_cm']:.1f} cm, path {s['path_length_cm']:.0f} cm, collisions "
         f"{s['collision_rate']:.0%}"

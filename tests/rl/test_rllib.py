@@ -246,3 +246,81 @@ def test_weights_of_another_network_are_refused():
         policy.load_weights(weights, "nan.pt")
     action, _ = policy.predict(env.reset(seed=0)[0])
     assert env.action_space.contains(action.astype(env.action_space.dtype))
+
+
+def _rllib_run(folder: Path) -> Path:
+    """An RLlib run directory of ``AFTIR-ArmReach-v0`` as the trainer writes it (random weights)."""
+    import dataclasses
+
+    import gymnasium as gym
+
+    from aftir_rl.rl.rllib.config import build_module
+    from aftir_rl.rl.rllib.policy import MODULE_FILE, save_tensors
+
+    config = SB3Config(env_id="AFTIR-ArmReach-v0", eval_targets=2)
+    env = gym.make("aftir_rl:AFTIR-ArmReach-v0")
+    module = build_module(config, env.observation_space, env.action_space)
+    folder.mkdir(parents=True)
+    params = {**dataclasses.asdict(config), "algo": "ppo", "seed": 0, "resume": None}
+    (folder / "config.json").write_text(json.dumps(params))
+    (folder / "rllib.json").write_text(json.dumps({"library": "rllib", "env_runners": 1}))
+    save_tensors(module.state_dict(), folder / MODULE_FILE)
+    return folder
+
+
+def _zip_bomb(path: Path) -> None:
+    """A tensor file whose one record inflates to 300 MB, past the limit (stored deflated)."""
+    import zipfile
+
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+        with z.open("archive/data/0", "w", force_zip64=True) as sink:
+            block = bytes(1 << 20)
+            for _ in range(300):
+                sink.write(block)
+
+
+@pytest.mark.parametrize(
+    "poison",
+    ["pickle", "truncated", "garbage", "bomb", "other-net", "rllib-json", "not-a-dict"],
+)
+def test_a_hostile_rllib_run_runs_nothing_and_says_one_line(poison, tmp_path, capsys):
+    from aftir_rl.cli import evaluate
+
+    run = _rllib_run(tmp_path / "run")
+    weights = run / "rllib_module.pt"
+    marker = Path("/tmp/aftir-rllib-pwned")
+    marker.unlink(missing_ok=True)
+    if poison == "pickle":
+        buffer = io.BytesIO()
+        torch.save({"w": _Boom()}, buffer, pickle_protocol=2)
+        weights.write_bytes(buffer.getvalue())
+    elif poison == "truncated":
+        weights.write_bytes(weights.read_bytes()[:500])
+    elif poison == "garbage":
+        weights.write_bytes(os.urandom(4096))
+    elif poison == "bomb":
+        _zip_bomb(weights)
+    elif poison == "other-net":
+        torch.save({"pi.net.mlp.0.weight": torch.zeros(3, 3)}, weights)
+    elif poison == "rllib-json":
+        (run / "rllib.json").write_bytes(b"\xff{")
+    else:
+        torch.save([torch.zeros(2)], weights)
+    out = tmp_path / "ev"
+    assert evaluate.main([str(run), "--logdir", str(out), "--random", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().count("\n") == 0 and "Traceback" not in err, err
+    assert str(run) in err
+    assert not marker.exists()
+
+
+def test_an_rllib_run_is_evaluated_and_rolled_out_without_ray(tmp_path, capsys):
+    from aftir_rl.cli import evaluate, rollout
+
+    run = _rllib_run(tmp_path / "run")
+    assert evaluate.main([str(run), "--logdir", str(tmp_path / "ev"), "--random", "2"]) == 0
+    assert "ppo RLlib (AFTIR-ArmReach-v0)" in capsys.readouterr().out
+    out = tmp_path / "roll"
+    assert rollout.main([str(run), "--target", "20", "10", "60", "-o", str(out)]) == 0
+    (motion,) = out.glob("*/trajectory.json")
+    assert json.loads(motion.read_text())["steps"] >= 1
