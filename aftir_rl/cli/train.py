@@ -214,14 +214,14 @@ def _add_sb3_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], al
     )
     _add_run_numbers(p)
     add_run_dir_options(p, "parent of the run directory", "model.zip")
-    if algo == "ppo":
-        _add_rllib_options(p)
+    if algo in ("ppo", "sac"):
+        _add_rllib_options(p, algo)
 
 
-def _add_rllib_options(p: argparse.ArgumentParser) -> None:
+def _add_rllib_options(p: argparse.ArgumentParser, algo: str) -> None:
     """``--rllib``, ``--ray ADDRESS`` and ``--env-runners N``: the same config with RLlib."""
     group = p.add_argument_group(
-        "RLlib", "the same config trained by RLlib's PPO, here or on a Ray cluster"
+        "RLlib", f"the same config trained by RLlib's {algo.upper()}, here or on a Ray cluster"
     )
     group.add_argument(
         "--rllib",
@@ -311,7 +311,7 @@ def _train_config(args: argparse.Namespace) -> TrainConfig:
 
 
 def _main_rllib(args: argparse.Namespace) -> int:
-    """``ppo --rllib``: the config resolved as SB3's, trained by RLlib (one stage)."""
+    """``ppo|sac --rllib``: the config resolved as SB3's, trained by RLlib (one stage)."""
     run = _train_config(args)
     if len(run.stages) > 1 or run.demos is not None:
         raise ConfigError("--rllib trains one config: no stage file and no --demos")
@@ -321,11 +321,12 @@ def _main_rllib(args: argparse.Namespace) -> int:
 
     (config,) = run.stages
     runners = 1 if args.env_runners is None else args.env_runners
-    check_rllib_run(config, runners)  # before Ray starts
+    check_rllib_run(config, runners, run.algo)  # before Ray starts
     address = args.ray or "local"  # local: a Ray of one CPU per env runner
     with ray_session(address, max(runners, 1) if address == "local" else None):
         s = train_rllib(
             config,
+            algo=run.algo,
             seed=run.seed,
             logdir=run.logdir,
             resume=run.resume,
@@ -333,10 +334,10 @@ def _main_rllib(args: argparse.Namespace) -> int:
             progress_bar=run.progress_bar,
         )
     print(
-        f"PPO (RLlib, {runners} env runner{'s' * (runners != 1)}) on {s['env_id']}: {s['timesteps']} steps "
-        f"in {s['seconds']:.0f} s; evaluation: success {s['success_rate']:.0%}, tip error "
-        f"{s['tip_error_cm']:.1f} cm, path {s['path_length_cm']:.0f} cm, collisions "
-        f"{s['collision_rate']:.0%}"
+        f"{run.algo.upper()} (RLlib, {runners} env runner{'s' * (runners != 1)}) on "
+        f"{s['env_id']}: {s['timesteps']} steps in {s['seconds']:.0f} s; evaluation: success "
+        f"{s['success_rate']:.0%}, tip error {s['tip_error_cm']:.1f} cm, path "
+        f"{s['path_length_cm']:.0f} cm, collisions {s['collision_rate']:.0%}"
     )
     print(f"  run dir: {s['run_dir']}")
     return 0

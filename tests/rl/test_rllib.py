@@ -150,10 +150,58 @@ def test_the_sb3_config_becomes_rllibs_ppo_settings():
     assert reach.gym_env_vectorize_mode == "sync"
 
 
+def test_the_sb3_sac_config_becomes_rllibs_sac_settings():
+    from aftir_rl.rl.rllib.config import SB3_SAC_DEFAULTS, check_rllib_config, rllib_config
+
+    hyper = {"batch_size": 128, "train_freq": 4, "gradient_steps": 2, "ent_coef": "auto_0.1"}
+    config = SB3Config(env_id="AFTIR-ArmReach-v0", n_envs=2, hyperparameters=hyper)
+    check_rllib_config(config, 1, algo="sac")
+    sac = rllib_config("sac", config, "AFTIR-ArmReach-v0", seed=0, env_runners=1)
+    assert sac.actor_lr == sac.critic_lr == sac.alpha_lr == SB3_SAC_DEFAULTS["learning_rate"]
+    assert sac.train_batch_size_per_learner == 128 and sac.rollout_fragment_length == 4
+    assert sac.training_intensity == 2 * 128 / (4 * 2)  # trained / sampled steps, as SB3's
+    assert sac.initial_alpha == 0.1 and sac.target_entropy == "auto" and sac.twin_q
+    assert sac.replay_buffer_config["type"] == "EpisodeReplayBuffer"  # uniform, as SB3's
+    assert sac.replay_buffer_config["capacity"] == SB3_SAC_DEFAULTS["buffer_size"]
+    assert sac.model_config["fcnet_hiddens"] == [256, 256]
+
+
+@pytest.mark.parametrize(
+    ("config", "algo", "message"),
+    [
+        (SB3Config(hyperparameters={"ent_coef": 0.1}), "sac", "learns its temperature"),
+        (SB3Config(hyperparameters={"train_freq": [1, "episode"]}), "sac", "must be a number"),
+        (SB3Config(hyperparameters={"n_steps": 64}), "sac", "no counterpart in RLlib's SAC"),
+        (SB3Config(), "td3", "RLlib trains ppo and sac here"),
+    ],
+)
+def test_what_rllibs_sac_cannot_train_as_sb3_would_is_refused(config, algo, message):
+    from aftir_rl.rl.rllib.config import check_rllib_config
+
+    with pytest.raises(ConfigError, match=message):
+        check_rllib_config(config, 1, algo=algo)
+
+
+@pytest.mark.slow
+def test_sac_trains_on_a_local_ray_and_is_evaluated(tmp_path):
+    logdir = tmp_path / "runs"
+    out = _aftir(
+        "train", "sac", "--rllib", "--env-runners", "0", "--env", "AFTIR-ArmReach-v0",
+        "--total-timesteps", "200", "--hyperparams", "learning_starts:100",
+        "--eval-episodes", "2", "--no-progress", "--logdir", str(logdir),
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-3000:]
+    (run,) = logdir.glob("rllib-sac__AFTIR-ArmReach-v0__*")
+    assert json.loads((run / "config.json").read_text())["algo"] == "sac"
+    assert "train/critic_loss" in _tags(run) and "eval/success_rate" in _tags(run)
+    out = _aftir("evaluate", str(run), "--random", "2", "--logdir", str(tmp_path))
+    assert out.returncode == 0 and "sac RLlib (AFTIR-ArmReach-v0)" in out.stdout, out.stderr
+
+
 @pytest.mark.parametrize(
     ("config", "runners", "message"),
     [
-        (SB3Config(her=True), 1, "no replay buffer"),
+        (SB3Config(her=True), 1, "no HER here"),
         (SB3Config(hyperparameters={"use_sde": True}), 1, "no counterpart in RLlib"),
         (SB3Config(hyperparameters={"learning_rate": "lin_3e-4"}), 1, "must be a number"),
         (SB3Config(hyperparameters={"policy_kwargs": {"ortho_init": False}}), 1, "net_arch only"),

@@ -1,12 +1,16 @@
-"""An SB3 PPO config as RLlib's ``PPOConfig``, and the RLModule a run's weights go into.
+"""An SB3 PPO or SAC config as RLlib's, and the RLModule a run's weights go into.
 
 The same :class:`~aftir_rl.rl.sb3.config.SB3Config` (an entry of
-``configs/hyperparams/ppo.yml`` or a named config, with the command line's overrides) trains
-with either library: :data:`PPO_TRAINING_KEYS` maps SB3's PPO hyperparameters to RLlib's, the
-ones a config leaves out take SB3's defaults (:data:`SB3_PPO_DEFAULTS`), so both libraries run
-the same algorithm settings: ``n_steps`` per env between updates (RLlib's rollout fragment),
-``n_envs`` envs in all, minibatches of ``batch_size``, ``n_epochs`` passes, clipping, no KL
-penalty, separate policy and value networks of ``policy_kwargs.net_arch`` with tanh.
+``configs/hyperparams/<algo>.yml`` or a named config, with the command line's overrides) trains
+with either library (:func:`rllib_config`): SB3's hyperparameters map to RLlib's, the ones a
+config leaves out take SB3's defaults (:data:`SB3_DEFAULTS`), so both libraries run the same
+settings. PPO: ``n_steps`` per env between updates (RLlib's rollout fragment), ``n_envs`` envs
+in all, minibatches of ``batch_size``, ``n_epochs`` passes, clipping, no KL penalty, separate
+policy and value networks of ``policy_kwargs.net_arch`` with tanh. SAC: one learning rate for
+actor, critics and temperature, a uniform replay buffer of ``buffer_size``, ``learning_starts``,
+``gradient_steps`` updates of ``batch_size`` per ``train_freq`` steps of every env (RLlib's
+training intensity), the temperature learnt from ``ent_coef`` ``auto`` or ``auto_X``, twin
+critics, ReLU networks of ``net_arch``.
 
 ``Dict`` observations (the goal-conditioned FTL env) are flattened by RLlib's own
 ``FlattenObservations`` connector in training and by the same function in
@@ -27,15 +31,19 @@ from aftir_rl.rl.sb3.config import BATCHED_ENV_IDS, SB3Config
 
 if TYPE_CHECKING:
     import gymnasium as gym
-    from ray.rllib.algorithms.ppo import PPOConfig
 
 __all__ = [
     "INSTALL_HINT",
     "LIBRARY",
     "MAX_ENV_RUNNERS",
+    "ALGORITHMS",
     "PPO_TRAINING_KEYS",
+    "SAC_KEYS",
+    "SB3_DEFAULTS",
     "SB3_PPO_DEFAULTS",
+    "SB3_SAC_DEFAULTS",
     "check_rllib_config",
+    "rllib_config",
     "ppo_config",
     "observation_space",
     "build_module",
@@ -48,6 +56,9 @@ INSTALL_HINT = 'pip install "aftir_rl[rllib]"'
 LIBRARY = "rllib"
 #: The most env runner processes a run asks for (each a Ray actor with one CPU).
 MAX_ENV_RUNNERS = 256
+
+#: The algorithms RLlib trains here.
+ALGORITHMS = ("ppo", "sac")
 
 #: SB3's PPO hyperparameters and the keyword of RLlib's ``PPOConfig.training`` each becomes.
 #: ``n_steps`` is the rollout fragment (steps per env between updates) and ``policy_kwargs``
@@ -77,29 +88,65 @@ SB3_PPO_DEFAULTS: dict[str, Any] = {
     "max_grad_norm": 0.5,
     "policy_kwargs": {"net_arch": [64, 64]},
 }
+#: SB3's SAC hyperparameters RLlib's SAC takes (how each maps: :func:`rllib_config`).
+SAC_KEYS = (
+    "learning_rate",
+    "buffer_size",
+    "learning_starts",
+    "batch_size",
+    "tau",
+    "gamma",
+    "train_freq",
+    "gradient_steps",
+    "ent_coef",
+    "target_entropy",
+)
+#: SB3's SAC defaults (stable_baselines3.SAC), for the keys a config leaves out.
+SB3_SAC_DEFAULTS: dict[str, Any] = {
+    "learning_rate": 3e-4,
+    "buffer_size": 1_000_000,
+    "learning_starts": 100,
+    "batch_size": 256,
+    "tau": 0.005,
+    "gamma": 0.99,
+    "train_freq": 1,
+    "gradient_steps": 1,
+    "ent_coef": "auto",
+    "target_entropy": "auto",
+    "policy_kwargs": {"net_arch": [256, 256]},
+}
+#: Each algorithm's SB3 defaults.
+SB3_DEFAULTS = {"ppo": SB3_PPO_DEFAULTS, "sac": SB3_SAC_DEFAULTS}
 
 
-def check_rllib_config(config: SB3Config, env_runners: int, source: str = "config") -> None:
-    """Refuse what RLlib's PPO cannot train as SB3 would, in one line naming the key.
+def check_rllib_config(
+    config: SB3Config, env_runners: int, source: str = "config", algo: str = "ppo"
+) -> None:
+    """Refuse what RLlib's ``algo`` cannot train as SB3 would, in one line naming the key.
 
     Raises:
         ConfigError: HER, a hyperparameter without an RLlib counterpart, a ``policy_kwargs``
-            other than ``net_arch``, a schedule instead of a number, or ``n_envs`` that the env
-            runners cannot share equally.
+            other than ``net_arch``, a schedule instead of a number, a fixed SAC temperature,
+            or ``n_envs`` that the env runners cannot share equally.
 
     """
+    if algo not in ALGORITHMS:
+        raise ConfigError(f"RLlib trains {' and '.join(ALGORITHMS)} here, not {brief(algo)}")
     if config.her:
-        raise ConfigError(f"{source}: her: RLlib's PPO takes no replay buffer")
+        raise ConfigError(f"{source}: her: RLlib's replay buffers have no HER here")
     if not isinstance(env_runners, int) or not 0 <= env_runners <= MAX_ENV_RUNNERS:
         raise ConfigError(f"--env-runners must be from 0 to {MAX_ENV_RUNNERS}")
+    known = ("n_steps", *PPO_TRAINING_KEYS) if algo == "ppo" else SAC_KEYS
     for key, value in config.hyperparameters.items():
         if key == "policy_kwargs":
-            _net_arch(value, source)
-        elif key not in PPO_TRAINING_KEYS and key != "n_steps":
+            _net_arch(value, source, algo)
+        elif key not in known:
             raise ConfigError(
-                f"{source}: hyperparameters: {brief(key)} has no counterpart in RLlib's PPO "
-                f"(it takes {', '.join(['n_steps', *PPO_TRAINING_KEYS, 'policy_kwargs'])})"
+                f"{source}: hyperparameters: {brief(key)} has no counterpart in RLlib's "
+                f"{algo.upper()} (it takes {', '.join([*known, 'policy_kwargs'])})"
             )
+        elif algo == "sac" and key in ("ent_coef", "target_entropy"):
+            _temperature(key, value, source)
         elif isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{source}: hyperparameters: {key} must be a number for RLlib")
     if env_runners and config.n_envs % env_runners:
@@ -109,24 +156,52 @@ def check_rllib_config(config: SB3Config, env_runners: int, source: str = "confi
         )
 
 
-def _net_arch(policy_kwargs: Any, source: str) -> list[int]:
+def _temperature(key: str, value: Any, source: str) -> float | str:
+    """SAC's ``ent_coef`` or ``target_entropy`` as RLlib takes them.
+
+    ``ent_coef``: ``auto`` or ``auto_X``, the initial temperature (1 or X); ``target_entropy``:
+    ``auto`` or a number.
+    """
+    if key == "target_entropy":
+        if value == "auto" or (isinstance(value, (int, float)) and not isinstance(value, bool)):
+            return value if value == "auto" else float(value)
+        raise ConfigError(f"{source}: hyperparameters: target_entropy: auto or a number")
+    if isinstance(value, str) and (value == "auto" or value.startswith("auto_")):
+        try:
+            initial = 1.0 if value == "auto" else float(value[len("auto_") :])
+        except ValueError:
+            initial = -1.0
+        if initial > 0 and math.isfinite(initial):
+            return initial
+    raise ConfigError(
+        f"{source}: hyperparameters: ent_coef: RLlib's SAC learns its temperature: auto or "
+        "auto_X (X the initial one)"
+    )
+
+
+def _net_arch(policy_kwargs: Any, source: str, algo: str = "ppo") -> list[int]:
     """The layer widths of ``policy_kwargs`` (``{"net_arch": [256, 256]}``)."""
     if not isinstance(policy_kwargs, dict) or set(policy_kwargs) - {"net_arch"}:
-        raise ConfigError(f"{source}: policy_kwargs: RLlib's PPO takes net_arch only")
-    arch = policy_kwargs.get("net_arch", SB3_PPO_DEFAULTS["policy_kwargs"]["net_arch"])
+        raise ConfigError(f"{source}: policy_kwargs: RLlib's {algo.upper()} takes net_arch only")
+    arch = policy_kwargs.get("net_arch", SB3_DEFAULTS[algo]["policy_kwargs"]["net_arch"])
     if not isinstance(arch, list) or not all(type(w) is int and w > 0 for w in arch):
         raise ConfigError(f"{source}: policy_kwargs.net_arch: a list of layer widths for RLlib")
     return list(arch)
 
 
-def _hyper(config: SB3Config) -> dict[str, Any]:
-    """The config's PPO hyperparameters over SB3's defaults."""
-    return {**SB3_PPO_DEFAULTS, **config.hyperparameters}
+def _hyper(config: SB3Config, algo: str = "ppo") -> dict[str, Any]:
+    """The config's hyperparameters over SB3's defaults for ``algo``."""
+    return {**SB3_DEFAULTS[algo], **config.hyperparameters}
 
 
-def model_config(config: SB3Config) -> dict[str, Any]:
-    """RLlib's ``model_config`` of the default PPO module: SB3's MlpPolicy's networks."""
-    arch = _net_arch(_hyper(config)["policy_kwargs"], "config")
+def model_config(config: SB3Config, algo: str = "ppo") -> dict[str, Any]:
+    """RLlib's ``model_config`` of the default module: SB3's networks.
+
+    Tanh for PPO, ReLU for SAC, as SB3's policies.
+    """
+    arch = _net_arch(_hyper(config, algo)["policy_kwargs"], "config", algo)
+    if algo == "sac":
+        return {"fcnet_hiddens": arch, "fcnet_activation": "relu"}
     return {"fcnet_hiddens": arch, "fcnet_activation": "tanh", "vf_share_layers": False}
 
 
@@ -137,38 +212,78 @@ def flatten_connector(env: object = None, spaces: object = None, device: object 
     return FlattenObservations()
 
 
-def ppo_config(config: SB3Config, env_id: str, seed: int, env_runners: int) -> PPOConfig:
-    """RLlib's ``PPOConfig`` of a checked ``config`` (:func:`check_rllib_config`).
+def rllib_config(algo: str, config: SB3Config, env_id: str, seed: int, env_runners: int) -> Any:
+    """RLlib's ``PPOConfig`` or ``SACConfig`` of a checked ``config`` (:func:`check_rllib_config`).
 
-    ``env_runners`` processes (0: the driver samples) share ``n_envs`` envs; one training
-    batch is ``n_steps × n_envs`` steps, as SB3's rollout.
+    ``env_runners`` processes (0: the driver samples) share ``n_envs`` envs, each making a
+    batched env through its ``vector_entry_point`` (others as Gymnasium's sync vector env).
     """
     from ray.rllib.algorithms.ppo import PPOConfig
+    from ray.rllib.algorithms.sac import SACConfig
 
-    hyper = _hyper(config)
+    hyper = _hyper(config, algo)
     bare = env_id.removeprefix("aftir_rl:")
-    training = {rl: hyper[sb3] for sb3, rl in PPO_TRAINING_KEYS.items()}
-    return (
-        PPOConfig()
-        .environment(f"aftir_rl:{bare}", env_config=dict(config.env_kwargs))
+    fragment = int(hyper["n_steps"] if algo == "ppo" else hyper["train_freq"])
+    rl: Any = PPOConfig() if algo == "ppo" else SACConfig()
+    rl = (
+        rl.environment(f"aftir_rl:{bare}", env_config=dict(config.env_kwargs))
         .env_runners(
             num_env_runners=env_runners,
             num_envs_per_env_runner=config.n_envs // max(env_runners, 1),
             num_cpus_per_env_runner=1,
-            rollout_fragment_length=int(hyper["n_steps"]),
+            rollout_fragment_length=fragment,
             gym_env_vectorize_mode="vector_entry_point" if bare in BATCHED_ENV_IDS else "sync",
             env_to_module_connector=flatten_connector,
         )
         .training(
-            **training,
-            train_batch_size_per_learner=int(hyper["n_steps"]) * config.n_envs,
-            use_kl_loss=False,
-            vf_clip_param=math.inf,  # SB3 clips the policy's ratio, not the value loss
+            **(_ppo_training(hyper, config) if algo == "ppo" else _sac_training(hyper, config))
         )
-        .rl_module(model_config=model_config(config))
+        .rl_module(model_config=model_config(config, algo))
         .fault_tolerance(restart_failed_env_runners=False)  # a failure ends the run, said
         .debugging(seed=seed, log_level="ERROR")
     )
+    return rl
+
+
+def _ppo_training(hyper: dict[str, Any], config: SB3Config) -> dict[str, Any]:
+    """``PPOConfig.training``'s keywords: one update is ``n_steps × n_envs`` steps, as SB3's."""
+    return {
+        **{rl: hyper[sb3] for sb3, rl in PPO_TRAINING_KEYS.items()},
+        "train_batch_size_per_learner": int(hyper["n_steps"]) * config.n_envs,
+        "use_kl_loss": False,
+        "vf_clip_param": math.inf,  # SB3 clips the policy's ratio, not the value loss
+    }
+
+
+def _sac_training(hyper: dict[str, Any], config: SB3Config) -> dict[str, Any]:
+    """``SACConfig.training``'s keywords.
+
+    SB3's ``gradient_steps`` updates of ``batch_size`` per ``train_freq`` steps of every env
+    become RLlib's training intensity (steps trained over steps sampled).
+    """
+    sampled = int(hyper["train_freq"]) * config.n_envs
+    return {
+        "actor_lr": hyper["learning_rate"],
+        "critic_lr": hyper["learning_rate"],
+        "alpha_lr": hyper["learning_rate"],
+        "train_batch_size_per_learner": int(hyper["batch_size"]),
+        "tau": hyper["tau"],
+        "gamma": hyper["gamma"],
+        "num_steps_sampled_before_learning_starts": int(hyper["learning_starts"]),
+        "training_intensity": int(hyper["gradient_steps"]) * int(hyper["batch_size"]) / sampled,
+        "initial_alpha": _temperature("ent_coef", hyper["ent_coef"], "config"),
+        "target_entropy": _temperature("target_entropy", hyper["target_entropy"], "config"),
+        "twin_q": True,
+        "replay_buffer_config": {
+            "type": "EpisodeReplayBuffer",  # uniform, as SB3's
+            "capacity": int(hyper["buffer_size"]),
+        },
+    }
+
+
+def ppo_config(config: SB3Config, env_id: str, seed: int, env_runners: int) -> Any:
+    """RLlib's ``PPOConfig`` of a checked PPO ``config`` (:func:`rllib_config`)."""
+    return rllib_config("ppo", config, env_id, seed, env_runners)
 
 
 @contextmanager
@@ -197,13 +312,15 @@ def observation_space(space: gym.Space[Any]) -> gym.Space[Any]:
     return FlattenObservations(space).observation_space
 
 
-def build_module(config: SB3Config, space: gym.Space[Any], action_space: gym.Space[Any]) -> Any:
-    """A new PPO module (torch) for an env of ``space`` and ``action_space``, on the CPU."""
-    from ray.rllib.algorithms.ppo import PPOConfig
-
-    spec = PPOConfig().rl_module(model_config=model_config(config)).get_default_rl_module_spec()
+def build_module(
+    config: SB3Config, space: gym.Space[Any], action_space: gym.Space[Any], algo: str = "ppo"
+) -> Any:
+    """A new inference-only module of ``algo`` (torch, CPU): what acts, without critics."""
+    rl = rllib_config(algo, config, "aftir_rl:AFTIR-ArmReach-v0", 0, 0)
+    spec = rl.get_default_rl_module_spec()
     spec.observation_space = observation_space(space)
     spec.action_space = action_space
-    spec.model_config = model_config(config)
+    spec.model_config = rl.model_config
+    spec.inference_only = True
     with quiet_rllib():
         return spec.build()

@@ -108,12 +108,12 @@ def learner_checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
 
 
 class RLlibPolicy:
-    """An RLlib PPO module with SB3's ``predict`` (what evaluate, rollout and record call).
+    """An RLlib module (PPO's or SAC's, inference only) with SB3's ``predict``.
 
-    The observation is flattened as RLlib's ``FlattenObservations`` connector does in
-    training; the action is the distribution's mean (``deterministic``) or a sample (torch's
-    generator), then mapped from RLlib's normalised actions into the action space, as the env
-    runners do (``unsquash_action``).
+    What evaluate, rollout and record call. The observation is flattened as RLlib's
+    ``FlattenObservations`` connector does in training; the action is the distribution's mean
+    (``deterministic``) or a sample (torch's generator), then mapped from RLlib's normalised
+    actions into the action space, as the env runners do (``unsquash_action``).
     """
 
     def __init__(self, module: Any, space: gym.Space[Any], action_space: gym.Space[Any]) -> None:
@@ -139,6 +139,11 @@ class RLlibPolicy:
             dist = dist.to_deterministic()
         action = np.asarray(dist.sample()[0])
         return unsquash_action(action, self.action_space), None
+
+    def acting(self, weights: dict[str, Any]) -> dict[str, Any]:
+        """The tensors of a learner's module that this (inference-only) module has."""
+        own = self.module.state_dict()
+        return {k: v for k, v in weights.items() if k in own}
 
     def load_weights(self, weights: dict[str, Any], source: str) -> None:
         """Set the module's weights from a ``state_dict`` (every tensor, shapes as built).

@@ -1,7 +1,7 @@
-"""PPO with RLlib on the arm envs, on this machine or a Ray cluster: :func:`train_rllib`.
+"""PPO and SAC with RLlib on the arm envs, on this machine or a Ray cluster: :func:`train_rllib`.
 
-``aftir train ppo --rllib [--ray ADDRESS] [--env-runners N]`` trains the same config as
-``aftir train ppo`` (:mod:`aftir_rl.rl.rllib.config`), with RLlib's PPO: ``N`` env runner
+``aftir train ppo|sac --rllib [--ray ADDRESS] [--env-runners N]`` trains the same config as
+``aftir train ppo|sac`` (:mod:`aftir_rl.rl.rllib.config`), with RLlib's algorithm: ``N`` env runner
 processes (Ray actors, anywhere on the cluster) step ``n_envs`` envs between them, the learner
 runs in this process. The run directory is an SB3 run's in form: ``config.json`` (the same
 keys), ``rllib.json`` (the library, its version, the env runners), TensorBoard events and
@@ -37,12 +37,13 @@ from aftir_rl.core.tank.loading import keep_run_tank
 from aftir_rl.rl.common import check_env_id, hyperparameter_text, run_name
 from aftir_rl.rl.logs import run_logger
 from aftir_rl.rl.rllib.config import (
+    ALGORITHMS,
     INSTALL_HINT,
     LIBRARY,
     build_module,
     check_rllib_config,
-    ppo_config,
     quiet_rllib,
+    rllib_config,
 )
 from aftir_rl.rl.rllib.policy import (
     MODULE_FILE,
@@ -68,8 +69,8 @@ __all__ = [
 
 #: The file that marks an RLlib run directory: the library, its version and the env runners.
 RLLIB_FILE = "rllib.json"
-#: The algorithm's name in run directory names (``rllib-ppo__AFTIR-ArmFTL-v0__random__0__...``).
-RUN_PREFIX = "rllib-ppo"
+#: Before the algorithm in run directory names (``rllib-ppo__AFTIR-ArmFTL-v0__random__0__...``).
+RUN_PREFIX = "rllib-"
 
 
 def require_rllib() -> None:
@@ -85,17 +86,17 @@ def require_rllib() -> None:
         raise ConfigError(f"--rllib needs RLlib: {INSTALL_HINT}") from None
 
 
-def check_rllib_run(config: SB3Config, env_runners: int) -> str:
-    """Check a run before Ray starts; the env's bare id.
+def check_rllib_run(config: SB3Config, env_runners: int, algo: str = "ppo") -> str:
+    """Check a run of ``algo`` before Ray starts; the env's bare id.
 
     Raises:
-        ConfigError: an env RLlib's PPO does not train here, a value out of range, what RLlib
+        ConfigError: an env ``algo`` does not train here, a value out of range, what RLlib
             cannot train as SB3 would (:func:`check_rllib_config`), or RLlib missing.
 
     """
-    bare = check_env_id(config.env_id, SB3_ENV_IDS, "ppo")
-    check_sb3_values(config, "ppo", bare, Origins("config"))
-    check_rllib_config(config, env_runners)
+    check_rllib_config(config, env_runners, algo=algo)
+    bare = check_env_id(config.env_id, SB3_ENV_IDS, algo)
+    check_sb3_values(config, algo, bare, Origins("config"))
     require_rllib()
     return bare
 
@@ -111,15 +112,15 @@ class RLlibRun:
     model: RLlibPolicy
 
 
-def _policy(config: SB3Config, env_id: str) -> RLlibPolicy:
-    """A new policy (random weights) for the env ``config`` trains on."""
+def _policy(config: SB3Config, env_id: str, algo: str) -> RLlibPolicy:
+    """A new policy of ``algo`` (random weights) for the env ``config`` trains on."""
     import gymnasium as gym
 
     from aftir_rl.rl.sb3.evaluation import evaluation_env_kwargs
 
     env = gym.make(env_id, **evaluation_env_kwargs(config.env_kwargs))
     try:
-        module = build_module(config, env.observation_space, env.action_space)
+        module = build_module(config, env.observation_space, env.action_space, algo)
         return RLlibPolicy(module, env.observation_space, env.action_space)
     finally:
         env.close()
@@ -144,8 +145,10 @@ def load_rllib_run(run_dir: str | Path) -> RLlibRun:
     read_json(run_file(run_dir, RLLIB_FILE), RLLIB_FILE)
     algo, config = sb3_config_from_run(read_json(run_file(run_dir, "config.json")), source)
     env_id = f"aftir_rl:{registered_env_id(config.env_id, source)}"
+    if algo not in ALGORITHMS:
+        raise CheckpointError(f"{source}: algo {algo}: RLlib runs are {', '.join(ALGORITHMS)}")
     require_rllib()
-    policy = _policy(config, env_id)
+    policy = _policy(config, env_id, algo)
     weights_file = run_dir / MODULE_FILE
     if weights_file.exists():
         weights = load_tensors(run_file(run_dir, MODULE_FILE), "weights")
@@ -153,7 +156,8 @@ def load_rllib_run(run_dir: str | Path) -> RLlibRun:
         found = learner_checkpoints(run_dir)
         if not found:
             raise CheckpointError(f"{run_dir}: no {MODULE_FILE} and no learner checkpoint")
-        weights = _module_weights(load_tensors(found[-1][1], "learner state"), str(found[-1][1]))
+        state = load_tensors(found[-1][1], "learner state")
+        weights = policy.acting(_module_weights(state, str(found[-1][1])))
     policy.load_weights(weights, str(weights_file))
     return RLlibRun(run_dir, algo, config, env_id, policy)
 
@@ -212,13 +216,17 @@ class TrainingFailed(AftirError):
 def train_rllib(
     config: SB3Config,
     *,
+    algo: str = "ppo",
     seed: int = 0,
     logdir: str | Path = "runs",
     resume: str | Path | None = None,
     env_runners: int = 1,
     progress_bar: bool = True,
 ) -> dict[str, Any]:
-    """Train PPO with RLlib on ``config``'s env; one run directory (module docstring).
+    """Train ``algo`` (``ppo``, ``sac``) with RLlib on ``config``'s env; one run directory.
+
+    The run directory and its files: the module docstring. SAC resumes its networks and
+    optimizers; its replay buffer starts empty again.
 
     Runs on the Ray this process is connected to (``aftir`` connects to ``--ray ADDRESS``,
     :func:`aftir_rl.experiments.distributed.ray_session`); without one, RLlib starts a local
@@ -236,7 +244,7 @@ def train_rllib(
             is kept when it holds a checkpoint).
 
     """
-    bare = check_rllib_run(config, env_runners)
+    bare = check_rllib_run(config, env_runners, algo)
     import ray
 
     from aftir_rl.rl.sb3.evaluation import evaluation_targets
@@ -245,22 +253,22 @@ def train_rllib(
     resumed = _resumed(resume) if resume is not None else None
     env_id = f"aftir_rl:{bare}"
     targets = evaluation_targets(env_id, config.eval_targets, env_kwargs=config.env_kwargs)
-    policy = _policy(config, env_id)
+    policy = _policy(config, env_id, algo)
     with quiet_rllib():
         if not ray.is_initialized():
             ray.init(
                 num_cpus=max(env_runners, 1), include_dashboard=False, logging_level=logging.ERROR
             )
         cluster = _cluster(env_runners)
-        algo: Any = ppo_config(config, env_id, seed, env_runners).build_algo()
+        rl: Any = rllib_config(algo, config, env_id, seed, env_runners).build_algo()
     try:
         if resumed is not None:
-            _restore(algo, resumed, policy)
-        trainer = _Trainer(algo, config, env_id, policy, targets, seed, resumed)
-        run_dir = folder / run_name(RUN_PREFIX, bare, "random", seed)
+            _restore(rl, resumed, policy)
+        trainer = _Trainer(rl, algo, config, env_id, policy, targets, seed, resumed)
+        run_dir = folder / run_name(RUN_PREFIX + algo, bare, "random", seed)
         return trainer.run(run_dir, progress_bar, {"env_runners": env_runners, **cluster})
     finally:
-        algo.stop()
+        rl.stop()
 
 
 def _restore(algo: Any, resumed: _Resumed, policy: RLlibPolicy) -> None:
@@ -272,7 +280,8 @@ def _restore(algo: Any, resumed: _Resumed, policy: RLlibPolicy) -> None:
         CheckpointError: the checkpoint does not fit this config's network or optimizer.
 
     """
-    policy.load_weights(_module_weights(resumed.state, str(resumed.path)), str(resumed.path))
+    weights = policy.acting(_module_weights(resumed.state, str(resumed.path)))
+    policy.load_weights(weights, str(resumed.path))
     try:
         algo.learner_group.set_state(resumed.state)
     except Exception as exc:  # RLlib's and torch's errors for a state of another network
@@ -303,12 +312,29 @@ def _cluster(env_runners: int) -> dict[str, int]:
     return {"nodes": len(nodes), "cpus": cpus}
 
 
+#: SB3's TensorBoard tags of the learners' numbers, and RLlib's names of them.
+_LOSS_TAGS = {
+    "ppo": {
+        "train/policy_gradient_loss": "policy_loss",
+        "train/value_loss": "vf_loss",
+        "train/loss": "total_loss",
+    },
+    "sac": {
+        "train/actor_loss": "policy_loss",
+        "train/critic_loss": "qf_loss",
+        "train/ent_coef_loss": "alpha_loss",
+        "train/ent_coef": "alpha_value",
+    },
+}
+
+
 class _Trainer:
     """One RLlib run: train, log, evaluate, checkpoint, write the run directory."""
 
     def __init__(
         self,
         algo: Any,
+        name: str,
         config: SB3Config,
         env_id: str,
         policy: RLlibPolicy,
@@ -318,7 +344,8 @@ class _Trainer:
     ) -> None:
         from aftir_rl.rl.sb3.evaluation import Period
 
-        self.algo, self.config, self.env_id, self.policy = algo, config, env_id, policy
+        self.algo, self.name, self.config = algo, name, config
+        self.env_id, self.policy = env_id, policy
         self.targets, self.seed, self.resumed = targets, seed, resumed
         self.offset = resumed.steps if resumed else 0
         self.start = resumed.start if resumed else 0
@@ -344,7 +371,7 @@ class _Trainer:
                 save_tensors(self.policy.module.state_dict(), partial / MODULE_FILE)
                 self._checkpoint(partial)
             summary = {
-                "algo": "ppo",
+                "algo": self.name,
                 "library": LIBRARY,
                 "env_id": self.config.env_id,
                 "timesteps": self.steps,
@@ -362,7 +389,7 @@ class _Trainer:
 
         params = {
             **dataclasses.asdict(self.config),
-            "algo": "ppo",
+            "algo": self.name,
             "seed": self.seed,
             "resume": str(self.resumed.path) if self.resumed else None,
         }
@@ -425,15 +452,13 @@ class _Trainer:
         numbers = {
             "rollout/ep_rew_mean": runners.get("episode_return_mean"),
             "rollout/ep_len_mean": runners.get("episode_len_mean"),
-            "train/policy_gradient_loss": losses.get("policy_loss"),
-            "train/value_loss": losses.get("vf_loss"),
-            "train/entropy_loss": (
-                -float(losses["entropy"]) if losses.get("entropy") is not None else None
-            ),
-            "train/loss": losses.get("total_loss"),
             "time/fps": batch / seconds,
             "time/total_timesteps": self.steps,
         }
+        for tag, key in _LOSS_TAGS[self.name].items():
+            numbers[tag] = losses.get(key)
+        if self.name == "ppo" and losses.get("entropy") is not None:
+            numbers["train/entropy_loss"] = -float(losses["entropy"])
         for key, value in numbers.items():
             if value is not None and np.isfinite(float(value)):
                 logger.record(key, float(value))
@@ -441,7 +466,9 @@ class _Trainer:
 
     def _set_policy(self) -> None:
         """The learner's weights into the policy evaluation runs."""
-        state = self.algo.learner_group.get_state(components="learner/rl_module")
+        state = self.algo.learner_group.get_state(
+            components="learner/rl_module", inference_only=True
+        )
         weights = _module_weights(as_tensors(state), "the learner")
         self.policy.load_weights(weights, "the learner")
 
