@@ -354,6 +354,7 @@ class _Trainer:
         self.evals.start(self.steps)
         self.checkpoints.start(self.steps)
         self.last_metrics: dict[str, float] = {}
+        self.evaluated_at: int | None = None
         self.best: tuple[float, float] | None = None
         self.best_metrics: dict[str, float] = {}
 
@@ -366,7 +367,7 @@ class _Trainer:
             with interrupts.deferred():
                 self._train(partial, logger, progress_bar)
                 self._set_policy()
-                if not self.last_metrics or self.evals.next_step <= self.steps:
+                if self.evaluated_at != self.steps:  # the last weights, as SB3's runs end
                     self._evaluate(partial, logger)
                 save_tensors(self.policy.module.state_dict(), partial / MODULE_FILE)
                 self._checkpoint(partial)
@@ -485,7 +486,7 @@ class _Trainer:
         )
         for key, value in metrics.items():
             logger.record(f"eval/{key}", value)
-        self.last_metrics = metrics
+        self.last_metrics, self.evaluated_at = metrics, self.steps
         error = metrics["tip_error_cm"]
         score = (metrics["success_rate"], -error if np.isfinite(error) else -np.inf)
         if self.best is None or score > self.best:
