@@ -372,3 +372,29 @@ def test_an_rllib_run_is_evaluated_and_rolled_out_without_ray(tmp_path, capsys):
     assert rollout.main([str(run), "--target", "20", "10", "60", "-o", str(out)]) == 0
     (motion,) = out.glob("*/trajectory.json")
     assert json.loads(motion.read_text())["steps"] >= 1
+
+
+class _Diverging:
+    """What RLlib's ``Algorithm.train`` returns once a loss overflows (its weights may not)."""
+
+    def train(self) -> dict:
+        losses = {"total_loss": float("nan"), "policy_loss": 0.1}
+        return {
+            "env_runners": {"num_env_steps_sampled_lifetime": 64},
+            "learners": {"default_policy": losses},
+        }
+
+
+def test_a_loss_that_is_not_finite_keeps_the_run_and_says_so(tmp_path):
+    from aftir_rl.rl.rllib import train as rllib_train
+
+    env_id = "aftir_rl:AFTIR-ArmReach-v0"
+    config = SB3Config(total_timesteps=128, eval_freq=64, checkpoint_freq=64)
+    policy = rllib_train._policy(config, env_id, "ppo")
+    trainer = rllib_train._Trainer(_Diverging(), "ppo", config, env_id, policy, [], 0, None)
+    with pytest.raises(rllib_train.TrainingFailed, match="diverged at step 64"):
+        trainer.run(tmp_path / "run", False, {"env_runners": 1})
+    (kept,) = tmp_path.glob(".run.partial")
+    assert json.loads((kept / "diverged.json").read_text())["step"] == 64
+    assert (kept / "config.json").exists() and (kept / "progress.csv").exists()
+    assert not (tmp_path / "run").exists()

@@ -54,6 +54,7 @@ from aftir_rl.rl.rllib.policy import (
     save_tensors,
 )
 from aftir_rl.rl.sb3.config import SB3_ENV_IDS, Origins, SB3Config, check_sb3_values
+from aftir_rl.rl.sb3.train import DIVERGED
 
 if TYPE_CHECKING:
     from stable_baselines3.common.logger import Logger
@@ -412,7 +413,7 @@ class _Trainer:
             while self.steps < goal:
                 if interrupts.requested():
                     self._stopped(partial)
-                result = self._iteration()
+                result = self._iteration(partial)
                 bar.update(self.steps - bar.n - self.start)
                 self._log(logger, result)
                 if self.evals.due(self.steps) and not interrupts.requested():
@@ -425,8 +426,12 @@ class _Trainer:
         if interrupts.requested():
             self._stopped(partial)
 
-    def _iteration(self) -> dict[str, Any]:
-        """One ``algo.train()``; the run's step count updated."""
+    def _iteration(self, partial: Path) -> dict[str, Any]:
+        """One ``algo.train()``; the run's step count updated.
+
+        A loss that is no longer finite writes ``diverged.json`` (the step), so the run folder
+        is kept with its logs, and raises :class:`TrainingFailed` saying where.
+        """
         try:
             result = self.algo.train()
         except Exception as exc:  # an env runner's error comes back as Ray's, with a traceback
@@ -438,9 +443,10 @@ class _Trainer:
         self.steps = self.offset + int(sampled)
         losses = result.get("learners", {}).get("default_policy", {})
         if not all(np.isfinite(float(v)) for k, v in losses.items() if k.endswith("loss")):
+            write_json(partial / DIVERGED, {"step": self.steps, "library": LIBRARY})
             raise TrainingFailed(
-                f"training diverged at step {self.steps} (a loss is not finite); lower the "
-                "learning rate"
+                f"training diverged at step {self.steps} (a loss is not finite); its logs are "
+                f"kept in {partial}; lower the learning rate"
             )
         return result
 
@@ -520,5 +526,5 @@ class _Trainer:
 
 
 def _kept_on_failure(partial: Path) -> bool:
-    """Keep a failed run's folder when it holds a learner checkpoint to resume from."""
-    return bool(learner_checkpoints(partial))
+    """Keep a failed run's folder when it can be resumed or it diverged (its logs say how)."""
+    return bool(learner_checkpoints(partial)) or (partial / DIVERGED).exists()
