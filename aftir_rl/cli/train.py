@@ -333,14 +333,18 @@ def _main_rllib(args: argparse.Namespace) -> int:
             env_runners=runners,
             progress_bar=run.progress_bar,
         )
+    _print_run(f"{run.algo.upper()} (RLlib, {runners} env runner{'s' * (runners != 1)})", s)
+    return 0
+
+
+def _print_run(what: str, s: dict[str, Any]) -> None:
+    """A trained run's line (steps, time, last evaluation) and its run directory."""
     print(
-        f"{run.algo.upper()} (RLlib, {runners} env runner{'s' * (runners != 1)}) on "
-        f"{s['env_id']}: {s['timesteps']} steps in {s['seconds']:.0f} s; evaluation: success "
-        f"{s['success_rate']:.0%}, tip error {s['tip_error_cm']:.1f} cm, path "
+        f"{what} on {s['env_id']}: {s['timesteps']} steps in {s['seconds']:.0f} s; evaluation: "
+        f"success {s['success_rate']:.0%}, tip error {s['tip_error_cm']:.1f} cm, path "
         f"{s['path_length_cm']:.0f} cm, collisions {s['collision_rate']:.0%}"
     )
     print(f"  run dir: {s['run_dir']}")
-    return 0
 
 
 def _main_sb3(args: argparse.Namespace) -> int:
@@ -373,13 +377,7 @@ def _main_sb3(args: argparse.Namespace) -> int:
     summaries = train_run(run, pretrain)
     for k, s in enumerate(summaries):
         stage = f"stage {k}: " if len(summaries) > 1 else ""
-        print(
-            f"{stage}{run.algo.upper()} on {s['env_id']}: {s['timesteps']} steps in "
-            f"{s['seconds']:.0f} s; evaluation: success {s['success_rate']:.0%}, tip error "
-            f"{s['tip_error_cm']:.1f} cm, path {s['path_length_cm']:.0f} cm, collisions "
-            f"{s['collision_rate']:.0%}"
-        )
-        print(f"  run dir: {s['run_dir']}")
+        _print_run(f"{stage}{run.algo.upper()}", s)
     return 0
 
 

@@ -87,6 +87,12 @@ def shorten(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+def error_line(exc: BaseException, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """The first line of ``exc``'s message (its type's name if empty), :func:`shorten`-ed."""
+    text = str(exc).strip()
+    return shorten(text.splitlines()[0] if text else type(exc).__name__, limit)
+
+
 def one_line(text: str) -> str:
     """``text`` with every run of whitespace made one space and other control characters "?"."""
     return _CONTROL.sub("?", " ".join(text.split()))

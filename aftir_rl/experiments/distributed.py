@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from aftir_rl.core.config import shorten
+from aftir_rl.core.config import error_line, shorten
 from aftir_rl.core.errors import AftirError, CheckpointError
 from aftir_rl.core.tank.raster import format_point
 
@@ -166,9 +166,8 @@ def ray_session(
         else:
             ray.init(address=address, **kwargs)
     except (ConnectionError, RuntimeError, ValueError, TimeoutError, OSError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise RayError(
-            f"cannot start or reach Ray at {address!r} ({shorten(first, 160)}); start a cluster "
+            f"cannot start or reach Ray at {address!r} ({error_line(exc, 160)}); start a cluster "
             "with `ray start --head` or use --ray local (a cluster with token authentication, "
             "the default of `ray start`, also needs RAY_AUTH_MODE=token and its token here)"
         ) from None

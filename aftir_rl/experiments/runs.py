@@ -206,9 +206,9 @@ def load_rllib_run(run_dir: str | Path) -> SB3Run:
     """
     from aftir_rl.rl.rllib.train import load_rllib_run as load
 
-    run = load(run_dir)
-    model = cast("BaseAlgorithm", run.model)  # only its predict is called
-    return SB3Run(Path(run_dir), run.algo, run.config, run.env_id, model, "rllib")
+    algo, config, env_id, policy = load(run_dir)
+    model = cast("BaseAlgorithm", policy)  # only its predict is called
+    return SB3Run(Path(run_dir), algo, config, env_id, model, "rllib")
 
 
 def load_policy_run(run_dir: str | Path) -> SB3Run:

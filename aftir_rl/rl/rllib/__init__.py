@@ -13,13 +13,12 @@ function is called.
 
 from aftir_rl.rl.rllib.config import check_rllib_config, ppo_config, rllib_config
 from aftir_rl.rl.rllib.policy import MODULE_FILE, RLlibPolicy
-from aftir_rl.rl.rllib.train import RLLIB_FILE, RLlibRun, load_rllib_run, train_rllib
+from aftir_rl.rl.rllib.train import RLLIB_FILE, load_rllib_run, train_rllib
 
 __all__ = [
     "MODULE_FILE",
     "RLLIB_FILE",
     "RLlibPolicy",
-    "RLlibRun",
     "check_rllib_config",
     "load_rllib_run",
     "ppo_config",

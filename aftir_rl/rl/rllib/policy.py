@@ -9,7 +9,6 @@ directory runs code when it is read, unlike RLlib's own checkpoints (pickles).
 
 from __future__ import annotations
 
-import io
 import os
 import re
 from pathlib import Path
@@ -18,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from aftir_rl.core.archives import BoundedZip
-from aftir_rl.core.config import read_limited, shorten
+from aftir_rl.core.config import error_line, read_limited, shorten
 from aftir_rl.core.errors import CheckpointError
 from aftir_rl.core.files import atomic_open
 
@@ -64,10 +63,8 @@ def save_tensors(state: Any, path: Path) -> Path:
     """Write ``state`` (nested dicts of arrays, tensors, numbers) to ``path``, atomically."""
     import torch
 
-    buffer = io.BytesIO()
-    torch.save(as_tensors(state), buffer)
     with atomic_open(path, "wb") as fh:
-        fh.write(buffer.getvalue())
+        torch.save(as_tensors(state), fh)
     return path
 
 
@@ -91,9 +88,8 @@ def load_tensors(path: str | os.PathLike[str], what: str) -> Any:
     try:
         return torch.load(packed, weights_only=True, map_location="cpu")
     except Exception as exc:  # torch's unpickler raises many kinds; none may escape as a crash
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise CheckpointError(
-            f"{path}: not an RLlib run's {what} ({shorten(first, 120)})"
+            f"{path}: not an RLlib run's {what} ({error_line(exc, 120)})"
         ) from None
 
 

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from aftir_rl.core import interrupts
+from aftir_rl.core.config import error_line
 from aftir_rl.core.errors import AftirError, CheckpointError, ConfigError
 from aftir_rl.core.files import (
     atomic_open,
@@ -61,7 +62,6 @@ if TYPE_CHECKING:
 
 __all__ = [
     "RLLIB_FILE",
-    "RLlibRun",
     "check_rllib_run",
     "require_rllib",
     "train_rllib",
@@ -102,17 +102,6 @@ def check_rllib_run(config: SB3Config, env_runners: int, algo: str = "ppo") -> s
     return bare
 
 
-@dataclass
-class RLlibRun:
-    """An RLlib run loaded for evaluation: ``model`` has SB3's ``predict``."""
-
-    run_dir: Path
-    algo: str
-    config: SB3Config
-    env_id: str
-    model: RLlibPolicy
-
-
 def _policy(config: SB3Config, env_id: str, algo: str) -> RLlibPolicy:
     """A new policy of ``algo`` (random weights) for the env ``config`` trains on."""
     import gymnasium as gym
@@ -127,8 +116,10 @@ def _policy(config: SB3Config, env_id: str, algo: str) -> RLlibPolicy:
         env.close()
 
 
-def load_rllib_run(run_dir: str | Path) -> RLlibRun:
-    """An RLlib run directory (or its ``best/``): its checked config and its policy.
+def load_rllib_run(run_dir: str | Path) -> tuple[str, SB3Config, str, RLlibPolicy]:
+    """``(algo, config, env_id, policy)`` of an RLlib run directory (or its ``best/``).
+
+    The same as :func:`aftir_rl.rl.sb3.load_run` gives for an SB3 run.
 
     ``config.json`` is checked key by key as an SB3 run's; the weights are ``rllib_module.pt``,
     or the newest learner checkpoint of an unfinished run, read as tensors only.
@@ -160,7 +151,7 @@ def load_rllib_run(run_dir: str | Path) -> RLlibRun:
         state = load_tensors(found[-1][1], "learner state")
         weights = policy.acting(_module_weights(state, str(found[-1][1])))
     policy.load_weights(weights, str(weights_file))
-    return RLlibRun(run_dir, algo, config, env_id, policy)
+    return algo, config, env_id, policy
 
 
 def _module_weights(state: Any, source: str) -> dict[str, Any]:
@@ -286,9 +277,8 @@ def _restore(algo: Any, resumed: _Resumed, policy: RLlibPolicy) -> None:
     try:
         algo.learner_group.set_state(resumed.state)
     except Exception as exc:  # RLlib's and torch's errors for a state of another network
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise CheckpointError(
-            f"{resumed.path}: does not fit this run's network or optimizer ({first[:160]})"
+            f"{resumed.path}: does not fit this run's network or optimizer ({error_line(exc, 160)})"
         ) from None
     algo.env_runner_group.sync_weights(
         from_worker_or_learner_group=algo.learner_group, inference_only=True
@@ -435,8 +425,7 @@ class _Trainer:
         try:
             result = self.algo.train()
         except Exception as exc:  # an env runner's error comes back as Ray's, with a traceback
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise TrainingFailed(f"RLlib's training failed: {first[:300]}") from None
+            raise TrainingFailed(f"RLlib's training failed: {error_line(exc, 300)}") from None
         sampled = result.get("env_runners", {}).get("num_env_steps_sampled_lifetime")
         if sampled is None:
             sampled = result.get("num_env_steps_sampled_lifetime", 0)
