@@ -354,7 +354,7 @@ def test_same_step_autoreset_keeps_the_transitions(shaping):
             assert r1 == r[i] and te == term[i]
             if term[i] or trunc[i]:
                 for key in o:
-                    np.testing.assert_array_equal(info["final_obs"][key][i], o[key])
+                    np.testing.assert_array_equal(info["final_obs"][i][key], o[key])
                 o, _ = env.reset()
             for key in o:
                 np.testing.assert_array_equal(nxt[key][i], o[key])

@@ -90,7 +90,7 @@ def test_batched_pool_rows_are_single_envs_of_their_tanks():
                 ended += 1
                 assert info["_final_obs"][i]
                 for key in o:
-                    np.testing.assert_array_equal(info["final_obs"][key][i], o[key])
+                    np.testing.assert_array_equal(info["final_obs"][i][key], o[key])
                 o, _ = env.reset()
             for key in o:
                 np.testing.assert_array_equal(nxt[key][i], o[key])

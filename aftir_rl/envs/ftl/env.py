@@ -37,7 +37,7 @@ from aftir_rl.envs.ftl.task import (
     spaces_of,
 )
 
-__all__ = ["ArmFTLEnv", "ArmFTLVectorEnv"]
+__all__ = ["ArmFTLEnv", "ArmFTLVectorEnv", "same_step_finals"]
 
 
 class ArmFTLEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
@@ -301,6 +301,26 @@ class ArmFTLEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
         return self._renderer.render(np.array(self._tips), self.target, arms=[self.body()])
 
 
+def same_step_finals(final_obs: NDArray[np.object_], info: dict[str, Any]) -> dict[str, Any]:
+    """The ``info`` entries of a ``SameStep`` autoreset, in Gymnasium's ``SyncVectorEnv`` form.
+
+    ``final_obs``: one entry per row, the row's last observation where it ended and None
+    elsewhere; ``final_info``: the step's per-row ``info`` arrays, each with its ``_key`` mask;
+    ``_final_obs`` and ``_final_info``: which rows ended.
+    """
+    ended = np.array([o is not None for o in final_obs], dtype=bool)
+    final_info: dict[str, Any] = {}
+    for key, value in info.items():
+        final_info[key] = value.copy()
+        final_info[f"_{key}"] = ended.copy()
+    return {
+        "final_obs": final_obs,
+        "_final_obs": ended,
+        "final_info": final_info,
+        "_final_info": ended.copy(),
+    }
+
+
 class ArmFTLVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], Any]):
     """``num_envs`` :class:`ArmFTLEnv` s stepped together in numpy (autoreset: next step).
 
@@ -315,9 +335,10 @@ class ArmFTLVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float
     ``reset(options={"target": ...})`` takes one target for all rows or one per row ``(B, 3)``.
     ``info`` holds per-row arrays ``prev_achieved_goal``, ``contact``, ``is_success``,
     ``distance_cm`` and ``min_clearance_cm``. With ``autoreset_mode="SameStep"`` rows that end are
-    reset within the step instead: their last observations are in ``info["final_obs"]`` (the
-    batched ``Dict``, valid where ``info["_final_obs"]``) and the step returns their first ones
-    (what SB3's ``VecEnv`` adapter :class:`aftir_rl.rl.sb3.vec_adapter.SB3VectorEnv` wants).
+    reset within the step instead and the step returns their first observations; their last ones
+    are where Gymnasium's ``SyncVectorEnv`` puts them (:func:`same_step_finals`), which is what
+    TorchRL's ``GymWrapper`` and SB3's ``VecEnv`` adapter
+    (:class:`aftir_rl.rl.sb3.vec_adapter.SB3VectorEnv`) read.
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -463,7 +484,10 @@ class ArmFTLVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float
             self.prev_done = done
         elif done.any():  # SAME_STEP: the last observations go to info, the rows start again
             rows = np.flatnonzero(done)
-            info.update(final_obs=obs, _final_obs=done)
+            final_obs = np.full(self.num_envs, None, dtype=object)
+            for i in rows.tolist():
+                final_obs[i] = {key: value[i].copy() for key, value in obs.items()}
+            info.update(same_step_finals(final_obs, info))
             b.reset_rows(rows, self._new_targets(rows))
             self._potential[rows] = np.nan
             self.steps[rows] = 0

@@ -20,7 +20,7 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError, InvalidActionError, TargetError
-from aftir_rl.envs.ftl.env import ArmFTLVectorEnv
+from aftir_rl.envs.ftl.env import ArmFTLVectorEnv, same_step_finals
 from aftir_rl.envs.ftl.pool import TankPool, pool_specs
 
 __all__ = ["ArmFTLPoolVectorEnv", "make_vector_env"]
@@ -156,12 +156,16 @@ def _join(parts: list[Obs]) -> Obs:
 
 
 def _join_infos(obs: list[Obs], infos: list[dict[str, Any]]) -> dict[str, Any]:
-    """The groups' infos row by row; ``final_obs`` where any group has one (valid by mask)."""
-    keys = [k for k in infos[0] if k not in ("final_obs", "_final_obs")]
+    """The groups' infos row by row; a ``SameStep`` end's entries where any group has one."""
+    finals = ("final_obs", "_final_obs", "final_info", "_final_info")
+    keys = [k for k in infos[0] if k not in finals]
     out: dict[str, Any] = {k: np.concatenate([i[k] for i in infos]) for k in keys}
     if any("final_obs" in i for i in infos):
-        out["final_obs"] = _join([i.get("final_obs", o) for i, o in zip(infos, obs)])
-        out["_final_obs"] = np.concatenate(
-            [i.get("_final_obs", np.zeros(len(o["observation"]), bool)) for i, o in zip(infos, obs)]
+        final_obs = np.concatenate(
+            [
+                i.get("final_obs", np.full(len(o["observation"]), None, dtype=object))
+                for i, o in zip(infos, obs)
+            ]
         )
+        out.update(same_step_finals(final_obs, out))
     return out

@@ -78,7 +78,10 @@ class SB3VectorEnv(VecEnv):
         keys = [
             k
             for k, v in info.items()
-            if not k.startswith("_") and isinstance(v, np.ndarray) and len(v) == self.num_envs
+            if not k.startswith("_")
+            and k != "final_obs"
+            and isinstance(v, np.ndarray)
+            and len(v) == self.num_envs
         ]
         infos: list[dict[str, Any]]
         if self.running_info_keys is None:
@@ -108,9 +111,7 @@ class SB3VectorEnv(VecEnv):
         for i in ended.tolist():
             infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
             if final is not None:
-                infos[i]["terminal_observation"] = (
-                    {k: v[i] for k, v in final.items()} if isinstance(final, dict) else final[i]
-                )
+                infos[i]["terminal_observation"] = final[i]
         return obs, np.asarray(reward, dtype=np.float32), dones, infos
 
     def close(self) -> None:
