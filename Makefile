@@ -27,15 +27,15 @@ PYTEST := OMP_NUM_THREADS=1 $(PY) -m pytest -q -n auto --dist loadfile
 test: $(STAMP)  ## the test suite (fast; long checks are marked slow and run by test-all)
 	$(PYTEST) -m "not slow"
 
-test-slow: $(STAMP)  ## only the tests marked slow: after `make test`, every test has run once
-	$(PYTEST) -m slow
+test-slow: $(STAMP)  ## the slow tests but the fuzzer's: after `make test` and `make fuzz`, every test has run once
+	$(PYTEST) -m "slow and not fuzz"
 
 test-all: $(STAMP)  ## every test, fast and slow
 	$(PYTEST)
 
 # Faults: the fuzzer, FUZZ_CASES mutated run directories for each of view, evaluate, rollout,
 # rank_checkpoints, check and export, as many tanks (tank show) and Minari datasets (--demos)
-# (test-all runs 5 each), then Ctrl-C at SIGINT_MOMENTS
+# (test-all runs 5 each; test-slow leaves them here), then Ctrl-C at SIGINT_MOMENTS
 # random moments of each long command, one at a time so that no other process slows its exit
 # (about 40 minutes on 2 cores).
 FUZZ_CASES ?= 2000
@@ -45,8 +45,8 @@ fuzz: $(STAMP)
 	AFTIR_SIGINT_MOMENTS=$(SIGINT_MOMENTS) OMP_NUM_THREADS=1 $(PY) -m pytest -q -rP tests/cli/test_sigint_moments.py
 
 lint: $(STAMP)
-	$(PY) -m ruff check aftir_launch.py aftir_rl tests benchmarks scripts docs/_ext docs/conf.py
-	$(PY) -m ruff format --check aftir_launch.py aftir_rl tests benchmarks scripts docs/_ext docs/conf.py
+	$(PY) -m ruff check aftir_launch.py aftir_rl tests benchmarks scripts examples docs/_ext docs/conf.py
+	$(PY) -m ruff format --check aftir_launch.py aftir_rl tests benchmarks scripts examples docs/_ext docs/conf.py
 	$(PY) -m mypy
 
 # A review aid, not a test: the largest modules, functions and module docstrings; fails nothing.

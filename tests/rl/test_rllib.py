@@ -198,6 +198,39 @@ def test_sac_trains_on_a_local_ray_and_is_evaluated(tmp_path):
     assert out.returncode == 0 and "sac RLlib (AFTIR-ArmReach-v0)" in out.stdout, out.stderr
 
 
+class _Random:
+    """Uniformly random actions (seeded), with SB3's ``predict``."""
+
+    def __init__(self, space) -> None:
+        self.space = space
+        self.space.seed(0)
+
+    def predict(self, observation, *, deterministic: bool = True):
+        return self.space.sample(), None
+
+
+@pytest.mark.slow
+def test_ppo_by_rllib_learns_to_reach_targets_random_actions_miss(cluster, tmp_path):
+    """ArmReach's shipped entry for 60k steps (about a minute): >= 15 points above random."""
+    import gymnasium as gym
+
+    from aftir_rl.experiments.runs import evaluate_run
+    from aftir_rl.rl.sb3 import evaluate_policy_on_targets, evaluation_targets
+
+    env_id = "AFTIR-ArmReach-v0"
+    out = _aftir(
+        "train", "ppo", "--rllib", "--ray", cluster, "--env-runners", "0", "--env", env_id,
+        "--total-timesteps", "60000", "--eval-episodes", "10", "--no-progress",
+        "--logdir", str(tmp_path),
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-3000:]
+    (run,) = tmp_path.glob(f"rllib-ppo__{env_id}__*")
+    targets = evaluation_targets(env_id, 50, seed=5_000_000)  # seeds no training drew
+    learnt = evaluate_run(run, targets=targets)
+    random, _ = evaluate_policy_on_targets(_Random(gym.make(env_id).action_space), env_id, targets)
+    assert learnt["success_rate"] >= random["success_rate"] + 0.15, (learnt, random)
+
+
 @pytest.mark.parametrize(
     ("config", "runners", "message"),
     [
