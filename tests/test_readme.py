@@ -1,7 +1,8 @@
 """The README's commands, run as a user would: from a fresh directory, on the installed wheel.
 
-The same wheel (one build, one cold numba cache) also shows that the package works outside the
-repository: configs shipped as package data, every env, ``aftir plan``.
+The same wheel (one build, numba's cache of the checkout's kernels copied beside it) also shows
+that the package works outside the repository: configs shipped as package data, every env,
+``aftir plan``. (``make install`` compiles the kernels cold, from the checkout.)
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ README = ROOT / "README.md"
 
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, str]]:
-    return install_wheel(tmp_path_factory.mktemp("wheel"))
+    return install_wheel(tmp_path_factory.mktemp("wheel"), warm_numba=True)
 
 
 def _blocks(section: str, lang: str) -> list[str]:

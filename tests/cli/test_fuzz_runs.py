@@ -27,7 +27,7 @@ import pytest
 from aftir_rl.core.config import CONFIG_DIR
 from tests.fuzz import CASE_SECONDS
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.fuzz]  # run by `make fuzz`, not `make test-slow`
 
 ROOT = Path(__file__).parents[2]
 CASES = int(os.environ.get("AFTIR_FUZZ_CASES", "5"))  # ``make fuzz``: 2,000

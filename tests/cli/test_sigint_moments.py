@@ -26,7 +26,7 @@ import pytest
 
 from aftir_rl.rl.tabular.checkpoint import read_q_table
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.fuzz]  # run by `make fuzz`, not `make test-slow`
 
 ROOT = Path(__file__).resolve().parents[2]
 MOMENTS = int(os.environ.get("AFTIR_SIGINT_MOMENTS", "0"))  # ``make fuzz``: 20
