@@ -4,6 +4,8 @@
   (each row resets on the step after it ends, ``NextStep``, the same for the same seed), and the
   batched follow-the-leader env's ``SameStep`` ends in the form Gymnasium's own ``SyncVectorEnv``
   gives (what TorchRL reads).
+- RLlib's env runner, configured as ``aftir train --rllib`` configures it, samples every id
+  with PPO's default module.
 - TorchRL wraps any Gymnasium env by id, checks its specs against a rollout
   (``check_env_specs``) and runs a batch of them as a Gymnasium vector env in subprocesses
   (``num_envs``), or wraps the batched env itself (``GymWrapper``). It passes ``frameskip`` to
@@ -136,6 +138,38 @@ def test_the_env_pages_torchrl_snippet_runs_and_its_batches_hold(monkeypatch):
     finally:
         names["env"].close()
         names["batched"].close()
+
+
+@pytest.mark.parametrize("env_id", aftir_rl.ENV_IDS)
+def test_rllib_samples_every_env_with_ppos_module(env_id):
+    """RLlib's env runner as ``aftir train --rllib`` configures it, without Ray: one-hot for the
+    grid worlds' ``Discrete`` observations, flattened ``Dict`` s, the batched env as one."""
+    pytest.importorskip("ray.rllib")
+    from ray.rllib.algorithms.ppo import PPOConfig
+    from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
+
+    from aftir_rl.rl.rllib.config import flatten_connector
+    from aftir_rl.rl.sb3.config import BATCHED_ENV_IDS
+
+    mode = "vector_entry_point" if env_id in BATCHED_ENV_IDS else "sync"
+    config = (
+        PPOConfig()
+        .environment(f"aftir_rl:{env_id}")
+        .env_runners(
+            num_env_runners=0,
+            num_envs_per_env_runner=2,
+            env_to_module_connector=flatten_connector,
+            gym_env_vectorize_mode=mode,
+        )
+    )
+    runner = SingleAgentEnvRunner(config=config)
+    try:
+        episodes = runner.sample(num_timesteps=64, random_actions=False)
+        assert sum(len(e) for e in episodes) >= 64
+        for episode in episodes:
+            assert np.all(np.isfinite(episode.get_rewards()))
+    finally:
+        runner.stop()
 
 
 def _example(script: str, *args: str) -> dict:
