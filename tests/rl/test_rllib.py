@@ -98,7 +98,7 @@ def test_ppo_on_a_two_node_cluster_resumes_and_is_evaluated(cluster, tmp_path):
         assert tag in tags, sorted(tags)
     assert (run / "best" / "rllib_module.pt").exists()
 
-    # the SB3 commands read it: evaluate (here two held-out targets), rollout
+    # the SB3 commands read it: evaluate (here two held-out targets), rollout, view
     out = _aftir("evaluate", str(run), "--random", "2", "--seed", "7", "--logdir", str(tmp_path))
     assert out.returncode == 0, out.stderr[-2000:]
     assert "ppo RLlib (AFTIR-ArmFTL-v0)" in out.stdout
@@ -106,6 +106,9 @@ def test_ppo_on_a_two_node_cluster_resumes_and_is_evaluated(cluster, tmp_path):
     assert out.returncode == 0, out.stderr[-2000:]
     (motion,) = (tmp_path / "roll").glob("*/trajectory.json")
     assert json.loads(motion.read_text())["motion"]
+    out = _aftir("view", str(run), str(motion.parent), "-o", str(tmp_path / "view.html"))
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert (tmp_path / "view.html").stat().st_size > 100_000
 
     # resumed with no steps to train: the learner's weights are the checkpoint's, exactly
     again = tmp_path / "again"
