@@ -179,7 +179,6 @@ def main(argv: list[str] | None = None) -> dict:
         return_log_prob=True,
     )
     value = ValueOperator(mlp(n_obs, 1, args.hidden), in_keys=["observation"])
-    policy(env.reset())  # materialise any lazy shapes before the optimiser sees the parameters
     collector = Collector(
         env,
         policy,
