@@ -3,11 +3,11 @@
     python scripts/warm_kernels.py
 
 Run by ``make install``: the follow-the-leader planner's kernels, the camera's line of sight,
-the ``AFTIR-ArmFTL-v0`` step (with and without the guide), the posture planners' planar search,
-the posture collision pre-check, the posture chain's tip Jacobian, the mesh tanks' distance
-kernels, the goal-conditioned Q-learning sweep and (with the physics extra) PyElastica's rod
-otherwise compile on first use (about a minute in all on 2 cores). Nothing is written but
-numba's cache files (and a mesh in a temporary folder, removed).
+the ``AFTIR-ArmFTL-v0`` step (with and without the guide; the raster's distance table), the
+posture planners' planar search, the posture collision pre-check, the posture chain's tip
+Jacobian, the mesh tanks' distance kernels, the goal-conditioned Q-learning sweep and (with the
+physics extra) PyElastica's rod otherwise compile on first use (about a minute in all on 2
+cores). Nothing is written but numba's cache files (and a mesh in a temporary folder, removed).
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def main() -> None:
     CollisionScene(tank).collides_fast(Posture(-60.0, (0.0, 0.0), (0.0, 0.0)))
     joint_tip_jacobian(np.zeros(5), 25.0, 1e-6, np.empty(3), np.empty((3, 5)))
     say("the AFTIR-ArmFTL-v0 step")
-    for kwargs in ({}, {"guide": True, "shaping": "field", "steer": "target"}):
+    for kwargs in ({"shaping": True}, {"guide": True, "shaping": "field", "steer": "target"}):
         env = gym.make("AFTIR-ArmFTL-v0", **kwargs)
         env.reset(seed=0)
         env.step(np.zeros(env.action_space.shape, dtype=np.float32))

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from aftir_rl.core import kernel
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.tank import Tank
+from aftir_rl.envs.ftl.kernel.raster import all_pairs_bfs
 
 __all__ = [
     "FieldGuide",
@@ -42,44 +43,25 @@ LOOKAHEAD_HOPS = (3, 6)
 def raster_distance_table(tank: Tank) -> NDArray[np.int32]:
     """Shortest 6-connected raster distances ``D[c, g]`` [cells] between every pair of cells.
 
-    The BFS through free cells (:meth:`~aftir_rl.core.tank.Raster.bfs_distances` from every cell at
-    once, by numpy relaxation); an obstructed end cell (a free point can lie in a cell a solid
-    only partly fills) counts as one step from its nearest free neighbour. Unreachable pairs get
-    the largest finite distance plus one. Shape ``(cells, cells)``, flat cell indices. Cached per
-    tank.
+    One breadth-first search through free cells from every cell (compiled:
+    :func:`~aftir_rl.envs.ftl.kernel.raster.all_pairs_bfs`, what
+    :meth:`~aftir_rl.core.tank.Raster.bfs_distances` gives from one cell); an obstructed end cell
+    (a free point can lie in a cell a solid only partly fills) counts as one step from its nearest
+    free neighbour, and an obstructed source from either end. Unreachable pairs get the largest
+    finite distance plus one. Shape ``(cells, cells)``, flat cell indices. Cached per tank.
     """
     cached = _TABLES.get(tank)
     if cached is not None:
         return cached
     raster = tank.raster
-    shape = raster.shape
-    free = ~raster.obstructed
-    n = raster.n_cells
-    big = np.int32(10 * n)
-    dist = np.full((n,) + shape, big, dtype=np.int32)
-    dist.reshape(n, n)[np.arange(n), np.arange(n)] = 0
-    moves = [(axis, step) for axis in range(3) for step in (-1, 1)]
-
-    def neighbour_min(d: NDArray[np.int32]) -> NDArray[np.int32]:
-        best = np.full_like(d, big)
-        for axis, step in moves:
-            src = [slice(None)] * 4
-            dst = [slice(None)] * 4
-            src[axis + 1] = slice(max(0, -step), shape[axis] - max(0, step))
-            dst[axis + 1] = slice(max(0, step), shape[axis] - max(0, -step))
-            best[tuple(dst)] = np.minimum(best[tuple(dst)], d[tuple(src)])
-        return best
-
-    for _ in range(4 * sum(shape)):
-        new = np.where(free[None], np.minimum(dist, neighbour_min(dist) + 1), dist)
-        if np.array_equal(new, dist):
-            break
-        dist = new
-    dist = np.where(free[None], dist, np.minimum(dist, neighbour_min(dist) + 1))
-    flat = dist.reshape(n, n)
+    free = np.ascontiguousarray(~raster.obstructed).reshape(-1)
+    flat = all_pairs_bfs(free, *(int(n) for n in raster.shape))
+    unreached = flat < 0
+    flat[unreached] = np.iinfo(np.int32).max
     flat = np.minimum(flat, flat.T)  # obstructed sources: from either end
-    finite = flat[flat < big]
-    flat = np.where(flat < big, flat, (finite.max() + 1) if finite.size else 0).astype(np.int32)
+    unreached = flat == np.iinfo(np.int32).max
+    if unreached.any():
+        flat[unreached] = flat[~unreached].max() + 1 if (~unreached).any() else 0
     flat.setflags(write=False)
     _TABLES[tank] = flat
     return flat
@@ -98,10 +80,10 @@ def raster_detour_table(tank: Tank) -> NDArray[np.int32]:
     cached = _DETOUR_CACHE.get(tank)
     if cached is not None:
         return cached
-    dist = raster_distance_table(tank)
-    cells = np.indices(tank.raster.shape).reshape(3, -1).T
-    manhattan = np.abs(cells[:, None, :] - cells[None, :, :]).sum(-1)
-    detour = np.clip(dist - manhattan, 0, None).astype(np.int32)
+    detour = raster_distance_table(tank).copy()
+    for axis in np.indices(tank.raster.shape).reshape(3, -1).astype(np.int32):
+        detour -= np.abs(axis[:, None] - axis[None, :])  # minus the Manhattan distance
+    np.clip(detour, 0, None, out=detour)
     detour.setflags(write=False)
     _DETOUR_CACHE[tank] = detour
     return detour
