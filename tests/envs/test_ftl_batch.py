@@ -106,6 +106,62 @@ def test_raster_distance_table_against_bfs():
         np.testing.assert_array_equal(table[start][reach], bfs[reach])
 
 
+def test_raster_distance_table_ends_and_sources_inside_solids():
+    """Every entry of sampled rows, obstructed cells included, against an independent BFS.
+
+    The documented rule: the path's cells before its end are free; an obstructed end is one step
+    from a reached free neighbour (or from the source); an obstructed source counts from either
+    end (the same steps either way: free paths reverse). A generated 3-bay wing: baffles,
+    stringers and holes give many partly filled cells.
+    """
+    from collections import deque
+
+    tank = load_tank("wing:3:11")
+    table = raster_distance_table(tank)
+    raster = tank.raster
+    obstructed = raster.obstructed
+    shape = raster.shape
+
+    def neighbours(cell):
+        for axis in range(3):
+            for step in (-1, 1):
+                n = list(cell)
+                n[axis] += step
+                if 0 <= n[axis] < shape[axis]:
+                    yield tuple(n)
+
+    def row(src):  # steps from src: free cells by BFS, then obstructed ends, -1 where none
+        dist = np.full(shape, -1)
+        dist[src] = 0
+        queue = deque([src])
+        while queue:
+            cur = queue.popleft()
+            for n in neighbours(cur):
+                if not obstructed[n] and dist[n] < 0:
+                    dist[n] = dist[cur] + 1
+                    queue.append(n)
+        ends = dist.copy()
+        for cell in map(tuple, np.argwhere(obstructed)):
+            if cell != src:
+                near = [dist[n] for n in neighbours(cell) if dist[n] >= 0]
+                ends[cell] = min(near) + 1 if near else -1
+        return ends.reshape(-1)
+
+    rng = np.random.default_rng(5)
+    cells = np.argwhere(np.ones(shape, bool))
+    sources = [tuple(c) for c in np.argwhere(obstructed)[rng.choice(obstructed.sum(), 4)]]
+    sources += [tuple(c) for c in np.argwhere(~obstructed)[rng.choice((~obstructed).sum(), 4)]]
+    assert any(obstructed[src] for src in sources) and len(cells) == raster.n_cells
+    finite_max = table[table < table.max()].max() if (table < table.max()).any() else 0
+    for src in sources:
+        i, mine = raster.index(src), row(src)
+        reached = mine >= 0
+        np.testing.assert_array_equal(table[i][reached], mine[reached])
+        assert np.all(table[i][~reached] > finite_max - 1)  # unreachable: past every distance
+    index = [raster.index(src) for src in sources]
+    np.testing.assert_array_equal(table[np.ix_(index, index)], table[np.ix_(index, index)].T)
+
+
 def test_guide_leads_through_the_hatch():
     """Following the guide's way from bay 1 reaches a bay-2 target, and P is GuideField's."""
     from aftir_rl.planning.ftl.route import GuideField
