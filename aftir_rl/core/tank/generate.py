@@ -16,10 +16,11 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError
 
-__all__ = ["WingRanges", "wing_tank", "MAX_BAYS", "MAX_SEED"]
+__all__ = ["WingRanges", "wing_tank", "wing_family_box", "MAX_BAYS", "MAX_SEED"]
 
 #: Most bays of a generated wing tank (12 sections of 50 cm reach about five).
 MAX_BAYS = 8
@@ -111,7 +112,9 @@ def _obstacles(
     out: list[dict[str, Any]] = []
     access = [(h["center"][1] - h["width"] / 2, h["center"][1] + h["width"] / 2)
               for rib in ribs for h in rib["holes"][:1]]  # fmt: skip
-    low, high = min(a for a, _ in access) - 6, max(b for _, b in access) + 6
+    # the pipe keeps off the ribs' access holes (a one-bay wing has none: off the middle)
+    low = min((a for a, _ in access), default=0.0) - 6
+    high = max((b for _, b in access), default=0.0) + 6
     for where, z0, z1 in (("floor", 0.0, 5.0),):
         for j in range(int(rng.integers(r.stringers[0], r.stringers[1] + 1))):
             y = rng.uniform(-half_chord + 8, half_chord - 8)
@@ -177,6 +180,22 @@ def wing_tank(bays: int, seed: int, ranges: WingRanges | None = None) -> dict[st
         "arm": {"section_length": 50, "max_sections": 12, "radius": 2.5, "theta_max": 1.5708},
         "targets": targets,
     }
+
+
+def wing_family_box(
+    bays: int, ranges: WingRanges | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Corners [cm] of a box that holds every wing tank of ``bays`` bays, whatever its seed.
+
+    From the ranges' largest bay length, chord and depth (each rounded up by a cell): what a
+    stream of generated tanks needs to fix its goal space before it has drawn them.
+    """
+    r = ranges or WingRanges()
+    step = r.cell_size
+    length, chord, depth = r.bay_length[1] + step, r.chord[1] + 2 * step, r.depth[1] + step
+    lo = np.array([-(length / 2 + step), -chord / 2, 0.0])
+    hi = np.array([bays * length, chord / 2, depth])
+    return lo, hi
 
 
 def ranges_json(ranges: WingRanges | None = None) -> dict[str, Any]:
