@@ -128,3 +128,90 @@ def test_single_env_tank_option_and_pool_evaluation_targets():
         tank = load_tank(f"wing:2:{i % 3}")
         lo, hi = tank.bay(2)
         assert np.all((target > lo) & (target < hi)) and tank.distance(target) >= 5.0
+
+
+def _stream_run(mode: str, steps: int = 120, seed: int = 3) -> tuple[list, ArmFTLPoolVectorEnv]:
+    env = gym.make_vec(
+        "aftir_rl:AFTIR-ArmFTL-v0", num_envs=6, tank="wing:2:700+", tanks_at_once=2,
+        tank_episodes=5, autoreset_mode=mode, max_episode_steps=25, bay=1,
+    )  # fmt: skip
+    env.reset(seed=seed)
+    actions = np.random.default_rng(1).uniform(-1, 1, (steps, 6, 3)).astype(np.float32)
+    record = []
+    for a in actions:
+        before = list(env.row_tanks)
+        obs, reward, terminated, truncated, info = env.step(a)
+        record.append((before, list(env.row_tanks), obs, reward, terminated, truncated, info))
+    return record, env
+
+
+@pytest.mark.parametrize("mode", ["NextStep", "SameStep"])
+def test_a_stream_moves_each_group_on_to_unused_wings(mode):
+    record, env = _stream_run(mode)
+    seen = [t for step in record for t in dict.fromkeys(step[1])]
+    tanks = list(dict.fromkeys(seen))
+    assert len(tanks) >= 5, tanks  # the two first wings, then new ones
+    assert tanks == [f"wing:2:{700 + i}" for i in range(len(tanks))]  # in order, none twice
+    swaps = 0
+    for t, (before, after, *_) in enumerate(record):
+        for new_tank in dict.fromkeys(after[i] for i in range(6) if before[i] != after[i]):
+            swaps += 1
+            moved = [i for i in range(6) if after[i] == new_tank]
+            _check_moved(mode, record, t, moved, new_tank)
+    assert swaps >= 3
+    assert env.observation_space.contains(record[-1][2])
+
+
+def _check_moved(mode: str, record: list, t: int, moved: list[int], new_tank: str) -> None:
+    """The rows of a group that has just moved on to ``new_tank`` at step ``t``."""
+    _, _, obs, _, terminated, truncated, info = record[t]
+    assert np.all((terminated | truncated)[moved])  # every row of the group ends there
+    tank = load_tank(new_tank)
+    lo, hi = tank.bay(1)
+    if mode == "SameStep":  # the returned rows are the new tank's first observations
+        assert info["_final_obs"][moved].all()
+        goals = obs["desired_goal"][moved]
+        np.testing.assert_allclose(
+            obs["achieved_goal"][moved], obs["achieved_goal"][moved][:1].repeat(len(moved), 0)
+        )
+    elif t + 1 < len(record):  # the next step starts them there, reward 0
+        nxt = record[t + 1]
+        assert np.all(nxt[3][moved] == 0) and not np.any((nxt[4] | nxt[5])[moved])
+        goals = nxt[2]["desired_goal"][moved]
+    else:
+        return
+    assert np.all((goals > lo) & (goals < hi)), (goals, lo, hi)  # targets of its bay 1
+    assert all(tank.distance(g) > 0 for g in goals)
+
+
+def test_a_seeded_stream_repeats_and_starts_again_on_a_seeded_reset():
+    first, env = _stream_run("NextStep", steps=80)
+    second, _ = _stream_run("NextStep", steps=80)
+    for a, b in zip(first, second):
+        assert a[1] == b[1]
+        np.testing.assert_array_equal(a[2]["observation"], b[2]["observation"])
+        np.testing.assert_array_equal(a[3], b[3])
+    assert env.row_tanks != ["wing:2:700"] * 3 + ["wing:2:701"] * 3
+    env.reset(seed=3)
+    assert env.row_tanks == ["wing:2:700"] * 3 + ["wing:2:701"] * 3
+
+
+def test_streams_are_refused_where_they_cannot_run():
+    with pytest.raises(ConfigError, match="the batched env's"):
+        gym.make("AFTIR-ArmFTL-v0", tank="wing:3:5+")
+    with pytest.raises(ConfigError, match="1 to 8 bays"):
+        gym.make_vec("AFTIR-ArmFTL-v0", 2, tank="wing:9:5+")
+    with pytest.raises(ConfigError, match="tank_episodes must be"):
+        gym.make_vec("AFTIR-ArmFTL-v0", 2, tank="wing:3:5+", tank_episodes=0)
+    with pytest.raises(ConfigError, match="a stream's"):
+        gym.make_vec("AFTIR-ArmFTL-v0", 2, tank="wing:3:5-6", tank_episodes=3)
+
+
+def test_the_family_box_holds_every_generated_wing():
+    from aftir_rl.core.tank.generate import wing_family_box, wing_tank
+
+    for bays in (1, 2, 3, 5, 8):
+        lo, hi = wing_family_box(bays)
+        for seed in range(60):
+            box = wing_tank(bays, seed)["box"]
+            assert np.all(np.asarray(box["min"]) >= lo) and np.all(np.asarray(box["max"]) <= hi)

@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.robot import Posture, body_points
-from aftir_rl.envs.ftl.pool import TankPool, pool_specs
+from aftir_rl.envs.ftl.pool import TankPool, pool_specs, stream_spec
 from aftir_rl.envs.ftl.spec import FTLSpec
 from aftir_rl.envs.ftl.task import (
     build_parts,
@@ -157,6 +157,7 @@ class ArmFTLEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
             raise ConfigError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         self.render_mode = render_mode
         spec = FTLSpec.from_kwargs(**kwargs)
+        _refuse_stream(spec.task.tank)
         specs = pool_specs(spec.task.tank)
         #: The tanks drawn per episode (``tank="wing:BAYS:FIRST-LAST"``), or None.
         self.pool = None if specs is None else TankPool(specs)
@@ -301,6 +302,14 @@ class ArmFTLEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
         return self._renderer.render(np.array(self._tips), self.target, arms=[self.body()])
 
 
+def _refuse_stream(tank: object) -> None:
+    if stream_spec(tank) is not None:
+        raise ConfigError(
+            f"tank {tank!r} is a stream of generated wings: the batched env's, "
+            "gym.make_vec('AFTIR-ArmFTL-v0', n, tank=...)"
+        )
+
+
 def same_step_finals(final_obs: NDArray[np.object_], info: dict[str, Any]) -> dict[str, Any]:
     """The ``info`` entries of a ``SameStep`` autoreset, in Gymnasium's ``SyncVectorEnv`` form.
 
@@ -363,6 +372,7 @@ class ArmFTLVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = None
         spec = FTLSpec.from_kwargs(**kwargs)
+        _refuse_stream(spec.task.tank)
         if pool_specs(spec.task.tank) is not None:
             raise ConfigError(
                 "a tank pool (wing:BAYS:FIRST-LAST) has one tank per group of rows: "

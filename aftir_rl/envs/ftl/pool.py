@@ -6,7 +6,8 @@
 env lives), draws one per episode with the env's generator, and gives the goal space that holds
 every tank of the pool, so observations do not depend on which tank an episode has. The batched
 vector env keeps one tank for all its rows; a pool runs in the single env, one tank per env of
-``gym.make_vec(..., vectorization_mode="sync" | "async")``.
+``gym.make_vec(..., vectorization_mode="sync" | "async")``. ``tank="wing:BAYS:FIRST+"`` is an
+unbounded stream of them (:func:`stream_spec`), for the batched env only.
 """
 
 from __future__ import annotations
@@ -21,11 +22,12 @@ from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.tank import Tank, load_tank
 from aftir_rl.envs.ftl.spec import FTLSpec
 
-__all__ = ["MAX_POOL", "TankPool", "pool_specs"]
+__all__ = ["MAX_POOL", "TankPool", "pool_specs", "stream_spec"]
 
 #: Most tanks in one pool.
 MAX_POOL = 64
 _POOL = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})-([0-9]{1,10})")
+_STREAM = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})\+")
 
 
 def pool_specs(tank: object) -> list[str] | None:
@@ -44,6 +46,30 @@ def pool_specs(tank: object) -> list[str] | None:
             f"tank {tank!r}: a pool names 1 to {MAX_POOL} seeds, FIRST-LAST with FIRST <= LAST"
         )
     return [f"wing:{bays}:{seed}" for seed in range(first, last + 1)]
+
+
+def stream_spec(tank: object) -> tuple[int, int] | None:
+    """``(bays, first seed)`` of a stream ``wing:BAYS:FIRST+``, or None for anything else.
+
+    A stream is every generated wing of ``BAYS`` bays from seed ``FIRST`` on, each used once
+    (:class:`~aftir_rl.envs.ftl.pool_vector.ArmFTLPoolVectorEnv`).
+
+    Raises:
+        ConfigError: ``BAYS`` or ``FIRST`` outside what the generator draws.
+
+    """
+    from aftir_rl.core.tank.generate import MAX_BAYS, MAX_SEED
+
+    match = _STREAM.fullmatch(tank) if isinstance(tank, str) else None
+    if match is None:
+        return None
+    bays, first = int(match[1]), int(match[2])
+    if not 1 <= bays <= MAX_BAYS or first > MAX_SEED:
+        raise ConfigError(
+            f"tank {tank!r}: a stream is wing:BAYS:FIRST+ with 1 to {MAX_BAYS} bays and a first "
+            f"seed up to {MAX_SEED:,}"
+        )
+    return bays, first
 
 
 class TankPool:
