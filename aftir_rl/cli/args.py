@@ -246,16 +246,18 @@ def add_tank_option(parser: argparse.ArgumentParser, what: str) -> None:
     """Add ``--tank`` (a name, YAML path, generator spec or pool; :func:`check_tank`)."""
     parser.add_argument(
         "--tank",
-        help=f"{what}: a name, YAML path, generator spec such as wing:3:7, or a pool "
-        "wing:BAYS:FIRST-LAST of generated tanks (one per group of rows, or per episode)",
+        help=f"{what}: a name, YAML path, generator spec such as wing:3:7, a pool "
+        "wing:BAYS:FIRST-LAST of generated tanks (one per group of rows, or per episode), or "
+        "to train on, a stream wing:BAYS:FIRST+ (a new wing per group every tank_episodes)",
     )
 
 
 def check_tank(tank: str) -> None:
-    """One line (:class:`ConfigError`) unless ``tank`` loads, or is a pool whose first does."""
+    """One line (:class:`ConfigError`) unless ``tank`` loads (a pool's or stream's first)."""
     from aftir_rl.core.tank import load_tank
-    from aftir_rl.envs.ftl.pool import pool_specs
+    from aftir_rl.envs.ftl.pool import evaluation_tank, pool_specs
 
+    tank = str(evaluation_tank(tank))  # a stream: its first wings
     specs = pool_specs(tank)
     load_tank(tank if specs is None else specs[0])
 

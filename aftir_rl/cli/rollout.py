@@ -80,20 +80,22 @@ def policy_env_kwargs(args: argparse.Namespace, env_kwargs: dict[str, Any]) -> d
     """The run's env kwargs, in ``--tank`` if given; a motion is in one tank, not a pool.
 
     Raises:
-        ConfigError: the tank is a pool (the run's, without ``--tank``), or does not load.
+        ConfigError: the tank is a pool or stream (the run's, without ``--tank``), or does not
+            load.
 
     """
-    from aftir_rl.envs.ftl.pool import pool_specs
+    from aftir_rl.envs.ftl.pool import evaluation_tank, pool_specs
 
     kwargs = dict(env_kwargs)
     if args.tank is not None:
         check_tank(args.tank)
         kwargs["tank"] = args.tank
-    specs = pool_specs(kwargs.get("tank"))
+    specs = pool_specs(evaluation_tank(kwargs.get("tank")))
     if specs is not None:
+        what = "pool" if pool_specs(kwargs["tank"]) else "stream of tanks"
         raise ConfigError(
-            f"the run trained on the pool {kwargs['tank']}; a motion is in one tank: give --tank "
-            f"({specs[0]}, another of the pool, or a tank it never saw)"
+            f"the run trained on the {what} {kwargs['tank']}; a motion is in one tank: give "
+            f"--tank ({specs[0]}, another of the {what}, or a tank it never saw)"
         )
     return kwargs
 

@@ -49,3 +49,21 @@ def test_train_on_a_pool_then_evaluate_in_held_out_tanks(tmp_path, capsys):
     assert rollout.main(argv) == 0
     (folder,) = moves.iterdir()
     assert json.loads((folder / "summary.json").read_text())["tank"] == "wing:2:8"
+
+
+@pytest.mark.slow  # about 8 s: a few wings built for training, two for the evaluation
+def test_train_on_a_stream_then_evaluate_on_its_first_wings(tmp_path, capsys):
+    (tmp_path / "pool.yaml").write_text(POOL_YAML)
+    argv = ["ppo", "--config", str(tmp_path / "pool.yaml"), "--total-timesteps", "256"]
+    argv += ["--tank", "wing:2:60+", "--env-kwargs", "tank_episodes:2", "tanks_at_once:2"]
+    argv += ["--logdir", str(tmp_path / "runs"), "--no-progress"]
+    assert train.main(argv) == 0
+    run = next((tmp_path / "runs").iterdir())
+    kwargs = json.loads((run / "config.json").read_text())["env_kwargs"]
+    assert kwargs["tank"] == "wing:2:60+" and kwargs["tank_episodes"] == 2
+    capsys.readouterr()
+    assert evaluate.main([str(run), "--random", "2", "--logdir", str(tmp_path / "eval")]) == 0
+    assert "| 2 |" in capsys.readouterr().out
+    # a motion is in one tank: a stream run rolls out with --tank, as a pool run does
+    assert rollout.main([str(run), "--random", "1", "-o", str(tmp_path / "moves")]) == 2
+    assert "stream of tanks wing:2:60+" in capsys.readouterr().err

@@ -198,7 +198,9 @@ def test_a_seeded_stream_repeats_and_starts_again_on_a_seeded_reset():
 
 def test_streams_are_refused_where_they_cannot_run():
     with pytest.raises(ConfigError, match="the batched env's"):
-        gym.make("AFTIR-ArmFTL-v0", tank="wing:3:5+")
+        ArmFTLVectorEnv(num_envs=2, tank="wing:3:5+")  # (make_vec gives the pool env)
+    with pytest.raises(ConfigError, match="is a stream of generated wings"):
+        load_tank("wing:3:5+")
     with pytest.raises(ConfigError, match="1 to 8 bays"):
         gym.make_vec("AFTIR-ArmFTL-v0", 2, tank="wing:9:5+")
     with pytest.raises(ConfigError, match="tank_episodes must be"):
@@ -215,3 +217,14 @@ def test_the_family_box_holds_every_generated_wing():
         for seed in range(60):
             box = wing_tank(bays, seed)["box"]
             assert np.all(np.asarray(box["min"]) >= lo) and np.all(np.asarray(box["max"]) <= hi)
+
+
+def test_a_single_env_of_a_stream_is_its_first_wings_as_a_pool_with_the_streams_goal_space():
+    single = gym.make("AFTIR-ArmFTL-v0", tank="wing:2:40+", tank_episodes=3, tanks_at_once=2)
+    assert single.unwrapped.pool.names == [f"wing:2:{40 + i}" for i in range(16)]
+    batched = gym.make_vec("AFTIR-ArmFTL-v0", 4, tank="wing:2:40+", tanks_at_once=2)
+    pool = gym.make("AFTIR-ArmFTL-v0", tank="wing:2:900-903")
+    for other in (batched.single_observation_space, pool.observation_space):
+        for key in ("achieved_goal", "desired_goal"):
+            np.testing.assert_array_equal(single.observation_space[key].low, other[key].low)
+            np.testing.assert_array_equal(single.observation_space[key].high, other[key].high)

@@ -65,6 +65,7 @@ __all__ = [
     "tank_from_mapping",
     "generated_spec",
     "names_generated",
+    "STREAM_SPEC",
     "MAX_COORD",
     "MAX_CELLS",
     "MAX_SECTIONS",
@@ -279,6 +280,8 @@ RUN_TANK_FILE = "tank.yaml"
 #: A generated tank by name: ``wing:BAYS:SEED`` (:func:`generated_spec`).
 _SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})")
 _POOL_SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})-([0-9]{1,10})")
+#: A stream of generated wings ``wing:BAYS:FIRST+`` (:func:`~aftir_rl.envs.ftl.pool.stream_spec`).
+STREAM_SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})\+")
 
 
 _Source = tuple[Path, bytes, dict[str, Any], list[tuple[dict[str, Any], str]]]
@@ -377,8 +380,13 @@ def generated_spec(text: str) -> tuple[int, int] | None:
 
 
 def names_generated(text: str) -> bool:
-    """Whether ``text`` names generated tanks: ``wing:BAYS:SEED`` or a pool ``wing:BAYS:A-B``."""
-    return generated_spec(text) is not None or _POOL_SPEC.fullmatch(text) is not None
+    """Whether ``text`` names generated tanks: ``wing:BAYS:SEED``, a pool or a stream.
+
+    A pool is ``wing:BAYS:A-B``, a stream ``wing:BAYS:A+``.
+    """
+    return generated_spec(text) is not None or any(
+        spec.fullmatch(text) is not None for spec in (_POOL_SPEC, STREAM_SPEC)
+    )
 
 
 def load_tank(tank: str | Path | Tank = DEFAULT_TANK) -> Tank:
@@ -394,6 +402,11 @@ def load_tank(tank: str | Path | Tank = DEFAULT_TANK) -> Tank:
     if isinstance(tank, Tank):
         return tank
     text = str(tank)
+    if STREAM_SPEC.fullmatch(text):
+        raise ConfigError(
+            f"tank {text!r} is a stream of generated wings: the batched AFTIR-ArmFTL-v0 moves its "
+            "groups of rows from one to the next; everything else takes one tank, wing:BAYS:SEED"
+        )
     if _POOL_SPEC.fullmatch(text):
         raise ConfigError(
             f"tank {text!r} is a pool of generated tanks: AFTIR-ArmFTL-v0 draws one per episode "

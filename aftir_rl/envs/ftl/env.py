@@ -26,7 +26,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from aftir_rl.core.errors import ConfigError, TargetError
 from aftir_rl.core.robot import Posture, body_points
-from aftir_rl.envs.ftl.pool import TankPool, pool_specs, stream_spec
+from aftir_rl.envs.ftl.pool import (
+    STREAM_KWARGS,
+    TankPool,
+    evaluation_tank,
+    pool_specs,
+    stream_spec,
+)
 from aftir_rl.envs.ftl.spec import FTLSpec
 from aftir_rl.envs.ftl.task import (
     build_parts,
@@ -87,9 +93,11 @@ class ArmFTLEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
 
     ## Arguments
 
-    - ``tank``: tank name, YAML path, generator spec ``wing:BAYS:SEED``, or (this env, not the
-      batched one) a pool ``wing:BAYS:FIRST-LAST`` drawn per episode
-      (:mod:`aftir_rl.envs.ftl.pool`); ``n_sections``: default the tank arm's maximum.
+    - ``tank``: tank name, YAML path, generator spec ``wing:BAYS:SEED``, a pool
+      ``wing:BAYS:FIRST-LAST`` drawn per episode (:mod:`aftir_rl.envs.ftl.pool`; the batched
+      env gives each its group of rows), or a stream ``wing:BAYS:FIRST+``: the batched env
+      moves along it (with ``tanks_at_once`` and ``tank_episodes``), this env takes its first
+      16 wings as a pool; ``n_sections``: default the tank arm's maximum.
     - ``target``: fixed target [cm] for every episode; default drawn per episode with
       ``np_random``, uniformly among points ``target_clearance`` (10 cm) from every surface and
       20 cm from the start, in ``bay`` (1 to the number of bays between the tank's baffles, or
@@ -156,8 +164,10 @@ class ArmFTLEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         self.render_mode = render_mode
+        if stream_spec(kwargs.get("tank")) is not None:  # its first wings, as a pool
+            kwargs = {k: v for k, v in kwargs.items() if k not in STREAM_KWARGS}
+            kwargs["tank"] = evaluation_tank(kwargs["tank"])
         spec = FTLSpec.from_kwargs(**kwargs)
-        _refuse_stream(spec.task.tank)
         specs = pool_specs(spec.task.tank)
         #: The tanks drawn per episode (``tank="wing:BAYS:FIRST-LAST"``), or None.
         self.pool = None if specs is None else TankPool(specs)

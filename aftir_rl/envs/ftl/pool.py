@@ -4,10 +4,12 @@
 ``FIRST`` to ``LAST`` (:func:`~aftir_rl.core.tank.generate.wing_tank`; at most
 :data:`MAX_POOL` of them). :class:`TankPool` builds them once (their grids are kept while the
 env lives), draws one per episode with the env's generator, and gives the goal space that holds
-every tank of the pool, so observations do not depend on which tank an episode has. The batched
+every wing of its bays, so observations do not depend on which tank an episode has. The batched
 vector env keeps one tank for all its rows; a pool runs in the single env, one tank per env of
 ``gym.make_vec(..., vectorization_mode="sync" | "async")``. ``tank="wing:BAYS:FIRST+"`` is an
-unbounded stream of them (:func:`stream_spec`), for the batched env only.
+unbounded stream of them (:func:`stream_spec`): the batched env moves its groups of rows along
+it; anywhere else it is its first :data:`STREAM_EVAL_TANKS` wings as a pool
+(:func:`evaluation_tank`), which is how a run trained on a stream is evaluated.
 """
 
 from __future__ import annotations
@@ -20,14 +22,27 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.tank import Tank, load_tank
+from aftir_rl.core.tank.generate import wing_family_box
+from aftir_rl.core.tank.loading import STREAM_SPEC, generated_spec
 from aftir_rl.envs.ftl.spec import FTLSpec
 
-__all__ = ["MAX_POOL", "TankPool", "pool_specs", "stream_spec"]
+__all__ = [
+    "MAX_POOL",
+    "STREAM_EVAL_TANKS",
+    "STREAM_KWARGS",
+    "TankPool",
+    "evaluation_tank",
+    "pool_specs",
+    "stream_spec",
+]
 
 #: Most tanks in one pool.
 MAX_POOL = 64
+#: A stream's options (of the batched env, not of the tank's episodes): evaluations drop them.
+STREAM_KWARGS = ("tanks_at_once", "tank_episodes")
+#: Tanks of a stream's evaluation pool: its first wings, fixed whatever the run met.
+STREAM_EVAL_TANKS = 16
 _POOL = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})-([0-9]{1,10})")
-_STREAM = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})\+")
 
 
 def pool_specs(tank: object) -> list[str] | None:
@@ -60,7 +75,7 @@ def stream_spec(tank: object) -> tuple[int, int] | None:
     """
     from aftir_rl.core.tank.generate import MAX_BAYS, MAX_SEED
 
-    match = _STREAM.fullmatch(tank) if isinstance(tank, str) else None
+    match = STREAM_SPEC.fullmatch(tank) if isinstance(tank, str) else None
     if match is None:
         return None
     bays, first = int(match[1]), int(match[2])
@@ -72,6 +87,18 @@ def stream_spec(tank: object) -> tuple[int, int] | None:
     return bays, first
 
 
+def evaluation_tank(tank: object) -> object:
+    """The tank that evaluates a run trained on ``tank``: a stream's first wings as a pool.
+
+    :data:`STREAM_EVAL_TANKS` of them, fixed whatever the run met; any other tank as it is.
+    """
+    stream = stream_spec(tank)
+    if stream is None:
+        return tank
+    bays, first = stream
+    return f"wing:{bays}:{first}-{first + STREAM_EVAL_TANKS - 1}"
+
+
 class TankPool:
     """The tanks of a pool, built once; the one of each episode is drawn from them."""
 
@@ -79,9 +106,10 @@ class TankPool:
         #: The pool's tanks, in seed order (kept alive: their grids are cached per tank).
         self.tanks: list[Tank] = [load_tank(s) for s in specs]
         self.names = specs
-        lo = np.min([t.box_min for t in self.tanks], axis=0)
-        hi = np.max([t.box_max for t in self.tanks], axis=0)
-        #: The goal space's corners [cm]: every tank's box, grown by 1 m.
+        bays = {generated_spec(s)[0] for s in specs}  # type: ignore[index]
+        lo, hi = wing_family_box(max(bays))
+        #: The goal space's corners [cm]: the box of every wing of these bays, grown by 1 m (the
+        #: same for every pool and stream of them, whichever wings it holds).
         self.goal_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] = (lo - 100.0, hi + 100.0)
 
     def __len__(self) -> int:

@@ -4,12 +4,11 @@
 the pool ``tank="wing:BAYS:FIRST-LAST"`` (the first ``num_envs`` tanks if the pool is larger),
 as equal as can be, each group an :class:`~aftir_rl.envs.ftl.env.ArmFTLVectorEnv` of its own
 tank, stepped one after the other. Rows keep their tank: row ``i`` seeded ``seed + i`` draws its
-targets as row ``i - start`` of its group does. The goal space holds every tank of the pool.
+targets as row ``i - start`` of its group does. The goal space holds every wing of the pool's
+bays (:func:`~aftir_rl.core.tank.generate.wing_family_box`).
 With a stream ``tank="wing:BAYS:FIRST+"`` the groups' tanks are the stream's first ones, and a
 group whose rows have ended ``tank_episodes`` episodes moves on to the stream's next unused
-wing: its running episodes end there (truncated), and its rows start again in the new tank. The
-goal space then holds every wing of those bays
-(:func:`~aftir_rl.core.tank.generate.wing_family_box`).
+wing: its running episodes end there (truncated), and its rows start again in the new tank.
 :func:`make_vector_env` is the registered vector entry point: a pool or a stream gives this env,
 one tank the plain batched one.
 """
@@ -26,7 +25,7 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError, InvalidActionError, TargetError
 from aftir_rl.core.tank import load_tank
-from aftir_rl.core.tank.generate import MAX_SEED, wing_family_box
+from aftir_rl.core.tank.generate import MAX_SEED
 from aftir_rl.envs.ftl.env import ArmFTLVectorEnv, same_step_finals
 from aftir_rl.envs.ftl.pool import TankPool, pool_specs, stream_spec
 
@@ -92,11 +91,7 @@ class ArmFTLPoolVectorEnv(VectorEnv[Obs, NDArray[np.float32], Any]):
             specs = [f"wing:{bays}:{first + g}" for g in range(min(at_once, num_envs))]
         groups = min(len(specs), num_envs)
         self.pool = TankPool(specs[:groups])
-        if self.stream is None:
-            self.goal_bounds = self.pool.goal_bounds
-        else:
-            lo, hi = wing_family_box(self.stream[0])
-            self.goal_bounds = (lo - 100.0, hi + 100.0)  # as a pool's: its boxes grown by 1 m
+        self.goal_bounds = self.pool.goal_bounds  # every wing of these bays: the stream's too
         sizes = [num_envs // groups + (g < num_envs % groups) for g in range(groups)]
         #: Each group's first row, and the end: group ``g`` holds rows ``starts[g]:starts[g+1]``.
         self.starts = np.concatenate([[0], np.cumsum(sizes)]).astype(int)

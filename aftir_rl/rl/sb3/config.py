@@ -479,7 +479,8 @@ def sb3_config_from_run(data: Any, source: str) -> tuple[str, SB3Config]:
 #: observation space: a model is always loaded into an env made with its run's ``env_kwargs``.
 ENV_KWARGS: dict[str, dict[str, tuple[type, ...]]] = {
     "AFTIR-ArmFull-v0": {"bay": (int, type(None))},
-    "AFTIR-ArmFTL-v0": CONFIG_KWARG_TYPES,
+    # a stream of tanks' options (--tank wing:B:F+) are the batched env's
+    "AFTIR-ArmFTL-v0": {**CONFIG_KWARG_TYPES, "tanks_at_once": (int,), "tank_episodes": (int,)},
 }
 #: Envs that take a ``tank`` (``--tank``; a run records it): never from a config file.
 TANK_ENV_IDS = ("AFTIR-ArmFTL-v0",)

@@ -28,6 +28,7 @@ from stable_baselines3.common.logger import Image
 from aftir_rl.core import interrupts
 from aftir_rl.core.config import EVAL_SEED
 from aftir_rl.core.files import atomic_open, write_json
+from aftir_rl.envs.ftl.pool import STREAM_KWARGS, evaluation_tank
 from aftir_rl.envs.ftl.spec import TRAINING_ONLY_KWARGS
 from aftir_rl.rl.common import Predictor
 
@@ -50,9 +51,17 @@ def evaluation_env_kwargs(env_kwargs: dict[str, Any] | None) -> dict[str, Any]:
 
     The keys of :data:`~aftir_rl.envs.ftl.spec.TRAINING_ONLY_KWARGS` change how training
     draws or judges its targets, not the env's spaces: every run of an env is evaluated on the
-    same targets by the same rule.
+    same targets by the same rule. A stream of tanks becomes its first wings as a pool
+    (:func:`~aftir_rl.envs.ftl.pool.evaluation_tank`), without the stream's options.
     """
-    return {k: v for k, v in (env_kwargs or {}).items() if k not in TRAINING_ONLY_KWARGS}
+    out = {
+        k: v
+        for k, v in (env_kwargs or {}).items()
+        if k not in TRAINING_ONLY_KWARGS and k not in STREAM_KWARGS
+    }
+    if "tank" in out:
+        out["tank"] = evaluation_tank(out["tank"])
+    return out
 
 
 def evaluation_targets(
