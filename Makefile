@@ -74,6 +74,7 @@ bench: $(STAMP)  ## every benchmark table, quick
 	$(PY) benchmarks/bench_render.py --quick
 	$(PY) benchmarks/bench_arm_ftl.py --quick
 	$(PY) benchmarks/bench_fields.py --quick
+	$(PY) benchmarks/bench_tank_cost.py --quick
 	$(PY) benchmarks/bench_physics.py --quick
 	OMP_NUM_THREADS=1 $(PY) benchmarks/bench_rllib.py --quick
 	$(PY) -m aftir_rl.bench --quick
@@ -89,6 +90,7 @@ bench-full: $(STAMP)  ## every benchmark table of docs/benchmarks.md, full
 	$(PY) benchmarks/bench_render.py
 	$(PY) benchmarks/bench_arm_ftl.py
 	$(PY) benchmarks/bench_fields.py
+	$(PY) benchmarks/bench_tank_cost.py
 	$(PY) benchmarks/bench_physics.py
 	OMP_NUM_THREADS=1 $(PY) benchmarks/bench_rllib.py --json benchmarks/results/rllib.json
 	$(PY) -m aftir_rl.bench

@@ -72,23 +72,9 @@ class ArmFTLPoolVectorEnv(VectorEnv[Obs, NDArray[np.float32], Any]):
             raise ConfigError("num_envs and max_episode_steps must be at least 1")
         #: ``(bays, first seed)`` of a stream, or None for a pool.
         self.stream = stream_spec(kwargs.get("tank"))
-        if self.stream is None:
-            specs = pool_specs(kwargs.get("tank"))
-            if specs is None:
-                raise ConfigError(
-                    "ArmFTLPoolVectorEnv needs a pool tank='wing:BAYS:FIRST-LAST' or a stream "
-                    "'wing:BAYS:FIRST+'"
-                )
-            if tanks_at_once is not None or tank_episodes is not None:
-                raise ConfigError("tanks_at_once and tank_episodes are a stream's (wing:B:F+)")
-        else:
-            bays, first = self.stream
-            at_once = 8 if tanks_at_once is None else tanks_at_once
-            self.tank_episodes = 256 if tank_episodes is None else tank_episodes
-            for name, value in (("tanks_at_once", at_once), ("tank_episodes", self.tank_episodes)):
-                if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                    raise ConfigError(f"{name} must be a whole number of at least 1, got {value!r}")
-            specs = [f"wing:{bays}:{first + g}" for g in range(min(at_once, num_envs))]
+        specs, self.tank_episodes = _first_tanks(
+            kwargs.get("tank"), num_envs, tanks_at_once, tank_episodes
+        )
         groups = min(len(specs), num_envs)
         self.pool = TankPool(specs[:groups])
         self.goal_bounds = self.pool.goal_bounds  # every wing of these bays: the stream's too
@@ -236,6 +222,30 @@ class ArmFTLPoolVectorEnv(VectorEnv[Obs, NDArray[np.float32], Any]):
         """Close every group (none when the constructor refused its arguments)."""
         for group in getattr(self, "groups", ()):
             group.close()
+
+
+def _first_tanks(
+    tank: object, num_envs: int, tanks_at_once: int | None, tank_episodes: int | None
+) -> tuple[list[str], int]:
+    """A pool's tanks, or a stream's first ``tanks_at_once``; a stream's ``tank_episodes``."""
+    stream = stream_spec(tank)
+    if stream is None:
+        specs = pool_specs(tank)
+        if specs is None:
+            raise ConfigError(
+                "ArmFTLPoolVectorEnv needs a pool tank='wing:BAYS:FIRST-LAST' or a stream "
+                "'wing:BAYS:FIRST+'"
+            )
+        if tanks_at_once is not None or tank_episodes is not None:
+            raise ConfigError("tanks_at_once and tank_episodes are a stream's (wing:B:F+)")
+        return specs, 0
+    at_once = 8 if tanks_at_once is None else tanks_at_once
+    episodes = 256 if tank_episodes is None else tank_episodes
+    for name, value in (("tanks_at_once", at_once), ("tank_episodes", episodes)):
+        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            raise ConfigError(f"{name} must be a whole number of at least 1, got {value!r}")
+    bays, first = stream
+    return [f"wing:{bays}:{first + g}" for g in range(min(at_once, num_envs))], episodes
 
 
 def _group_seed(seed: int | Sequence[int], rows: slice) -> int | list[int]:

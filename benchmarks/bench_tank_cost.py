@@ -1,0 +1,189 @@
+"""What a new tank costs ``AFTIR-ArmFTL-v0``, part by part, and in steps of a fixed tank's env.
+
+    python benchmarks/bench_tank_cost.py [--seeds N] [--bays 2,3,5] [--rows B]
+
+Per generated wing (``--bays``: 2, 3 and 5 bays, generator seeds 900,000... that nothing else
+builds, each tank built once, in this process) and the 737 tank: the seconds to generate it, to
+make the env's state (raster, clearance grids), the guide (the field guide with its first target
+field), and the raster shaping's all-pairs distance table with this tree's compiled BFS and with
+the previous numpy relaxation (transcribed below, on a second copy of the tank; both tables must
+be equal). Then ``--rows`` rows of the batched env on one of those wings step random actions:
+the steps a new tank's cost would buy (with the guide and the field shaping, and with the raster
+shaping). Last, SB3's PPO (the wings recipe's network and batch) trains ``--train-steps`` steps on
+that one wing, then on a stream of 3-bay wings (seeds 910,000...) moving on every 8, 32 or 128
+episodes of a group's rows: steps/s, the wings met, and the share of the one wing's speed. The
+tables, then the machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from quick_mode import parse_args, print_header  # benchmarks/ is the script's own folder
+
+from aftir_rl.core.tank import Tank, load_tank
+from aftir_rl.envs.ftl.env import ArmFTLVectorEnv
+from aftir_rl.envs.ftl.fields import raster_detour_table, raster_distance_table
+from aftir_rl.experiments.bench import machine_facts
+
+QUICK = {"seeds": 1, "bays": "2,3", "rows": 64, "train_steps": 32768}
+
+
+def previous_distance_table(tank: Tank) -> np.ndarray:
+    """The table before: relaxation of a ``(cells, cells)`` array by numpy, as it was."""
+    raster = tank.raster
+    shape = raster.shape
+    free = ~raster.obstructed
+    n = raster.n_cells
+    big = np.int32(10 * n)
+    dist = np.full((n,) + shape, big, dtype=np.int32)
+    dist.reshape(n, n)[np.arange(n), np.arange(n)] = 0
+    moves = [(axis, step) for axis in range(3) for step in (-1, 1)]
+
+    def neighbour_min(d: np.ndarray) -> np.ndarray:
+        best = np.full_like(d, big)
+        for axis, step in moves:
+            src = [slice(None)] * 4
+            dst = [slice(None)] * 4
+            src[axis + 1] = slice(max(0, -step), shape[axis] - max(0, step))
+            dst[axis + 1] = slice(max(0, step), shape[axis] - max(0, -step))
+            best[tuple(dst)] = np.minimum(best[tuple(dst)], d[tuple(src)])
+        return best
+
+    for _ in range(4 * sum(shape)):
+        new = np.where(free[None], np.minimum(dist, neighbour_min(dist) + 1), dist)
+        if np.array_equal(new, dist):
+            break
+        dist = new
+    dist = np.where(free[None], dist, np.minimum(dist, neighbour_min(dist) + 1))
+    flat = dist.reshape(n, n)
+    flat = np.minimum(flat, flat.T)
+    finite = flat[flat < big]
+    return np.where(flat < big, flat, (finite.max() + 1) if finite.size else 0).astype(np.int32)
+
+
+def _seconds(fn, *args, **kwargs) -> tuple[float, object]:  # noqa: ANN001
+    start = time.perf_counter()
+    out = fn(*args, **kwargs)
+    return time.perf_counter() - start, out
+
+
+def tank_costs(spec: str) -> dict[str, float]:
+    """Seconds of each part for one tank built here for the first time."""
+    row: dict[str, float] = {}
+    row["generate"], tank = _seconds(load_tank, spec)
+    row["cells"] = float(tank.raster.n_cells)
+    row["state"], env = _seconds(ArmFTLVectorEnv, num_envs=4, tank=tank)
+    env.close()
+    row["guide"], env = _seconds(ArmFTLVectorEnv, num_envs=4, tank=tank, guide=True)
+    env.reset(seed=0)  # the first target's field
+    row["guide"] += _seconds(env.step, np.zeros((4, 3), np.float32))[0]
+    env.close()
+    row["table"], table = _seconds(raster_distance_table, tank)
+    row["detour"], _ = _seconds(raster_detour_table, tank)
+    row["table before"], before = _seconds(previous_distance_table, load_tank(spec))
+    if not np.array_equal(table, before):
+        raise SystemExit(f"{spec}: the compiled table differs from the relaxation's")
+    return row
+
+
+def steps_per_second(rows: int, **kwargs: object) -> float:
+    """Random-action steps per second of ``rows`` rows of the batched env on a built tank."""
+    env = ArmFTLVectorEnv(num_envs=rows, **kwargs)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (300, rows, 3)).astype(np.float32)
+    for a in actions[:20]:  # the first targets' fields, compiled kernels
+        env.step(a)
+    start = time.perf_counter()
+    for a in actions[20:]:
+        env.step(a)
+    env.close()
+    return rows * (len(actions) - 20) / (time.perf_counter() - start)
+
+
+def training_rate(steps: int, rows: int, tank: str, **stream: int) -> tuple[float, int]:
+    """SB3 PPO's steps/s on ``rows`` rows (the wings recipe's settings), and the tanks it met."""
+    from stable_baselines3 import PPO
+
+    from aftir_rl.rl.sb3.vec_adapter import make_batched_vec_env
+
+    kwargs = {"tank": tank, "guide": True, "shaping": "field", "steer": "target", **stream}
+    venv = make_batched_vec_env("AFTIR-ArmFTL-v0", rows, 0, kwargs)
+    assert venv is not None
+    model = PPO("MultiInputPolicy", venv, n_steps=128, batch_size=4096, n_epochs=5, seed=0,
+                policy_kwargs={"net_arch": [256, 256]}, device="cpu")  # fmt: skip
+    batched = venv.venv.venv  # type: ignore[attr-defined]  (VecMonitor, SB3VectorEnv)
+    start = time.perf_counter()
+    model.learn(steps)
+    seconds = time.perf_counter() - start
+    used = getattr(batched, "_tanks_used", 1)
+    venv.close()
+    return model.num_timesteps / seconds, used
+
+
+def main() -> None:
+    """Print the table of costs per tank and what they are worth in steps."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, default=3, help="generated wings per bay count")
+    parser.add_argument("--bays", default="2,3,5", help="bay counts of the wings (default 2,3,5)")
+    parser.add_argument("--rows", type=int, default=128, help="rows of the fixed-tank env")
+    parser.add_argument(
+        "--train-steps", type=int, default=131072, help="PPO steps per training measurement"
+    )
+    args = parse_args(parser, QUICK)
+    print_header(args, QUICK)
+    load_tank("wing:2:899999")  # compile (or load) the kernels outside the timings
+    ArmFTLVectorEnv(num_envs=2, tank="wing:2:899999", guide=True, shaping=True).close()
+    specs = ["b737_center"] + [
+        f"wing:{bays}:{900_000 + seed}"
+        for bays in (int(b) for b in args.bays.split(","))
+        for seed in range(args.seeds)
+    ]
+    print("| tank | raster cells | generate s | env state s | guide s | raster table s, "
+          "before / now | ratio | detour s |")  # fmt: skip
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    totals = []
+    for spec in specs:
+        r = tank_costs(spec)
+        totals.append((r["generate"] + r["state"] + r["guide"], r["table"] + r["detour"]))
+        print(
+            f"| {spec} | {r['cells']:,.0f} | {r['generate']:.2f} | {r['state']:.2f} | "
+            f"{r['guide']:.2f} | {r['table before']:.2f} / {r['table']:.2f} | "
+            f"{r['table before'] / r['table']:.0f}x | {r['detour']:.2f} |"
+        )
+    wing = "wing:3:900000"  # (built above when --bays has 3: its fields are kept)
+    fixed = {
+        "guide, field shaping": steps_per_second(args.rows, tank=wing, guide=True, shaping="field"),
+        "guide, raster shaping": steps_per_second(args.rows, tank=wing, guide=True, shaping=True),
+    }
+    guide_cost = float(np.median([t[0] for t in totals[1:]]))
+    raster_cost = guide_cost + float(np.median([t[1] for t in totals[1:]]))
+    print(f"\n| {wing}, {args.rows} rows | steps/s | a new wing costs (median) | in steps |")
+    print("|---|---:|---:|---:|")
+    for (name, rate), cost in zip(fixed.items(), (guide_cost, raster_cost)):
+        print(f"| {name} | {rate:,.0f} | {cost:.2f} s | {rate * cost:,.0f} |")
+    print(
+        f"\n| PPO on {args.rows} rows, 3-bay wings, {args.train_steps:,} steps | steps/s | "
+        "tanks met | share of one tank's |"
+    )
+    print("|---|---:|---:|---:|")
+    training_rate(4096, args.rows, wing)  # torch's first steps, outside the table
+    fixed_rate, _ = training_rate(args.train_steps, args.rows, wing)
+    print(f"| one tank ({wing}) | {fixed_rate:,.0f} | 1 | 100% |")
+    for episodes in (8, 32, 128):
+        rate, used = training_rate(
+            args.train_steps, args.rows, "wing:3:910000+", tank_episodes=episodes
+        )
+        print(
+            f"| a stream, 8 tanks at once, a new one per {episodes} episodes of its rows | "
+            f"{rate:,.0f} | {used} | {rate / fixed_rate:.0%} |"
+        )
+    print()
+    print(machine_facts())
+
+
+if __name__ == "__main__":
+    main()
