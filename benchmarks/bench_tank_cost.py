@@ -138,7 +138,7 @@ def _training_rate(steps: int, rows: int, tank: str, stream: dict[str, int]) -> 
     start = time.perf_counter()
     model.learn(steps)
     seconds = time.perf_counter() - start
-    used = getattr(batched, "_tanks_used", 1)
+    used = getattr(batched, "tanks_met", 1)  # (one tank: the plain batched env)
     venv.close()
     return model.num_timesteps / seconds, used
 

@@ -152,6 +152,7 @@ def test_a_stream_moves_each_group_on_to_unused_wings(mode):
     tanks = list(dict.fromkeys(seen))
     assert len(tanks) >= 5, tanks  # the two first wings, then new ones
     assert tanks == [f"wing:2:{700 + i}" for i in range(len(tanks))]  # in order, none twice
+    assert env.tanks_met == len(tanks)
     swaps = 0
     for t, (before, after, *_) in enumerate(record):
         for new_tank in dict.fromkeys(after[i] for i in range(6) if before[i] != after[i]):

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.tank import Tank, load_tank
-from aftir_rl.core.tank.generate import wing_family_box
+from aftir_rl.core.tank.generate import MAX_BAYS, MAX_SEED, wing_family_box
 from aftir_rl.core.tank.loading import STREAM_SPEC, generated_spec
 from aftir_rl.envs.ftl.spec import FTLSpec
 
@@ -73,8 +73,6 @@ def stream_spec(tank: object) -> tuple[int, int] | None:
         ConfigError: ``BAYS`` or ``FIRST`` outside what the generator draws.
 
     """
-    from aftir_rl.core.tank.generate import MAX_BAYS, MAX_SEED
-
     match = STREAM_SPEC.fullmatch(tank) if isinstance(tank, str) else None
     if match is None:
         return None

@@ -104,7 +104,8 @@ class ArmFTLPoolVectorEnv(VectorEnv[Obs, NDArray[np.float32], Any]):
         #: Each row's tank (its generator spec).
         self.row_tanks = [name for name, n in zip(self.pool.names, sizes) for _ in range(n)]
         self._episodes = np.zeros(groups, dtype=np.int64)  # a stream's, per group and tank
-        self._tanks_used = groups
+        #: The tanks the rows have been in since the last seeded reset (a pool's: its groups').
+        self.tanks_met = groups
         self._seed: int | None = None
 
     def _slices(self) -> list[slice]:
@@ -168,7 +169,7 @@ class ArmFTLPoolVectorEnv(VectorEnv[Obs, NDArray[np.float32], Any]):
             if self.pool.names[g] != f"wing:{bays}:{first + g}":
                 self._replace_group(g, f"wing:{bays}:{first + g}")
         self._episodes[:] = 0
-        self._tanks_used = len(self.groups)
+        self.tanks_met = len(self.groups)
 
     def _replace_group(self, g: int, spec: str) -> ArmFTLVectorEnv:
         """Group ``g`` in the tank ``spec`` from now on (the old tank's env is closed)."""
@@ -194,10 +195,10 @@ class ArmFTLPoolVectorEnv(VectorEnv[Obs, NDArray[np.float32], Any]):
         if self._episodes[g] < self.tank_episodes:
             return out
         bays, first = self.stream  # type: ignore[misc]
-        seed = first + self._tanks_used
+        seed = first + self.tanks_met
         if seed > MAX_SEED:
             raise ConfigError(f"the stream of wing:{bays}:{first}+ ran past seed {MAX_SEED:,}")
-        self._tanks_used += 1
+        self.tanks_met += 1
         self._episodes[g] = 0
         new = self._replace_group(g, f"wing:{bays}:{seed}")
         own = None
