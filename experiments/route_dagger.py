@@ -31,12 +31,11 @@ from torch import nn
 from aftir_rl.core.errors import PlanningError
 from aftir_rl.envs.ftl.route_env import ROUTE_SETTINGS, ArmRouteEnv
 from aftir_rl.experiments.bench import machine_facts
-from aftir_rl.planning.ftl.plan import deploy_route
 from aftir_rl.planning.ftl.route import plan_route
 from aftir_rl.planning.ftl.search import MAIN_VARIANTS
 
-#: The teacher's search settings, tried in turn from the route as it is (lead 0, as the env).
-TEACHERS = (ROUTE_SETTINGS, *(replace(v, leads=(0.0,)) for v in MAIN_VARIANTS[1:4]))
+#: The teacher's search settings, tried in turn from the route as it is.
+TEACHERS = (ROUTE_SETTINGS, *MAIN_VARIANTS[1:4])
 
 
 class Teacher:
@@ -46,7 +45,15 @@ class Teacher:
         self.queries, self.answered, self.seconds = 0, 0, 0.0
 
     def __call__(self, env: ArmRouteEnv) -> int | None:
-        """The move of ``env``'s route that the planner's continuation begins with, or None."""
+        """The action the planner's continuation of ``env``'s route begins with, or None.
+
+        Before the lead is chosen: the first lead (the planner's own first, then ``env.leads``
+        in order) from which the teacher's moves, followed in ``env``, reach the target; after
+        it, the clear move nearest the next section of the route continued from ``env``'s
+        (its lead and sections kept).
+        """
+        if env.choosing:
+            return self.lead(env)
         start = time.perf_counter()
         self.queries += 1
         k, ok = env.route.n_route_sections, env.action_masks()
@@ -54,6 +61,7 @@ class Teacher:
         for settings in TEACHERS if ok.any() else ():
             try:
                 prefix = env.route if k else None
+                settings = replace(settings, leads=(env.route.lead,))
                 route = plan_route(env.tank, env.target, None, settings, env.arm, prefix).route
             except PlanningError:
                 continue
@@ -64,6 +72,48 @@ class Teacher:
                 break
         self.seconds += time.perf_counter() - start
         return label
+
+    def lead(self, env: ArmRouteEnv) -> int | None:
+        """The lead to choose: each tried by following the teacher from it (``env`` restored)."""
+        start, first = time.perf_counter(), None
+        self.queries += 1
+        for settings in TEACHERS:
+            try:
+                route = plan_route(env.tank, env.target, None, replace(settings, leads=env.leads))
+            except PlanningError:
+                continue
+            first = int(np.argmin(np.abs(np.array(env.leads) - route.route.lead)))
+            break
+        self.seconds += time.perf_counter() - start
+        order = ([first] if first is not None else []) + list(range(len(env.leads)))
+        label, empty = None, env.route
+        for j in dict.fromkeys(order):
+            env.restore(empty, choosing=True)
+            _, _, terminated, _, info = env.step(j)
+            if info["is_success"] or (not terminated and self.finishes(env)):
+                label = j
+                break
+        env.restore(empty, choosing=True)
+        self.answered += label is not None
+        return label if label is not None else first
+
+    def finishes(self, env: ArmRouteEnv) -> bool:
+        """Whether the teacher's moves, followed from ``env``'s route, reach the target.
+
+        The env is put back at its route after.
+        """
+        route, choosing = env.route, env.choosing
+        success = False
+        while True:
+            move = self(env)
+            if move is None:
+                break
+            _, _, terminated, _, info = env.step(move)
+            if terminated:
+                success = info["is_success"]
+                break
+        env.restore(route, choosing)
+        return success
 
 
 class Policy(nn.Module):
@@ -127,11 +177,12 @@ def episode(env: ArmRouteEnv, policy: Policy, seed: int, backtrack: int) -> tupl
 
     def dfs() -> bool:
         nonlocal steps
-        route, obs, mask = env.route, env.observation(), env.action_masks()
+        route, choosing = env.route, env.choosing
+        obs, mask = env.observation(), env.action_masks()
         for move in policy.order(obs, mask):
-            if steps >= env.arm.max_sections + backtrack:
+            if steps >= env.arm.max_sections + 1 + backtrack:
                 return False
-            env.restore(route)
+            env.restore(route, choosing)
             _, _, terminated, truncated, info = env.step(move)
             steps += 1
             if info["is_success"]:
@@ -145,19 +196,46 @@ def episode(env: ArmRouteEnv, policy: Policy, seed: int, backtrack: int) -> tupl
     return dfs(), steps
 
 
+def diagnose(env: ArmRouteEnv, policy: Policy, teacher: Teacher, seeds: list[int]) -> dict:
+    """Where the greedy policy's failures go wrong, counted by decision.
+
+    The first of its decisions after which the teacher, followed from there, no longer reaches
+    the target (``lead``, ``section 1``...; ``start`` where it cannot from the empty route
+    either), or ``at the end`` where it still could from the last route the policy left.
+    """
+    where: dict[str, int] = {}
+    names = ["start", *(["lead"] if len(env.leads) > 1 else [])]
+    for seed in seeds:
+        env.reset(seed=seed)
+        wrong, k = "at the end", 0
+        while True:
+            if not teacher.finishes(env):
+                wrong = names[k] if k < len(names) else f"section {k - len(names) + 1}"
+                break
+            move = policy.order(env.observation(), env.action_masks())
+            if not move:
+                break
+            _, _, terminated, _, _ = env.step(move[0])
+            k += 1
+            if terminated:
+                break
+        where[wrong] = where.get(wrong, 0) + 1
+    return dict(sorted(where.items()))
+
+
 def evaluate(env: ArmRouteEnv, policy: Policy, n: int, backtrack: int, deploy: bool) -> dict:
     """Success on the held-out targets; with ``deploy``, motions that keep 1 cm too."""
-    reached, kept, steps = 0, 0, []
+    reached, kept, steps, failed = 0, 0, [], []
     for i in range(n):
         ok, used = episode(env, policy, 3_000_000 + i, backtrack)
         reached += ok
         steps.append(used)
+        failed += [] if ok else [3_000_000 + i]
         if ok and deploy:
-            route = env.final_route()
-            assert route is not None
-            plan = deploy_route(env.tank, env.target, route)
+            plan = env.motion()
+            assert plan is not None and plan.min_clearance_cm is not None
             kept += plan.complete and plan.min_clearance_cm >= 1.0
-    out = {"success": reached / n, "steps_mean": float(np.mean(steps))}
+    out = {"success": reached / n, "steps_mean": float(np.mean(steps)), "failed": failed}
     return out | ({"motions_keeping_1cm": kept / n} if deploy else {})
 
 
@@ -199,8 +277,11 @@ def main() -> None:
         }
         if last:
             row["backtrack"] = evaluate(env, policy, args.eval, args.backtrack, True)
+            row["greedy_failures_go_wrong_at"] = diagnose(
+                env, policy, Teacher(), row["greedy"]["failed"]
+            )
         rounds.append(row)
-        print(json.dumps(row), flush=True)
+        print(json.dumps({k: v for k, v in row.items() if k != "failed"}), flush=True)
     if args.json:
         out = {"machine": machine_facts(), "options": vars(args), "rounds": rounds}
         Path(args.json).write_text(json.dumps(out, indent=1))

@@ -9,11 +9,12 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from aftir_rl.core.collision import CollisionScene
-from aftir_rl.core.errors import InvalidActionError
+from aftir_rl.core.errors import ConfigError, InvalidActionError
+from aftir_rl.envs.ftl import route_env
 from aftir_rl.envs.ftl.env import ArmFTLEnv
-from aftir_rl.envs.ftl.route_env import ROUTE_SETTINGS, ArmRouteEnv
+from aftir_rl.envs.ftl.route_env import ROUTE_LEADS, ROUTE_SETTINGS, ArmRouteEnv
 from aftir_rl.planning.ftl.plan import deploy_route
-from aftir_rl.planning.ftl.route import move_set, plan_route
+from aftir_rl.planning.ftl.route import move_set, plan_route, route_moves
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +47,7 @@ def test_the_planners_moves_reach_the_target_and_its_motion_keeps_the_margin(env
     env.reset(seed=seed)
     route = plan_route(env.tank, env.target, None, ROUTE_SETTINGS).route
     moves = move_set(ROUTE_SETTINGS)
-    info = {"is_success": False}
+    _, reward, terminated, _, info = env.step(ROUTE_LEADS.index(route.lead))
     for k in range(route.n_route_sections):
         last = route.kappa[k - 1] if k else np.zeros(2)
         move = int(np.argmin(np.abs(moves + last - route.kappa[k]).sum(axis=1)))
@@ -59,7 +60,9 @@ def test_the_planners_moves_reach_the_target_and_its_motion_keeps_the_margin(env
     assert reward == 1.0
     final = env.final_route()
     assert final is not None and np.linalg.norm(final.tip() - env.target) < 1e-4
-    plan = deploy_route(env.tank, env.target, final)
+    plan = env.motion()
+    again = deploy_route(env.tank, env.target, final)
+    assert plan is not None and plan.min_clearance_cm == again.min_clearance_cm
     scene = CollisionScene(env.tank, links_per_section=10)
     motion = plan.motion
     clearance = min(scene.check(motion.posture(t)).clearance_cm for t in range(len(motion)))
@@ -67,7 +70,8 @@ def test_the_planners_moves_reach_the_target_and_its_motion_keeps_the_margin(env
 
 
 def test_a_move_that_is_not_clear_ends_in_contact_and_restore_replays(env):
-    obs, _ = env.reset(seed=11)
+    env.reset(seed=11)
+    obs, *_ = env.step(ROUTE_LEADS.index(0.0))
     start = env.route
     blocked = np.flatnonzero(~env.action_masks())
     clear = np.flatnonzero(env.action_masks())
@@ -83,3 +87,56 @@ def test_a_move_that_is_not_clear_ends_in_contact_and_restore_replays(env):
         env.restore(start)
         _, reward, terminated, _, info = env.step(int(blocked[0]))
         assert terminated and info["contact"] and reward == -1.0
+
+
+def test_the_first_action_chooses_the_lead(env):
+    """At the first step the leads are the open actions, with their features in their slots;
+    the chosen lead is the route's and is observed; one lead makes no such step."""
+    first, _ = env.reset(seed=5)
+    n, inner = len(ROUTE_LEADS), len(first) - 4 * 25 - 5
+    assert env.choosing and env.action_masks().tolist() == [True] * n + [False] * (25 - n)
+    assert first[-5] == 1.0
+    with pytest.raises(InvalidActionError, match="a lead 0 to 4"):
+        env.step(n)
+    for j, lead in enumerate(ROUTE_LEADS):
+        env.restore(env.route, choosing=True)
+        obs, _, terminated, _, _ = env.step(j)
+        assert not env.choosing and env.route.lead == lead and env.route.n_route_sections == 0
+        assert obs[-5] == 0.0 and obs[-4] == pytest.approx(lead / 100)
+        np.testing.assert_allclose(obs[-3:], (env.target - env.route.tip()) / 100, atol=1e-6)
+        ok = route_moves(env.tank, env.route, env.target, ROUTE_SETTINGS).ok
+        assert terminated or (env.action_masks() == ok).all()
+        assert first[inner + j] == ok.any()  # the lead's slot: whether a first section is clear
+        assert first[inner + 75 + j] == pytest.approx(ok.mean())
+    single = ArmRouteEnv(bay=2, leads=(0.0,))
+    obs, _ = single.reset(seed=5)
+    assert not single.choosing and obs[-5] == 0.0
+    assert single.observation_space.contains(obs)
+    for bad in ((), (0.0, float("nan")), tuple(range(26))):
+        with pytest.raises(ConfigError, match="leads must be"):
+            ArmRouteEnv(bay=2, leads=bad)
+
+
+def test_a_closing_whose_motion_loses_the_margin_is_not_a_success(env, monkeypatch):
+    """The planner's route closes, but with its deployment refused the episode goes on."""
+    env.reset(seed=3_000_000)
+    route = plan_route(env.tank, env.target, None, ROUTE_SETTINGS).route
+    real = route_env.deploy_route
+
+    def refused(*args, **kwargs):
+        plan = real(*args, **kwargs)
+        plan.complete = False
+        return plan
+
+    monkeypatch.setattr(route_env, "deploy_route", refused)
+    env.reset(seed=3_000_000)
+    _, _, terminated, _, info = env.step(ROUTE_LEADS.index(route.lead))
+    moves = move_set(ROUTE_SETTINGS)
+    for k in range(route.n_route_sections):
+        if terminated:
+            break
+        last = route.kappa[k - 1] if k else np.zeros(2)
+        move = int(np.argmin(np.abs(moves + last - route.kappa[k]).sum(axis=1)))
+        _, _, terminated, _, info = env.step(move)
+        assert env.motion() is None and env.final_route() is None
+    assert not info["is_success"]

@@ -1,13 +1,16 @@
 """``AFTIR-ArmRoute-v0``: the follow-the-leader arm decided a route section at a time.
 
-The decision level of the route planner: one action chooses the next route section among the
-planner's moves (:func:`~aftir_rl.planning.ftl.route.move_set`: the last section's bend kept,
-or changed by one of 3 sizes in 8 directions), and the env closes the route onto the target as
+The decision level of the route planner: the first action chooses the route's lead (how far the
+arm travels straight above the floor, or bends inside the panel's guide, before its first
+section), every later one the next route section among the planner's moves
+(:func:`~aftir_rl.planning.ftl.route.move_set`: the last section's bend kept, or changed by one
+of 3 sizes in 8 directions), and the env closes the route onto the target as
 soon as the planner's closing can (:func:`~aftir_rl.planning.ftl.route.close_route`: the last
-sections re-bent so that the tip ends on the target, the margin kept). The policy decides the
-way through the tank; the closing places the tip. The arm follows the route exactly
-(follow-the-leader); :meth:`ArmRouteEnv.motion` deploys the final route as the planner does
-(:func:`~aftir_rl.planning.ftl.plan.deploy_route`) into a motion checked along its whole length.
+sections re-bent so that the tip ends on the target) and the closed route's motion keeps the
+margin: the arm deployed along it as the planner deploys its own
+(:func:`~aftir_rl.planning.ftl.plan.deploy_route`), checked by python-fcl along its whole length
+(:meth:`ArmRouteEnv.motion`). The policy decides the way through the tank; the closing places
+the tip.
 
 Targets, tank and observation features are those of ``AFTIR-ArmFTL-v0`` (an inner
 :class:`~aftir_rl.envs.ftl.env.ArmFTLEnv` with ``guide=True`` draws the targets with the same
@@ -17,15 +20,17 @@ levels are compared on the same targets.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from aftir_rl.core.errors import InvalidActionError
+from aftir_rl.core.errors import ConfigError, InvalidActionError
 from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.planning.ftl.model import Route
+from aftir_rl.planning.ftl.plan import MotionPlan, deploy_route
 from aftir_rl.planning.ftl.route import (
     RouteSettings,
     close_route,
@@ -33,11 +38,14 @@ from aftir_rl.planning.ftl.route import (
     route_moves,
 )
 
-__all__ = ["ArmRouteEnv", "ROUTE_SETTINGS"]
+__all__ = ["ArmRouteEnv", "ROUTE_LEADS", "ROUTE_SETTINGS"]
 
-#: The moves and clearance rule of the route env: the planner's first search setting, routes
-#: that start on the floor (where the arm starts).
+#: The moves and clearance rule of the route env: the planner's first search setting (its
+#: ``leads`` are not used: the env's ``leads`` are the first decision).
 ROUTE_SETTINGS = RouteSettings(clearance_weight=1.0, change_weight=20.0, leads=(0.0,))
+
+#: The leads [cm] the first action chooses among: the route search's own.
+ROUTE_LEADS: tuple[float, ...] = RouteSettings().leads
 
 #: Distance-to-go [cm] shown for a move that is not clear (and the cap of the others).
 _FAR = 1000.0
@@ -48,24 +56,33 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
 
     ## Action Space
 
-    ``Discrete(25)``: the next section's bend is the last one's plus move ``a`` of
-    :func:`~aftir_rl.planning.ftl.route.move_set` (0: unchanged). :meth:`action_masks` says
-    which moves keep the clearance (``radius + margin + slack`` from the tank, sampled along
-    the section); a move that does not ends the episode in contact.
+    ``Discrete(25)``. The first action chooses the lead: action ``j`` is ``leads[j]`` (with one
+    lead there is no such step). Every later action adds a section: its bend is the last one's
+    plus move ``a`` of :func:`~aftir_rl.planning.ftl.route.move_set` (0: unchanged).
+    :meth:`action_masks` says which actions are open: the leads at the first step, then the
+    moves that keep the clearance (``radius + margin + slack`` from the tank, sampled along the
+    section); a move that does not ends the episode in contact.
 
     ## Observation Space
 
     ``Box(-10, 10, float32)``: ``AFTIR-ArmFTL-v0``'s ``observation`` with ``guide=True`` and the
-    tip at the route's end (the arm, the tip's pose, clearances, the way to the target), then
-    for each of the 25 moves: whether it is clear, the distance-to-go through free space from
-    its end (cm/100, 10 where it is not clear), whether the route would then close, and the
-    share of moves clear after it (:func:`~aftir_rl.planning.ftl.route.route_moves` with ``ahead``).
+    route's sections from the floor (the arm, the tip's pose, clearances, the way to the
+    target; that env has no lead, so for a lead other than 0 these columns describe the same
+    sections started on the floor); then 25 slots of 4 columns: at the first step, lead ``j``
+    in slot ``j`` (whether any first section from it is clear, the least distance-to-go
+    through free space from such a section's end (cm/100; 10 where none), whether choosing
+    it closes the route, the share of first sections clear from it); after it, move ``a`` in
+    slot ``a`` (whether it is clear, the distance-to-go from its end, whether the route would
+    then close and the share of moves clear after it:
+    :func:`~aftir_rl.planning.ftl.route.route_moves` with ``ahead``); then whether the lead
+    is still to choose, the lead (cm/100) and the target from the route's true end (3, cm/100).
 
     ## Episode End
 
-    Terminated in success when the route closes onto the target (the tip on it, the margin
-    kept), in contact when a move is not clear, at a dead end when no move is clear from the
-    route's end (``info["dead_end"]``; the arm's sections used up included). Never truncated.
+    Terminated in success when the route closes onto the target and its motion keeps the
+    margin (python-fcl, :meth:`motion`), in contact when a move is not clear, at a dead end
+    when no move is clear from the route's end (``info["dead_end"]``; the arm's sections used
+    up included). Never truncated.
 
     ## Rewards
 
@@ -73,25 +90,37 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
 
     ## Arguments
 
-    ``settings`` (:data:`ROUTE_SETTINGS`): the route search's knobs (moves, margin, slack);
-    every other keyword argument goes to the inner ``AFTIR-ArmFTL-v0`` (``tank``, ``bay``,
-    ``target``...).
+    ``settings`` (:data:`ROUTE_SETTINGS`): the route search's knobs (moves, margin, slack;
+    the motion keeps ``settings.margin``); ``leads`` (:data:`ROUTE_LEADS`, at most 25): the
+    first decision's choices, ``(0.0,)`` for none; every other keyword argument goes to the
+    inner ``AFTIR-ArmFTL-v0`` (``tank``, ``bay``, ``target``...).
     """
 
     metadata = {"render_modes": []}
 
-    def __init__(self, settings: RouteSettings = ROUTE_SETTINGS, **kwargs: Any) -> None:
+    def __init__(
+        self,
+        settings: RouteSettings = ROUTE_SETTINGS,
+        leads: Sequence[float] = ROUTE_LEADS,
+        **kwargs: Any,
+    ) -> None:
         self.inner = ArmFTLEnv(**{**kwargs, "guide": True, "steer": "target"})
         self.tank, self.arm = self.inner.tank, self.inner.tank.arm
         self.settings = settings
         self.moves = move_set(settings)
         n_moves = len(self.moves)
+        self.leads = tuple(float(v) for v in leads)
+        if not 1 <= len(self.leads) <= n_moves or not np.all(np.isfinite(self.leads)):
+            raise ConfigError(f"leads must be 1 to {n_moves} finite numbers, got {leads!r}")
         inner_space = cast(gym.spaces.Dict, self.inner.observation_space)["observation"]
-        n_obs = int(np.prod(inner_space.shape or (0,))) + 4 * n_moves  # (no observation yet)
+        n_obs = int(np.prod(inner_space.shape or (0,))) + 4 * n_moves + 5
         self.action_space = gym.spaces.Discrete(n_moves)
         self.observation_space = gym.spaces.Box(-10.0, 10.0, (n_obs,), np.float32)
-        self.route = Route(0.0, np.zeros((0, 2)), self.arm.section_length)
+        self.route = self._empty(self.leads[0])
+        self.choosing = len(self.leads) > 1
         self.closed: tuple[Route, float] | None = None
+        self._plan: MotionPlan | None = None
+        self._mask = np.zeros(n_moves, dtype=bool)
         self._moves = route_moves(self.tank, self.route, np.zeros(3), settings)
         self._obs = np.zeros(n_obs, dtype=np.float32)
 
@@ -106,39 +135,43 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
         """A new target (drawn as ``AFTIR-ArmFTL-v0`` draws it), the route empty."""
         super().reset(seed=seed)
         _, info = self.inner.reset(seed=seed, options=options)
-        self.route = Route(0.0, np.zeros((0, 2)), self.arm.section_length)
-        self.closed = close_route(self.tank, self.route, self.target, self.settings)
-        return self._observe(), {"target": info["target"]}
+        self.choosing = len(self.leads) > 1
+        self._set(self._empty(self.leads[0]))
+        return self._obs.copy(), {"target": info["target"]}
 
     def action_masks(self) -> NDArray[np.bool_]:
-        """Which moves keep the clearance from here (sb3-contrib's ``MaskablePPO`` reads it)."""
-        return self._moves.ok.copy()
+        """Which actions are open from here (sb3-contrib's ``MaskablePPO`` reads it)."""
+        return self._mask.copy()
 
     def step(
         self, action: int | np.integer[Any]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
-        """Add the section of move ``action``; close the route if the planner's closing can."""
+        """Choose the lead, or add the section of move ``action``; close the route if it can."""
         a = int(action)
         if not 0 <= a < len(self.moves):
             raise InvalidActionError(f"action must be a move 0 to {len(self.moves) - 1}, got {a}")
         info: dict[str, Any] = {"is_success": False, "contact": False}
-        if self.closed is not None:  # closable before any move (a target near the panel)
+        if self.choosing:
+            if a >= len(self.leads):
+                raise InvalidActionError(f"the first action is a lead 0 to {len(self.leads) - 1}")
+            self.choosing = False
+            self._set(self._empty(self.leads[a]))
+        elif self.closed is not None:  # closable before any move (a target near the panel)
             info["is_success"] = True
-            return self._observe(), 1.0, True, False, info
-        if not self._moves.ok[a]:
+            return self._obs.copy(), 1.0, True, False, info
+        elif not self._moves.ok[a]:
             info["contact"] = True
-            return self._observe(), -1.0, True, False, info
-        kappa = np.vstack([self.route.kappa, self._moves.kappa[a][None]])
-        self.route = Route(0.0, kappa, self.arm.section_length)
-        self.closed = close_route(self.tank, self.route, self.target, self.settings)
-        obs = self._observe()
+            return self._obs.copy(), -1.0, True, False, info
+        else:
+            kappa = np.vstack([self.route.kappa, self._moves.kappa[a][None]])
+            self._set(Route(self.route.lead, kappa, self.arm.section_length))
         if self.closed is not None:
             info["is_success"] = True
-            return obs, 1.0, True, False, info
+            return self._obs.copy(), 1.0, True, False, info
         if not self._moves.ok.any():  # the arm used up, or no clear move from here
             info["dead_end"] = True
-            return obs, -1.0, True, False, info
-        return obs, 0.0, False, False, info
+            return self._obs.copy(), -1.0, True, False, info
+        return self._obs.copy(), 0.0, False, False, info
 
     def moves_kappa(self) -> NDArray[np.float64]:
         """The next section's ``κ`` ``(25, 2)`` [rad] per move from here (0 where not clear)."""
@@ -148,30 +181,66 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
         """The observation of the route as it is (what the last reset or step returned)."""
         return self._obs.copy()
 
-    def restore(self, route: Route) -> None:
-        """Put the episode back at ``route`` (a route it passed through): for search over moves."""
-        self.route = route
-        self.closed = close_route(self.tank, route, self.target, self.settings)
-        self._observe()
+    def restore(self, route: Route, choosing: bool = False) -> None:
+        """Put the episode back at ``route`` (a route it passed through): for search over moves.
+
+        ``choosing``: back before the lead was chosen (``route`` is then empty).
+        """
+        self.choosing = choosing and len(self.leads) > 1
+        self._set(route)
 
     def final_route(self) -> Route | None:
         """The closed route (the tip on the target), or None before success."""
         return None if self.closed is None else self.closed[0]
 
-    def _observe(self) -> NDArray[np.float32]:
-        """The inner env's observation with the tip at the route's end, then the moves."""
-        b, k = self.inner.batch, self.route.n_route_sections
+    def motion(self) -> MotionPlan | None:
+        """The closed route's motion, checked along its whole length, or None before success."""
+        return self._plan if self.closed is not None else None
+
+    def _empty(self, lead: float) -> Route:
+        return Route(lead, np.zeros((0, 2)), self.arm.section_length)
+
+    def _close(self, route: Route) -> tuple[Route, float] | None:
+        """``route`` closed onto the target with a motion that keeps the margin, or None."""
+        closed = close_route(self.tank, route, self.target, self.settings)
+        if closed is None:
+            return None
+        plan = deploy_route(self.tank, self.target, closed[0], self.settings.margin)
+        if not plan.complete:
+            return None
+        self._plan = plan
+        return closed
+
+    def _set(self, route: Route) -> None:
+        """Make ``route`` the episode's: its closing, moves, mask and observation."""
+        self.route = route
+        n_moves = len(self.moves)
+        slots = np.zeros((4, n_moves))
+        slots[1] = _FAR / 100.0
+        if self.choosing:
+            self.closed = None
+            for j, lead in enumerate(self.leads):
+                moves = route_moves(self.tank, self._empty(lead), self.target, self.settings)
+                togo = float(np.min(moves.togo[moves.ok], initial=_FAR))
+                closes = self._close(self._empty(lead)) is not None
+                slots[:, j] = moves.ok.any(), min(togo, _FAR) / 100.0, closes, moves.ok.mean()
+            self._mask = np.arange(n_moves) < len(self.leads)
+            self._moves = route_moves(self.tank, route, self.target, self.settings)
+        else:
+            self.closed = self._close(route)
+            moves = route_moves(self.tank, route, self.target, self.settings, ahead=True)
+            far = np.where(moves.ok, np.minimum(moves.togo, _FAR), _FAR) / 100.0
+            slots[:] = moves.ok, far, moves.closes, moves.onward
+            self._moves, self._mask = moves, moves.ok.copy()
+        b, k = self.inner.batch, route.n_route_sections
         n = b.kappa.shape[1]
         b.kappa[0] = 0.0
-        b.kappa[0, :k] = self.route.kappa
+        b.kappa[0, :k] = route.kappa[:n]
         if k < n:
-            b.kappa[0, k] = self.route.kappa[-1] if k else 0.0
+            b.kappa[0, k] = route.kappa[-1] if k else 0.0
         b.k[0], b.s[0] = min(k, n - 1), k * self.arm.section_length
         b.refresh()
-        moves = route_moves(self.tank, self.route, self.target, self.settings, ahead=True)
-        self._moves = moves
-        togo = np.where(moves.ok, np.minimum(moves.togo, _FAR), _FAR) / 100.0
-        inner = b.observation()[0]
-        parts = [inner, moves.ok, togo, moves.closes, moves.onward]
-        self._obs = np.concatenate(parts).astype(np.float32)
-        return self._obs
+        end = (self.target - route.tip()) / 100.0
+        tail = [float(self.choosing), route.lead / 100.0, *end]
+        parts = [b.observation()[0], slots.reshape(-1), tail]
+        self._obs = np.clip(np.concatenate(parts), -10.0, 10.0).astype(np.float32)
