@@ -2,8 +2,9 @@
 
 Run: ``python benchmarks/results_page.py [--results benchmarks/results] [-o docs/results.md]``.
 Reads ``bench.json`` (``python -m aftir_rl.bench --json``: every method on the fixed target
-sets) and every ``seeds_*.json`` (``benchmarks/bench_seeds.py``: an RL recipe from several
-seeds on the same held-out targets), and writes one page of tables and the README's short table
+sets), every ``seeds_*.json`` (``benchmarks/bench_seeds.py``: an RL recipe from several
+seeds on the same held-out targets) and every ``route_*.json`` (``experiments/route_dagger.py``:
+route policies from several seeds), and writes one page of tables and the README's short table
 (between its ``results`` markers); no number is typed by hand. ``--check`` exits 1 when either
 differs from what the JSON gives.
 """
@@ -133,6 +134,62 @@ def seeds_section(files: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _mean_std(values: list[float], scale: float, fmt: str) -> str:
+    m = sum(values) / len(values)
+    sd = math.sqrt(sum((v - m) ** 2 for v in values) / len(values))
+    return f"{format(m * scale, fmt)} ± {format(sd * scale, fmt)}"
+
+
+def _last(run: dict[str, Any]) -> dict[str, Any]:
+    return run["rounds"][-1]
+
+
+def route_section(files: list[dict[str, Any]]) -> str:
+    """Route policies over seeds: greedy and searched success on the same held-out targets."""
+    lines = [
+        "## Route policies over seeds\n",
+        "`python experiments/route_dagger.py --seeds 0 1 2 --bay B --json ...`: each seed clones "
+        "a policy of `AFTIR-ArmRoute-v0` from the planner's routes to its own training targets "
+        "(the planner as the teacher: its queries are in the minutes), then plays each "
+        "held-out target greedily, and best first within a budget of env steps. Success: a "
+        "closed route whose whole motion keeps 1 cm (python-fcl). Mean ± standard deviation "
+        "over the seeds.\n",
+        "| recipe | bay | seeds | held-out targets | greedy (%) | searched (%) | search budget "
+        "(env steps) | least clearance (cm) | reference corners | minutes per seed |",
+        "|---|---:|---:|---|---:|---:|---:|---:|---|---:|",
+    ]
+    for d in files:
+        runs, e = d["runs"], d["eval"]
+        least = min(_last(r)["search"]["least_clearance_cm"] for r in runs)
+        corners = [sum(_last(r).get("corners", [])) for r in runs]
+        lines.append(
+            f"| {d['recipe']} | {d['bay']} | {len(runs)} | {e['targets']} (seeds {e['seed']}..) "
+            f"| {_mean_std([_last(r)['greedy']['success'] for r in runs], 100, '.1f')} | "
+            f"{_mean_std([_last(r)['search']['success'] for r in runs], 100, '.1f')} | "
+            f"{e['budget']} | {least:.2f} | "
+            f"{', '.join(f'{c}/4' for c in corners) if d['bay'] == 2 else '–'} | "
+            f"{_mean_std([r['minutes'] for r in runs], 1, '.1f')} |"
+        )
+    lines += ["", "Each seed, and the machine it trained on:", ""]
+    lines += [
+        "| recipe | bay | seed | minutes | labelled states | teacher queries (s) | greedy | "
+        "searched | mean env steps searched | machine | FrozenLake 8x8 steps/s (same run) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|",
+    ]
+    for d in files:
+        for r in d["runs"]:
+            last = _last(r)
+            t = last["teacher"]
+            lines.append(
+                f"| {d['recipe']} | {d['bay']} | {r['seed']} | {r['minutes']:.1f} | "
+                f"{last['states']:,} | {t['queries']:,} ({t['seconds']:.0f}) | "
+                f"{last['greedy']['success']:.1%} | {last['search']['success']:.1%} | "
+                f"{last['search']['steps_mean']:.1f} | {_machine(d['machine'])} | "
+                f"{d['frozenlake_8x8_steps_per_s']:,.0f} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
 #: What each benchmark method is, for the README's table.
 METHODS = {
     "tsm": "a posture (three-segment method), no motion",
@@ -166,6 +223,17 @@ def readme_table(results: Path) -> str:
             f"| {d['recipe']} | {_task(d)}, {d['eval']['targets']} held-out targets | "
             f"{_pm(s, 'success_rate', 100, '.0f')}% | "
             f"{_pm(s, 'train_seconds', 1 / 60, '.0f')} min training | {len(d['runs'])} seeds |"
+        )
+    for path in sorted(results.glob("route_*.json")):
+        d = json.loads(path.read_text())
+        runs = d["runs"]
+        lines.append(
+            f"| {d['recipe']}, searched within {d['eval']['budget']} env steps | "
+            f"{d['env_id']} bay {d['bay']}, {d['eval']['targets']} held-out targets | "
+            f"{_mean_std([_last(r)['search']['success'] for r in runs], 100, '.1f')}% "
+            f"(greedy {_mean_std([_last(r)['greedy']['success'] for r in runs], 100, '.0f')}%) | "
+            f"{_mean_std([r['minutes'] for r in runs], 1, '.1f')} min training | "
+            f"{len(runs)} seeds |"
         )
     return "\n".join(lines)
 
@@ -225,6 +293,9 @@ def render(results: Path) -> str:
     seeds = [json.loads(p.read_text()) for p in sorted(results.glob("seeds_*.json"))]
     if seeds:
         parts.append(seeds_section(seeds))
+    routes = [json.loads(p.read_text()) for p in sorted(results.glob("route_*.json"))]
+    if routes:
+        parts.append(route_section(routes))
     suite = results / "suite" / "suite.json"
     if suite.exists():
         parts.append(suite_section(json.loads(suite.read_text())))

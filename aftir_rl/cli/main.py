@@ -29,6 +29,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "tune": ("aftir_rl.cli.tune", "a hyperparameter sweep on Ray Tune (needs aftir_rl[ray])"),
     "rollout": ("aftir_rl.cli.rollout", "a trained policy's motions as trajectory.json, for view"),
     "record": ("aftir_rl.cli.record", "a trained policy's episodes as an animated GIF"),
+    "route": (
+        "aftir_rl.cli.route",
+        "route policies: train one from the planner, plan checked motions with one",
+    ),
     "pretrained": (
         "aftir_rl.cli.pretrained",
         "the trained policies shipped with the package (--pretrained NAME)",

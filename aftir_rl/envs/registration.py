@@ -63,6 +63,10 @@ REGISTRATIONS: dict[str, dict[str, Any]] = {
         "vector_entry_point": "aftir_rl.envs.ftl.pool_vector:make_vector_env",
         "max_episode_steps": 300,
     },
+    "AFTIR-ArmRoute-v0": {
+        "entry_point": "aftir_rl.envs.ftl.route_env:ArmRouteEnv",
+        "max_episode_steps": 30,
+    },
 }
 
 #: Every environment id registered by :func:`register_envs`.

@@ -26,10 +26,11 @@ POLICY_DIR = Path(str(resources.files("aftir_rl.rl"))) / "policies"
 
 
 def names() -> list[str]:
-    """The names of the shipped policies, sorted."""
+    """The names of the shipped SB3 policies, sorted (route policies: ``aftir route plan``)."""
     if not POLICY_DIR.is_dir():
         return []
-    return sorted(p.name for p in POLICY_DIR.iterdir() if (p / "card.json").is_file())
+    found = (p for p in POLICY_DIR.iterdir() if (p / "card.json").is_file())
+    return sorted(p.name for p in found if (p / "model.zip").is_file())
 
 
 def policy_dir(name: str) -> Path:

@@ -56,9 +56,20 @@ def _staged(env_id: str) -> tuple[Any, str]:
     """The env to draw, and its caption.
 
     After 20 random steps (seed 0); the follow-the-leader env after the expert's motion to
-    :data:`STAGED_TARGET` (the arm through the hatch).
+    :data:`STAGED_TARGET` (the arm through the hatch), the route env after the planner's
+    choices to it (its online teacher's).
     """
     env = gym.make(env_id, render_mode="rgb_array")
+    if env_id == "AFTIR-ArmRoute-v0":
+        from aftir_rl.rl.route_policy import RouteTeacher
+
+        teacher, route_env = RouteTeacher(), env.unwrapped
+        env.reset(seed=0, options={"target": STAGED_TARGET})
+        while (action := teacher(route_env)) is not None:
+            _, _, terminated, _, _ = env.step(action)
+            if terminated:
+                break
+        return env, f"after the planner's choices to {STAGED_TARGET} cm in bay 2"
     if env_id == "AFTIR-ArmFTL-v0":
         from aftir_rl.rl.expert import FTLExpert
 

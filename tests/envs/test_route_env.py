@@ -96,8 +96,8 @@ def test_the_first_action_chooses_the_lead(env):
     n, inner = len(ROUTE_LEADS), len(first) - 4 * 25 - 5
     assert env.choosing and env.action_masks().tolist() == [True] * n + [False] * (25 - n)
     assert first[-5] == 1.0
-    with pytest.raises(InvalidActionError, match="a lead 0 to 4"):
-        env.step(n)
+    _, reward, terminated, _, info = env.step(n)
+    assert terminated and reward == -1.0 and info["not_a_lead"] and not info["contact"]
     for j, lead in enumerate(ROUTE_LEADS):
         env.restore(env.route, choosing=True)
         obs, _, terminated, _, _ = env.step(j)

@@ -257,7 +257,7 @@ class _Boom:
 
 
 def test_weights_are_read_as_tensors_only(tmp_path):
-    from aftir_rl.rl.rllib.policy import as_tensors, load_tensors, save_tensors
+    from aftir_rl.rl.tensors import as_tensors, load_tensors, save_tensors
 
     state = {"learner": {"w": np.arange(6.0).reshape(2, 3), "step": np.float32(2.0), 7: [1, 2]}}
     path = save_tensors(state, tmp_path / "ok.pt")
@@ -270,7 +270,7 @@ def test_weights_are_read_as_tensors_only(tmp_path):
     hostile.write_bytes(buffer.getvalue())
     Path("/tmp/aftir-rllib-pwned").unlink(missing_ok=True)
     with pytest.raises(CheckpointError, match="not an RLlib run's weights"):
-        load_tensors(hostile, "weights")
+        load_tensors(hostile, "an RLlib run's weights")
     assert not Path("/tmp/aftir-rllib-pwned").exists()
 
 
@@ -296,8 +296,8 @@ def test_rllib_options_are_checked_in_one_line(args, message, tmp_path):
     [[], {"learner": []}, {"learner": {"rl_module": {"default_policy": 3}}}, torch.zeros(3)],
 )
 def test_a_file_that_is_no_learner_state_is_refused(state, tmp_path):
-    from aftir_rl.rl.rllib.policy import save_tensors
     from aftir_rl.rl.rllib.train import RLLIB_FILE, _resumed
+    from aftir_rl.rl.tensors import save_tensors
 
     (tmp_path / RLLIB_FILE).write_text("{}")
     save_tensors(state, tmp_path / "checkpoints" / "learner_5.pt")
@@ -339,7 +339,8 @@ def _rllib_run(folder: Path) -> Path:
     import gymnasium as gym
 
     from aftir_rl.rl.rllib.config import build_module
-    from aftir_rl.rl.rllib.policy import MODULE_FILE, save_tensors
+    from aftir_rl.rl.rllib.policy import MODULE_FILE
+    from aftir_rl.rl.tensors import save_tensors
 
     config = SB3Config(env_id="AFTIR-ArmReach-v0", eval_targets=2)
     env = gym.make("aftir_rl:AFTIR-ArmReach-v0")

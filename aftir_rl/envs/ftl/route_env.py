@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError, InvalidActionError
+from aftir_rl.core.robot import body_points, forward_kinematics, kappa_to_angles
 from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.planning.ftl.model import Route
 from aftir_rl.planning.ftl.plan import MotionPlan, deploy_route
@@ -61,7 +62,8 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
     plus move ``a`` of :func:`~aftir_rl.planning.ftl.route.move_set` (0: unchanged).
     :meth:`action_masks` says which actions are open: the leads at the first step, then the
     moves that keep the clearance (``radius + margin + slack`` from the tank, sampled along the
-    section); a move that does not ends the episode in contact.
+    section). A closed action ends the episode: a move that does not keep it in contact, an
+    action past the leads at the first step with ``info["not_a_lead"]``.
 
     ## Observation Space
 
@@ -80,30 +82,39 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
     ## Episode End
 
     Terminated in success when the route closes onto the target and its motion keeps the
-    margin (python-fcl, :meth:`motion`), in contact when a move is not clear, at a dead end
+    margin (python-fcl, :meth:`motion`), on a closed action (in contact when a move is not
+    clear), at a dead end
     when no move is clear from the route's end (``info["dead_end"]``; the arm's sections used
     up included). Never truncated.
 
     ## Rewards
 
-    ``+1`` on success, ``-1`` on contact or at a dead end, 0 otherwise.
+    ``+1`` on success, ``-1`` on a closed action or at a dead end, 0 otherwise.
 
     ## Arguments
 
     ``settings`` (:data:`ROUTE_SETTINGS`): the route search's knobs (moves, margin, slack;
     the motion keeps ``settings.margin``); ``leads`` (:data:`ROUTE_LEADS`, at most 25): the
-    first decision's choices, ``(0.0,)`` for none; every other keyword argument goes to the
-    inner ``AFTIR-ArmFTL-v0`` (``tank``, ``bay``, ``target``...).
+    first decision's choices, ``(0.0,)`` for none; ``render_mode`` (``"rgb_array"``: the tank,
+    the arm along the route, the target); every other keyword argument goes to the inner
+    ``AFTIR-ArmFTL-v0`` (``tank``, ``bay``, ``target``...).
+
+    ## Version History
+
+    - v0: initial version.
     """
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
 
     def __init__(
         self,
         settings: RouteSettings = ROUTE_SETTINGS,
         leads: Sequence[float] = ROUTE_LEADS,
+        render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
+        self.render_mode = render_mode
+        self._renderer: Any = None
         self.inner = ArmFTLEnv(**{**kwargs, "guide": True, "steer": "target"})
         self.tank, self.arm = self.inner.tank, self.inner.tank.arm
         self.settings = settings
@@ -114,6 +125,7 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
             raise ConfigError(f"leads must be 1 to {n_moves} finite numbers, got {leads!r}")
         inner_space = cast(gym.spaces.Dict, self.inner.observation_space)["observation"]
         n_obs = int(np.prod(inner_space.shape or (0,))) + 4 * n_moves + 5
+        self.n_obs, self.n_actions = n_obs, n_moves
         self.action_space = gym.spaces.Discrete(n_moves)
         self.observation_space = gym.spaces.Box(-10.0, 10.0, (n_obs,), np.float32)
         self.route = self._empty(self.leads[0])
@@ -152,8 +164,9 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
             raise InvalidActionError(f"action must be a move 0 to {len(self.moves) - 1}, got {a}")
         info: dict[str, Any] = {"is_success": False, "contact": False}
         if self.choosing:
-            if a >= len(self.leads):
-                raise InvalidActionError(f"the first action is a lead 0 to {len(self.leads) - 1}")
+            if a >= len(self.leads):  # closed, as a move that would touch is
+                info["not_a_lead"] = True
+                return self._obs.copy(), -1.0, True, False, info
             self.choosing = False
             self._set(self._empty(self.leads[a]))
         elif self.closed is not None:  # closable before any move (a target near the panel)
@@ -196,6 +209,21 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
     def motion(self) -> MotionPlan | None:
         """The closed route's motion, checked along its whole length, or None before success."""
         return self._plan if self.closed is not None else None
+
+    def render(self) -> NDArray[np.uint8] | None:  # type: ignore[override]
+        """The tank, the arm along the route (the closed one after success), the target."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode= to make()")
+            return None
+        if self._renderer is None:
+            from aftir_rl.viz.plotting import PathRenderer
+
+            self._renderer = PathRenderer(self.tank, title="AFTIR-ArmRoute")
+        route, l = self.final_route() or self.route, self.arm.section_length
+        posture = route.final_posture(max(self.arm.max_sections, route.min_sections()))
+        body = body_points(posture.dis, posture.theta, posture.phi, l, 10)
+        ends = forward_kinematics(route.lead, *kappa_to_angles(route.kappa), l)[:, :3, 3]
+        return self._renderer.render(ends, self.target, arms=[body])
 
     def _empty(self, lead: float) -> Route:
         return Route(lead, np.zeros((0, 2)), self.arm.section_length)

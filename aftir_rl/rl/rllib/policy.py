@@ -2,95 +2,30 @@
 
 An RLlib run keeps its weights and its learner's state as tensors only: ``rllib_module.pt``
 (the module's ``state_dict``) and ``checkpoints/learner_<steps>.pt`` (module and optimizer
-state, the form ``LearnerGroup.get_state`` gives, numpy arrays as tensors). Both are read with
-``torch.load(weights_only=True)``, at most :data:`MAX_STATE_BYTES` inflated: nothing in a run
-directory runs code when it is read, unlike RLlib's own checkpoints (pickles).
+state, the form ``LearnerGroup.get_state`` gives, numpy arrays as tensors). Both are read by
+:func:`aftir_rl.rl.tensors.load_tensors` (``torch.load(weights_only=True)``, size bounded):
+nothing in a run directory runs code when it is read, unlike RLlib's own checkpoints (pickles).
 """
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from aftir_rl.core.archives import BoundedZip
-from aftir_rl.core.config import error_line, read_limited, shorten
+from aftir_rl.core.config import shorten
 from aftir_rl.core.errors import CheckpointError
-from aftir_rl.core.files import atomic_open
 
 if TYPE_CHECKING:
     import gymnasium as gym
 
-__all__ = [
-    "MODULE_FILE",
-    "MAX_STATE_BYTES",
-    "RLlibPolicy",
-    "as_tensors",
-    "save_tensors",
-    "load_tensors",
-    "learner_checkpoints",
-]
+__all__ = ["MODULE_FILE", "RLlibPolicy", "learner_checkpoints"]
 
 #: The weights of an RLlib run's policy (its RLModule's ``state_dict``).
 MODULE_FILE = "rllib_module.pt"
-#: The largest weights or learner state read [bytes] (the FTL env's 2 × 256 module with Adam's
-#: moments is about 2 MB; the trainer's largest networks under 50 MB).
-MAX_STATE_BYTES = 256_000_000
-#: The most records (tensors and the pickle) of one such file (about 60 for PPO's learner).
-MAX_RECORDS = 4096
 _CHECKPOINT = re.compile(r"^learner_(\d{1,15})\.pt$")
-
-
-def as_tensors(value: Any) -> Any:
-    """``value`` with numpy arrays and scalars as tensors and numbers (tuples as lists)."""
-    import torch
-
-    if isinstance(value, dict):
-        return {k: as_tensors(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [as_tensors(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return torch.from_numpy(np.ascontiguousarray(value))
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
-def save_tensors(state: Any, path: Path) -> Path:
-    """Write ``state`` (nested dicts of arrays, tensors, numbers) to ``path``, atomically."""
-    import torch
-
-    with atomic_open(path, "wb") as fh:
-        torch.save(as_tensors(state), fh)
-    return path
-
-
-def load_tensors(path: str | os.PathLike[str], what: str) -> Any:
-    """Read what :func:`save_tensors` wrote, with ``torch.load(weights_only=True)``.
-
-    Raises:
-        CheckpointError: missing, too large, or not such a file (nothing unpickled but tensors,
-            numbers, strings, lists and dicts).
-
-    """
-    import torch
-
-    path = Path(path)
-    raw = read_limited(path, MAX_STATE_BYTES, CheckpointError, what, what)
-    # torch allocates what a record's directory entry declares: read a re-packed copy whose
-    # records are stored, each as long as its directory says (aftir_rl.rl.sb3.loading's way)
-    with BoundedZip(raw, str(path), MAX_STATE_BYTES, MAX_RECORDS, "tensor file") as archive:
-        del raw
-        packed = archive.repack()
-    try:
-        return torch.load(packed, weights_only=True, map_location="cpu")
-    except Exception as exc:  # torch's unpickler raises many kinds; none may escape as a crash
-        raise CheckpointError(
-            f"{path}: not an RLlib run's {what} ({error_line(exc, 120)})"
-        ) from None
 
 
 def learner_checkpoints(run_dir: Path) -> list[tuple[int, Path]]:

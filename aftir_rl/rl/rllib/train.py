@@ -46,16 +46,10 @@ from aftir_rl.rl.rllib.config import (
     quiet_rllib,
     rllib_config,
 )
-from aftir_rl.rl.rllib.policy import (
-    MODULE_FILE,
-    RLlibPolicy,
-    as_tensors,
-    learner_checkpoints,
-    load_tensors,
-    save_tensors,
-)
+from aftir_rl.rl.rllib.policy import MODULE_FILE, RLlibPolicy, learner_checkpoints
 from aftir_rl.rl.sb3.config import SB3_ENV_IDS, Origins, SB3Config, check_sb3_values
 from aftir_rl.rl.sb3.train import DIVERGED
+from aftir_rl.rl.tensors import as_tensors, load_tensors, save_tensors
 
 if TYPE_CHECKING:
     from stable_baselines3.common.logger import Logger
@@ -143,12 +137,12 @@ def load_rllib_run(run_dir: str | Path) -> tuple[str, SB3Config, str, RLlibPolic
     policy = _policy(config, env_id, algo)
     weights_file = run_dir / MODULE_FILE
     if weights_file.exists():
-        weights = load_tensors(run_file(run_dir, MODULE_FILE), "weights")
+        weights = load_tensors(run_file(run_dir, MODULE_FILE), "an RLlib run's weights")
     else:
         found = learner_checkpoints(run_dir)
         if not found:
             raise CheckpointError(f"{run_dir}: no {MODULE_FILE} and no learner checkpoint")
-        state = load_tensors(found[-1][1], "learner state")
+        state = load_tensors(found[-1][1], "an RLlib run's learner state")
         weights = policy.acting(_module_weights(state, str(found[-1][1])))
     policy.load_weights(weights, str(weights_file))
     return algo, config, env_id, policy
@@ -194,7 +188,7 @@ def _resumed(resume: str | Path) -> _Resumed:
     if not found:
         raise CheckpointError(f"--resume {resume}: no checkpoints/learner_<steps>.pt to resume")
     steps, path = found[-1]
-    state = load_tensors(path, "learner state")
+    state = load_tensors(path, "an RLlib run's learner state")
     _module_weights(state, str(path))
     started = (unfinished_start(folder) or {}).get("timesteps")
     start = started if started is not None and started <= steps else steps

@@ -1,0 +1,249 @@
+"""``aftir route train|plan``: route policies, taught by the planner, planning motions.
+
+A thin command line over :mod:`aftir_rl.rl.route_policy` on ``AFTIR-ArmRoute-v0`` (the arm's
+route decided a section at a time):
+
+- ``aftir route train -o DIR``: clone a policy from the planner's routes to ``--routes``
+  targets of the bay, then ``--rounds`` DAgger rounds; writes ``DIR/route_policy.pt`` (tensors
+  only) and ``DIR/config.json`` (the options, the minutes, the teacher's queries);
+- ``aftir route plan DIR --target X Y Z -o OUT``: the policy's route to each target (best first
+  within ``--budget`` env steps), deployed and checked along its whole motion; writes
+  ``OUT/<target>/trajectory.json`` (the planner's contract, timed: ``aftir view`` and ``aftir
+  check`` read it) and ``summary.json``. ``--pretrained NAME`` takes a shipped route policy.
+
+Neither replaces a file that is there: a policy or a target's motion already written is one
+line and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from aftir_rl.cli.args import OneLineParser, add_seed_option, add_target_option, bounded_int
+from aftir_rl.cli.guard import cli
+from aftir_rl.core.errors import CheckpointError, ConfigError
+
+__all__ = ["POLICY_FILE", "build_parser", "main", "route_policy_dir"]
+
+#: The weights file of a route policy's folder (its options beside it in ``config.json``).
+POLICY_FILE = "route_policy.pt"
+#: The most targets one ``plan`` command takes.
+MAX_TARGETS = 1000
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The options of ``aftir route``."""
+    parser = OneLineParser(
+        prog="aftir route",
+        description="Route policies on AFTIR-ArmRoute-v0: train one from the planner, or plan "
+        "motions with one.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    train = sub.add_parser(
+        "train",
+        help="clone a route policy from the planner's routes, then DAgger rounds",
+        description="Clone a route policy from the planner's routes to --routes targets, then "
+        "--rounds DAgger rounds (the policy's routes, labelled by the planner's continuation).",
+    )
+    train.add_argument("-o", "--output", required=True, metavar="DIR", help="the policy's folder")
+    train.add_argument("--bay", type=int, choices=(1, 2), default=2, help="the bay (default 2)")
+    train.add_argument(
+        "--routes",
+        type=bounded_int(1, 100_000),
+        default=600,
+        metavar="N",
+        help="training targets per round (default 600: about 2 minutes on 2 cores)",
+    )
+    train.add_argument(
+        "--rounds", type=bounded_int(0, 100), default=0, metavar="R", help="DAgger rounds (0)"
+    )
+    train.add_argument(
+        "--updates", type=bounded_int(1, 10**6), default=3000, metavar="U", help="batches per fit"
+    )
+    add_seed_option(train, "torch's seed and the training targets' (10,000,000 + 100,000 SEED..)")
+    plan = sub.add_parser(
+        "plan",
+        help="a route policy's motions to targets, as trajectory.json",
+        description="Plan motions with a route policy: its route to each target, searched best "
+        "first within --budget env steps, deployed and checked along its whole motion.",
+    )
+    plan.add_argument("policy", nargs="?", metavar="DIR", help="a folder aftir route train wrote")
+    plan.add_argument(
+        "--pretrained", metavar="NAME", help="a route policy shipped with the package instead"
+    )
+    add_target_option(plan, "a target [cm] (repeatable)")
+    plan.add_argument(
+        "--random",
+        type=bounded_int(1, MAX_TARGETS),
+        metavar="N",
+        help=f"N targets drawn in the policy's bay (1..{MAX_TARGETS}) instead of --target",
+    )
+    add_seed_option(plan, "first reset seed of --random (default 3000000)", 3_000_000)
+    plan.add_argument(
+        "--budget",
+        type=bounded_int(0, 10_000),
+        default=100,
+        metavar="STEPS",
+        help="env steps of the best-first search per target (0: greedy; default 100)",
+    )
+    plan.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+    return parser
+
+
+def route_policy_dir(policy: str | None, pretrained: str | None) -> Path:
+    """The folder of ``DIR`` or ``--pretrained NAME`` (one of them, not both)."""
+    from aftir_rl.rl.pretrained import POLICY_DIR
+
+    if (policy is None) == (pretrained is None):
+        raise ConfigError("give a policy DIR or --pretrained NAME")
+    if pretrained is None:
+        return Path(str(policy))
+    shipped = sorted(p.name for p in POLICY_DIR.iterdir() if (p / POLICY_FILE).is_file())
+    if pretrained not in shipped:
+        raise ConfigError(
+            f"no shipped route policy named {pretrained[:80]!r}; shipped: {', '.join(shipped)}"
+        )
+    return POLICY_DIR / pretrained
+
+
+def _train(args: argparse.Namespace) -> int:
+    import torch
+
+    from aftir_rl.core.files import check_output, check_writable_dir, write_json
+    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.rl.route_policy import save_route_policy, train_route_policy
+
+    out = check_writable_dir(args.output, "--output")
+    for name in (POLICY_FILE, "config.json"):
+        if check_output(out / name) is not None:
+            raise ConfigError(f"{out / name}: exists; choose another --output")
+    torch.set_num_threads(1)
+    env = ArmRouteEnv(bay=args.bay)
+    print(
+        f"training on {args.routes} routes per round, {args.rounds} DAgger rounds "
+        f"(bay {args.bay}, seed {args.seed})",
+        flush=True,
+    )
+
+    def report(r: int, _: Any, row: dict[str, Any]) -> None:
+        t = row["teacher"]
+        print(
+            f"round {r}: {row['states']} labelled states, {row['train_accuracy']:.1%} fitted, "
+            f"teacher {t['queries']} queries in {t['seconds']:.0f} s, {row['minutes']:.1f} min",
+            flush=True,
+        )
+
+    start = time.perf_counter()
+    policy, stats = train_route_policy(
+        env,
+        routes=args.routes,
+        rounds=args.rounds,
+        updates=args.updates,
+        seed=args.seed,
+        first_target_seed=10_000_000 + 100_000 * args.seed,
+        after_round=report,
+    )
+    config = {
+        "env_id": "AFTIR-ArmRoute-v0",
+        "env_kwargs": {"bay": args.bay},
+        "leads": list(env.leads),
+        "routes": args.routes,
+        "rounds": args.rounds,
+        "updates": args.updates,
+        "seed": args.seed,
+        "minutes": round((time.perf_counter() - start) / 60, 2),
+        "rows": stats.rounds,
+    }
+    save_route_policy(policy, out / POLICY_FILE)
+    write_json(out / "config.json", config)
+    print(f"{out / POLICY_FILE}; aftir route plan {out} --random 10 -o OUT plans with it")
+    return 0
+
+
+def _load(folder: Path) -> tuple[Any, dict[str, Any]]:
+    from aftir_rl.core.files import read_json
+    from aftir_rl.rl.route_policy import load_route_policy
+
+    config = read_json(folder / "config.json", "route policy config")
+    bay = config.get("env_kwargs", {}).get("bay") if isinstance(config, dict) else None
+    if bay not in (1, 2):
+        raise CheckpointError(f"{folder}/config.json: no bay 1 or 2 in its env_kwargs")
+    return load_route_policy(folder / POLICY_FILE), {"bay": bay}
+
+
+def _name(target: Any) -> str:
+    return "target_" + "_".join(f"{v:.1f}" for v in target)
+
+
+def _plan(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from aftir_rl.core.files import check_outputs, check_writable_dir, write_json
+    from aftir_rl.core.shipped import DEFAULT_TANK
+    from aftir_rl.core.tank import keep_run_tank
+    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.planning.ftl.plan import MotionPlan
+    from aftir_rl.rl.route_policy import route_search
+
+    folder = route_policy_dir(args.policy, args.pretrained)
+    if bool(args.target) == bool(args.random):
+        raise ConfigError("give --target X Y Z (repeatable) or --random N")
+    policy, env_kwargs = _load(folder)
+    env = ArmRouteEnv(**env_kwargs)
+    if policy.n_obs != env.n_obs:
+        raise CheckpointError(f"{folder}: the policy reads {policy.n_obs} numbers, not {env.n_obs}")
+    jobs: list[tuple[int | None, Any]]
+    if args.random:
+        jobs = [(args.seed + i, None) for i in range(args.random)]
+    else:
+        jobs = [(None, np.array(t, dtype=np.float64)) for t in args.target]
+    out = check_writable_dir(args.output, "--output")
+    reached = 0
+    for seed, target in jobs:
+        start = time.perf_counter()
+        result = route_search(env, policy, seed, args.budget, target)
+        name = _name(env.target)
+        paths = [out / name / "trajectory.json", out / name / "summary.json"]
+        check_outputs(paths, [folder])
+        if any(p.exists() for p in paths):
+            raise ConfigError(f"{out / name}: a motion is there already; choose another --output")
+        plan = env.motion()
+        if plan is None:
+            arm = env.arm
+            why = f"no route within {args.budget} env steps of the search"
+            plan = MotionPlan(env.target, env.settings.margin, arm.section_length, False, 0.0)
+            plan.reason = why
+        plan.method, plan.seconds = "route-policy", time.perf_counter() - start
+        (out / name).mkdir(exist_ok=True)
+        write_json(paths[0], plan.to_json())
+        summary = {
+            "tank": keep_run_tank(DEFAULT_TANK, out / name),
+            "method": "route-policy",
+            "policy": args.pretrained or str(folder.resolve()),
+            "bay": env_kwargs["bay"],
+            "budget": args.budget,
+            "steps": result.steps,
+            "complete": result.success,
+            "seed": seed,
+        }
+        write_json(paths[1], summary)
+        reached += result.success
+        clearance = f"clearance {plan.min_clearance_cm:.2f} cm, " if result.success else ""
+        print(
+            f"{name}: {'reached' if result.success else 'missed'}, {clearance}"
+            f"{result.steps} env steps, {plan.seconds:.2f} s",
+            flush=True,
+        )
+    print(f"{reached}/{len(jobs)} reached; aftir view {out}/<target> -o view.html shows one")
+    return 0
+
+
+@cli
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``aftir route``."""
+    args = build_parser().parse_args(argv)
+    return _train(args) if args.command == "train" else _plan(args)

@@ -1,0 +1,101 @@
+"""``aftir route train|plan``: a route policy trained from the planner, its motions checked."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from aftir_rl.cli import check, route, view
+
+HATCH = ["--target", "170", "80", "50"]  # straight through the hatch
+
+
+@pytest.fixture(scope="module")
+def policy_dir(tmp_path_factory):
+    """A policy cloned from the planner's routes to 12 bay-2 targets (a few seconds)."""
+    out = tmp_path_factory.mktemp("route") / "policy"
+    argv = ["train", "-o", str(out), "--routes", "12", "--updates", "300", "--seed", "3"]
+    assert route.main(argv) == 0
+    return out
+
+
+def test_train_writes_the_policy_and_its_config_and_never_replaces_them(policy_dir, capsys):
+    config = json.loads((policy_dir / "config.json").read_text())
+    assert config["env_id"] == "AFTIR-ArmRoute-v0" and config["env_kwargs"] == {"bay": 2}
+    assert config["routes"] == 12 and config["rows"][0]["states"] > 12
+    before = (policy_dir / route.POLICY_FILE).read_bytes()
+    capsys.readouterr()
+    assert route.main(["train", "-o", str(policy_dir), "--routes", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "exists; choose another --output" in err
+    assert (policy_dir / route.POLICY_FILE).read_bytes() == before
+
+
+def test_plan_writes_a_timed_motion_that_check_and_view_read(policy_dir, tmp_path, capsys):
+    out = tmp_path / "motions"
+    argv = ["plan", str(policy_dir), *HATCH, "--budget", "300", "-o", str(out)]
+    assert route.main(argv) == 0
+    printed = capsys.readouterr().out
+    folder = out / "target_170.0_80.0_50.0"
+    data = json.loads((folder / "trajectory.json").read_text())
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["method"] == data["method"] == "route-policy" and summary["budget"] == 300
+    assert "1/1 reached" in printed and data["complete"] and summary["complete"]
+    assert data["min_clearance_cm"] >= 1.0 and data["duration_s"] > 0
+    assert data["target"] == [170.0, 80.0, 50.0] and data["tip_error_cm"] < 0.1
+    assert check.main([str(folder)]) == 0  # time, limits and 1 cm re-checked from the file
+    assert view.main([str(folder), "-o", str(tmp_path / "v.html")]) == 0
+    assert route.main(argv) == 2  # the motion is there already: not replaced
+    assert "a motion is there already" in capsys.readouterr().err
+
+
+def test_random_targets_and_a_greedy_plan(policy_dir, tmp_path, capsys):
+    out = tmp_path / "random"
+    argv = ["plan", str(policy_dir), "--random", "2", "--seed", "5", "--budget", "0", "-o", str(out)]
+    assert route.main(argv) == 0
+    folders = sorted(out.iterdir())
+    assert len(folders) == 2
+    for folder in folders:
+        data = json.loads((folder / "trajectory.json").read_text())
+        assert isinstance(data["complete"], bool) and len(data["target"]) == 3
+        if not data["complete"]:
+            assert "no route within 0 env steps" in data["reason"]
+    seeds = sorted(json.loads((f / "summary.json").read_text())["seed"] for f in folders)
+    assert seeds == [5, 6]
+    assert "/2 reached" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["plan", "-o", "X", *HATCH], "give a policy DIR or --pretrained NAME"),
+        (["plan", "P", "--pretrained", "route-bay2", "-o", "X", *HATCH], "give a policy DIR"),
+        (["plan", "--pretrained", "nope", "-o", "X", *HATCH], "no shipped route policy named"),
+        (["plan", "P", "-o", "X"], "give --target X Y Z (repeatable) or --random N"),
+        (["plan", "/nonexistent/p", "-o", "X", *HATCH], "/nonexistent/p/config.json"),
+        (["plan", "P", "--budget", "-1", "-o", "X", *HATCH], "--budget"),
+        (["train", "-o", "X", "--routes", "0"], "--routes"),
+    ],
+)
+def test_refused_command_lines_are_one_line(argv, message, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "P").mkdir()
+    (tmp_path / "P" / "config.json").write_text('{"env_kwargs": {"bay": 2}}')
+    assert route.main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err
+    assert not (tmp_path / "X").exists() or argv[0] == "plan"
+
+
+def test_a_policy_for_another_observation_is_refused(policy_dir, tmp_path, capsys):
+    from aftir_rl.rl.route_policy import RoutePolicy, save_route_policy
+
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "config.json").write_text((policy_dir / "config.json").read_text())
+    save_route_policy(RoutePolicy(7, 25), other / route.POLICY_FILE)
+    assert route.main(["plan", str(other), *HATCH, "-o", str(tmp_path / "o")]) == 2
+    assert "the policy reads 7 numbers" in capsys.readouterr().err
+    assert not np.any([p.name == "trajectory.json" for p in tmp_path.rglob("*")])
