@@ -1,13 +1,15 @@
 """Success against wall time of training runs, one plot: the RL recipes side by side.
 
 Run: ``python benchmarks/plot_curves.py LABEL=OFFSET_S=RUN_DIR [...] -o PNG [--json OUT]
-[--merge JSON]``.
+[--merge JSON] [--route JSON]``.
 Each run directory's ``progress.csv`` gives its periodic evaluations (``eval/success_rate``,
 on the run's fixed evaluation targets) and the training time at each (``time/time_elapsed`` of
 the last training row before it); ``OFFSET_S`` seconds are added to every time (what came before
 the run: the dataset, the cloning, earlier stages). Runs that share a label are one method
 (its seeds). ``--merge`` draws the curves of an earlier ``--json`` first (runs no longer on
-this machine). The plot marks the goal of 98% success in 15 minutes.
+this machine). ``--route`` adds the route policies of ``experiments/route_dagger.py``'s JSON:
+each seed's last round at its training minutes, greedy and searched, on its held-out targets.
+The plot marks the goal of 98% success in 15 minutes.
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ def main() -> None:
     parser.add_argument("-o", "--output", type=Path, required=True, help="the PNG to write")
     parser.add_argument("--json", type=Path, help="also write the points here")
     parser.add_argument("--merge", type=Path, help="an earlier --json whose curves come first")
+    parser.add_argument("--route", type=Path, help="route policies (route_dagger.py's JSON)")
     args = parser.parse_args()
     curves: dict[str, list[list[tuple[float, float]]]] = {}
     runs = list(args.runs)
@@ -54,18 +57,28 @@ def main() -> None:
     for spec in args.runs:
         label, offset, run = spec.split("=", 2)
         curves.setdefault(label, []).append(curve(Path(run), float(offset)))
+    if args.route:
+        data = json.loads(args.route.read_text())
+        what = f"{data['recipe']} ({data['eval']['targets']} held-out targets)"
+        searched = f"{data['eval']['budget']} steps of search"
+        for key, how in (("greedy", "greedy"), ("search", searched)):
+            label = f"{what}, {how}"
+            for run in data["runs"]:
+                last = run["rounds"][-1]
+                curves.setdefault(label, []).append([(run["minutes"], last[key]["success"])])
     fig, ax = plt.subplots(figsize=(8, 4.5), dpi=100)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for (label, seeds), color in zip(curves.items(), colors):
         for k, points in enumerate(seeds):
             x, y = zip(*points) if points else ((), ())
             shown = label if k == 0 else None
-            ax.plot(x, [100 * v for v in y], color=color, marker=".", label=shown)
+            marker = "o" if len(points) == 1 else "."
+            ax.plot(x, [100 * v for v in y], color=color, marker=marker, label=shown)
     ax.axhline(98, color="grey", linestyle="--", linewidth=1)
     ax.axvline(15, color="grey", linestyle=":", linewidth=1)
     ax.annotate("goal: 98% in 15 min", (15, 98), textcoords="offset points", xytext=(4, -12))
     ax.set(xlabel="wall time on 2 cores [min]", ylabel="success on the evaluation targets [%]",
-           ylim=(0, 100), title="AFTIR-ArmFTL-v0, bay 2")  # fmt: skip
+           ylim=(0, 100), title="bay 2 (route policies: AFTIR-ArmRoute-v0)")  # fmt: skip
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()

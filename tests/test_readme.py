@@ -49,6 +49,8 @@ def _small(line: str) -> str:
         line += " --eval-episodes 2 --no-progress"
     if line.startswith("aftir dataset"):
         line = re.sub(r"--episodes \d+", "--episodes 1", line) + " --no-progress"
+    if line.startswith("aftir route train"):  # three routes cloned, not 600
+        line += " --routes 3 --updates 50"
     if line.startswith("aftir simulate"):  # an instant every 10 s of the motion, not every 1 s
         line += " --every 10"
     if line.startswith("python -m rl_zoo3.train"):  # one rollout of 8 envs, not the entry's 128

@@ -65,6 +65,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--updates", type=bounded_int(1, 10**6), default=3000, metavar="U", help="batches per fit"
     )
     add_seed_option(train, "torch's seed and the training targets' (10,000,000 + 100,000 SEED..)")
+    train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     plan = sub.add_parser(
         "plan",
         help="a route policy's motions to targets, as trajectory.json",
@@ -112,6 +113,7 @@ def route_policy_dir(policy: str | None, pretrained: str | None) -> Path:
 
 def _train(args: argparse.Namespace) -> int:
     import torch
+    from tqdm import tqdm
 
     from aftir_rl.core.files import check_output, check_writable_dir, write_json
     from aftir_rl.envs.ftl.route_env import ArmRouteEnv
@@ -128,13 +130,13 @@ def _train(args: argparse.Namespace) -> int:
         f"(bay {args.bay}, seed {args.seed})",
         flush=True,
     )
+    bar = tqdm(total=args.routes * (args.rounds + 1), unit="route", disable=args.no_progress)
 
     def report(r: int, _: Any, row: dict[str, Any]) -> None:
         t = row["teacher"]
-        print(
+        bar.write(
             f"round {r}: {row['states']} labelled states, {row['train_accuracy']:.1%} fitted, "
-            f"teacher {t['queries']} queries in {t['seconds']:.0f} s, {row['minutes']:.1f} min",
-            flush=True,
+            f"teacher {t['queries']} queries in {t['seconds']:.0f} s, {row['minutes']:.1f} min"
         )
 
     start = time.perf_counter()
@@ -146,7 +148,9 @@ def _train(args: argparse.Namespace) -> int:
         seed=args.seed,
         first_target_seed=10_000_000 + 100_000 * args.seed,
         after_round=report,
+        on_route=bar.update,
     )
+    bar.close()
     config = {
         "env_id": "AFTIR-ArmRoute-v0",
         "env_kwargs": {"bay": args.bay},

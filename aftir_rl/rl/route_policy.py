@@ -244,6 +244,7 @@ def train_route_policy(
     seed: int = 0,
     first_target_seed: int = 10_000_000,
     after_round: Any = None,
+    on_route: Any = None,
 ) -> tuple[RoutePolicy, TrainStats]:
     """A route policy cloned from the teacher, then ``rounds`` DAgger rounds.
 
@@ -251,7 +252,8 @@ def train_route_policy(
     ``first_target_seed``..), every later round the policy's episodes to ``routes`` new ones;
     after each round the policy is fitted again on every labelled state so far.
     ``after_round(r, policy, row)`` is called after each (for evaluations; its time is left out
-    of the rows' ``minutes``). Seeds: torch and the batch order from ``seed``.
+    of the rows' ``minutes``), ``on_route()`` after each episode (for a progress bar). Seeds:
+    torch and the batch order from ``seed``.
     """
     import torch
 
@@ -264,6 +266,8 @@ def train_route_policy(
         learner = policy if r else None  # round 0: the teacher's own routes
         for i in range(routes):
             data += collect(env, first_target_seed + r * routes + i, stats.teacher, learner)
+            if on_route is not None:
+                on_route()
         accuracy = fit(policy, data, updates, seed + r)
         row = {
             "round": r,

@@ -189,7 +189,40 @@ def write_pretrained_page(docs: Path) -> None:
         "instead; the [journal](experiments.md#the-mean-action-against-sampled-actions) "
         "compares the two.\n"
     )
-    _write(docs / "pretrained.md", text)
+    _write(docs / "pretrained.md", text + _route_policies())
+
+
+def _route_policies() -> str:
+    """The route policies shipped beside them (``aftir route plan --pretrained NAME``)."""
+    from aftir_rl.cli.route import POLICY_FILE
+    from aftir_rl.core.files import read_json
+    from aftir_rl.rl.pretrained import POLICY_DIR
+
+    rows = []
+    for folder in sorted(p for p in POLICY_DIR.iterdir() if (p / POLICY_FILE).is_file()):
+        c = read_json(folder / "card.json", "card")
+        t, train = c["test"], c["training"]
+        corners = sum(c.get("corners", {}).values())
+        rows.append(
+            f"| `{c['name']}` | `{c['env_id']}` bay {c['env_kwargs']['bay']} | "
+            f"{train['routes']} routes, {train['rounds']} DAgger rounds | {train['minutes']:.1f} | "
+            f"{t['targets']} (seed {t['seed']}..) | {t['greedy']['success_rate']:.1%} | "
+            f"{t['search']['success_rate']:.1%} ({t['search']['budget']} env steps) | "
+            f"{t['search']['min_clearance_cm']:.2f} | {corners}/4 |"
+        )
+    return (
+        "\n## Route policies\n\n"
+        "Policies of `AFTIR-ArmRoute-v0` (the route planner's decision level), cloned from the "
+        "planner's routes (`aftir route train`; the [journal](experiments.md#the-decision-level-"
+        "a-route-section-at-a-time)), each with `card.json` beside its weights "
+        "(`benchmarks/route_card.py` measures it). A success is a closed route whose whole "
+        "motion keeps 1 cm (python-fcl); `aftir route plan --pretrained NAME --target X Y Z -o "
+        "DIR` writes the motion as `trajectory.json`.\n\n"
+        "| name | env | recipe | training minutes | test targets | greedy | searched | least "
+        "clearance (cm) | reference corners |\n|---|---|---|---:|---|---:|---:|---:|---:|\n"
+        + "\n".join(rows)
+        + "\n"
+    )
 
 
 def _generate(app: Any) -> None:

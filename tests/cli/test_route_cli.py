@@ -17,6 +17,7 @@ def policy_dir(tmp_path_factory):
     """A policy cloned from the planner's routes to 12 bay-2 targets (a few seconds)."""
     out = tmp_path_factory.mktemp("route") / "policy"
     argv = ["train", "-o", str(out), "--routes", "12", "--updates", "300", "--seed", "3"]
+    argv += ["--no-progress"]
     assert route.main(argv) == 0
     return out
 
@@ -53,7 +54,8 @@ def test_plan_writes_a_timed_motion_that_check_and_view_read(policy_dir, tmp_pat
 
 def test_random_targets_and_a_greedy_plan(policy_dir, tmp_path, capsys):
     out = tmp_path / "random"
-    argv = ["plan", str(policy_dir), "--random", "2", "--seed", "5", "--budget", "0", "-o", str(out)]
+    argv = ["plan", str(policy_dir), "--random", "2", "--seed", "5", "--budget", "0"]
+    argv += ["-o", str(out)]
     assert route.main(argv) == 0
     folders = sorted(out.iterdir())
     assert len(folders) == 2
@@ -99,3 +101,37 @@ def test_a_policy_for_another_observation_is_refused(policy_dir, tmp_path, capsy
     assert route.main(["plan", str(other), *HATCH, "-o", str(tmp_path / "o")]) == 2
     assert "the policy reads 7 numbers" in capsys.readouterr().err
     assert not np.any([p.name == "trajectory.json" for p in tmp_path.rglob("*")])
+
+
+def test_the_shipped_policy_reaches_a_corner_and_check_passes(tmp_path, capsys):
+    out = tmp_path / "corner"
+    argv = ["plan", "--pretrained", "route-bay2", "--target", "230", "140", "90", "-o", str(out)]
+    assert route.main(argv) == 0
+    assert "1/1 reached" in capsys.readouterr().out
+    (folder,) = out.iterdir()
+    assert check.main([str(folder)]) == 0
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["policy"] == "route-bay2" and summary["complete"]
+
+
+@pytest.mark.slow
+def test_the_shipped_policy_meets_its_card_on_its_first_test_targets():
+    """The card's test (500 targets from seed 4,000,000, all reached with the search): its
+    first 40 again, and the four corners the card says it reaches."""
+    import torch
+
+    from aftir_rl.core.files import read_json
+    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.rl.route_policy import load_route_policy, route_search
+
+    torch.set_num_threads(1)
+    folder = route.route_policy_dir(None, "route-bay2")
+    card = read_json(folder / "card.json")
+    policy, env = load_route_policy(folder / route.POLICY_FILE), ArmRouteEnv(bay=2)
+    test = card["test"]
+    seeds = range(test["seed"], test["seed"] + 40)
+    reached = sum(route_search(env, policy, s, test["search"]["budget"]).success for s in seeds)
+    assert reached >= round(40 * test["search"]["success_rate"]) - 1
+    for corner, ok in card["corners"].items():
+        target = np.array([float(v) for v in corner.strip("()").split(",")])
+        assert route_search(env, policy, None, test["search"]["budget"], target).success == ok
