@@ -14,9 +14,9 @@ HATCH = ["--target", "170", "80", "50"]  # straight through the hatch
 
 @pytest.fixture(scope="module")
 def policy_dir(tmp_path_factory):
-    """A policy cloned from the planner's routes to 12 bay-2 targets (a few seconds)."""
+    """A policy cloned from the planner's routes to 4 bay-2 targets (about a second)."""
     out = tmp_path_factory.mktemp("route") / "policy"
-    argv = ["train", "-o", str(out), "--routes", "12", "--updates", "300", "--seed", "3"]
+    argv = ["train", "-o", str(out), "--routes", "4", "--updates", "100", "--seed", "3"]
     argv += ["--no-progress"]
     assert route.main(argv) == 0
     return out
@@ -25,7 +25,7 @@ def policy_dir(tmp_path_factory):
 def test_train_writes_the_policy_and_its_config_and_never_replaces_them(policy_dir, capsys):
     config = json.loads((policy_dir / "config.json").read_text())
     assert config["env_id"] == "AFTIR-ArmRoute-v0" and config["env_kwargs"] == {"bay": 2}
-    assert config["routes"] == 12 and config["rows"][0]["states"] > 12
+    assert config["routes"] == 4 and config["rows"][0]["states"] > 4
     before = (policy_dir / route.POLICY_FILE).read_bytes()
     capsys.readouterr()
     assert route.main(["train", "-o", str(policy_dir), "--routes", "1"]) == 2

@@ -31,9 +31,9 @@ def env():
 
 @pytest.fixture(scope="module")
 def small(env):
-    """A policy cloned from the teacher's routes to 12 training targets (a few seconds)."""
+    """A policy cloned from the teacher's routes to 4 training targets (about a second)."""
     torch.set_num_threads(1)
-    return train_route_policy(env, routes=12, updates=300, seed=3)
+    return train_route_policy(env, routes=4, updates=100, seed=3)
 
 
 @pytest.mark.parametrize("seed", [3_000_003, 3_000_004])
@@ -60,7 +60,7 @@ def test_the_teacher_followed_reaches_held_out_targets_and_its_motion_keeps_1cm(
 def test_cloning_fits_the_teachers_labels_and_rounds_are_reported(env, small):
     policy, stats = small
     (row,) = stats.rounds
-    assert row["round"] == 0 and row["states"] > 12 and row["train_accuracy"] > 0.5
+    assert row["round"] == 0 and row["states"] > 4 and row["train_accuracy"] > 0.5
     assert row["teacher"]["queries"] == stats.teacher.queries > 0
     with pytest.raises(ConfigError, match="routes and updates"):
         train_route_policy(env, routes=0)
@@ -128,16 +128,16 @@ def test_a_pickle_that_would_run_code_is_refused(tmp_path):
 
 @pytest.mark.slow
 def test_a_cloned_policy_and_its_search_beat_the_same_search_without_learning(env):
-    """150 training routes (about 40 s): on 40 held-out bay-2 targets the cloned policy's best-
-    first search within 100 env steps reaches far more than the same search under a uniform
-    policy (every open action alike: 0 of 40 measured), and more than the greedy policy."""
+    """80 training routes (about 30 s): on 30 held-out bay-2 targets the cloned policy's best-
+    first search within 100 env steps reaches nearly all (measured 30; greedily 21), the same
+    search under a uniform policy (every open action alike) none (measured 0)."""
     torch.set_num_threads(1)
-    policy, _ = train_route_policy(env, routes=150, seed=0)
+    policy, _ = train_route_policy(env, routes=80, seed=0)
     uniform = RoutePolicy(policy.n_obs, policy.n_actions)
     for p in uniform.net.parameters():
         torch.nn.init.zeros_(p)
-    seeds = range(3_100_000, 3_100_040)
+    seeds = range(3_100_000, 3_100_030)
     greedy = sum(route_search(env, policy, s, 0).success for s in seeds)
     search = sum(route_search(env, policy, s, 100).success for s in seeds)
     blind = sum(route_search(env, uniform, s, 100).success for s in seeds)
-    assert search >= greedy and search >= 32 and search - blind >= 24, (greedy, search, blind)
+    assert search >= greedy and search >= 27 and search - blind >= 20, (greedy, search, blind)
