@@ -173,8 +173,9 @@ def _load(folder: Path) -> tuple[Any, dict[str, Any]]:
     from aftir_rl.rl.route_policy import load_route_policy
 
     config = read_json(folder / "config.json", "route policy config")
-    bay = config.get("env_kwargs", {}).get("bay") if isinstance(config, dict) else None
-    if bay not in (1, 2):
+    kwargs = config.get("env_kwargs") if isinstance(config, dict) else None
+    bay = kwargs.get("bay") if isinstance(kwargs, dict) else None
+    if type(bay) is not int or bay not in (1, 2):
         raise CheckpointError(f"{folder}/config.json: no bay 1 or 2 in its env_kwargs")
     return load_route_policy(folder / POLICY_FILE), {"bay": bay}
 
@@ -205,6 +206,9 @@ def _plan(args: argparse.Namespace) -> int:
         jobs = [(args.seed + i, None) for i in range(args.random)]
     else:
         jobs = [(None, np.array(t, dtype=np.float64)) for t in args.target]
+    for _, target in jobs:  # a target the env refuses: one line, before anything is written
+        if target is not None:
+            env.reset(options={"target": target})
     out = check_writable_dir(args.output, "--output")
     reached = 0
     for seed, target in jobs:

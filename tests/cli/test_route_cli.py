@@ -88,7 +88,22 @@ def test_refused_command_lines_are_one_line(argv, message, tmp_path, capsys, mon
     assert route.main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
-    assert not (tmp_path / "X").exists() or argv[0] == "plan"
+    assert not (tmp_path / "X").exists()
+
+
+@pytest.mark.parametrize(
+    "config",
+    [b"[]", b'{"env_kwargs": []}', b'{"env_kwargs": {"bay": "2"}}', b'{"env_kwargs": {"bay": 1.0}}',
+     b"\xff\xfe{", b"{" * 100_000, b'{"env_kwargs": {"bay": 3}}'],
+)  # fmt: skip
+def test_a_policy_folder_with_a_broken_config_is_one_line(config, tmp_path, capsys):
+    (tmp_path / "P").mkdir()
+    (tmp_path / "P" / "config.json").write_bytes(config)
+    argv = ["plan", str(tmp_path / "P"), *HATCH, "-o", str(tmp_path / "X")]
+    assert route.main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "config" in err and "Traceback" not in err
+    assert not (tmp_path / "X").exists()
 
 
 def test_a_policy_for_another_observation_is_refused(policy_dir, tmp_path, capsys):
@@ -135,3 +150,11 @@ def test_the_shipped_policy_meets_its_card_on_its_first_test_targets():
     for corner, ok in card["corners"].items():
         target = np.array([float(v) for v in corner.strip("()").split(",")])
         assert route_search(env, policy, None, test["search"]["budget"], target).success == ok
+
+
+def test_a_target_the_env_refuses_writes_nothing(policy_dir, tmp_path, capsys):
+    argv = ["plan", str(policy_dir), "--target", "1e4", "0", "0", "-o", str(tmp_path / "X")]
+    assert route.main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert not (tmp_path / "X").exists()
