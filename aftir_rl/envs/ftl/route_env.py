@@ -83,9 +83,8 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
 
     Terminated in success when the route closes onto the target and its motion keeps the
     margin (python-fcl, :meth:`motion`), on a closed action (in contact when a move is not
-    clear), at a dead end
-    when no move is clear from the route's end (``info["dead_end"]``; the arm's sections used
-    up included). Never truncated.
+    clear), at a dead end when no move is clear from the route's end (``info["dead_end"]``;
+    the arm's sections used up included). Never truncated.
 
     ## Rewards
 
