@@ -206,19 +206,24 @@ def _plan(args: argparse.Namespace) -> int:
         jobs = [(args.seed + i, None) for i in range(args.random)]
     else:
         jobs = [(None, np.array(t, dtype=np.float64)) for t in args.target]
-    for _, target in jobs:  # a target the env refuses: one line, before anything is written
-        if target is not None:
-            env.reset(options={"target": target})
-    out = check_writable_dir(args.output, "--output")
-    reached = 0
+    names = []  # each target drawn or checked by the env, its folder free: before any search
     for seed, target in jobs:
-        start = time.perf_counter()
-        result = route_search(env, policy, seed, args.budget, target)
-        name = _name(env.target)
+        env.inner.reset(seed=seed, options=None if target is None else {"target": target})
+        names.append(_name(env.target))
+    if len(set(names)) < len(names):
+        raise ConfigError("a target is given twice (to 0.1 cm); each has one output folder")
+    out = Path(args.output)
+    for name in names:
         paths = [out / name / "trajectory.json", out / name / "summary.json"]
         check_outputs(paths, [folder])
         if any(p.exists() for p in paths):
             raise ConfigError(f"{out / name}: a motion is there already; choose another --output")
+    out = check_writable_dir(args.output, "--output")
+    reached = 0
+    for (seed, target), name in zip(jobs, names, strict=True):
+        start = time.perf_counter()
+        result = route_search(env, policy, seed, args.budget, target)
+        paths = [out / name / "trajectory.json", out / name / "summary.json"]
         plan = env.motion()
         if plan is None:
             arm = env.arm

@@ -152,9 +152,13 @@ def test_the_shipped_policy_meets_its_card_on_its_first_test_targets():
         assert route_search(env, policy, None, test["search"]["budget"], target).success == ok
 
 
-def test_a_target_the_env_refuses_writes_nothing(policy_dir, tmp_path, capsys):
-    argv = ["plan", str(policy_dir), "--target", "1e4", "0", "0", "-o", str(tmp_path / "X")]
+@pytest.mark.parametrize(
+    "targets, message",
+    [(["--target", "1e4", "0", "0"], "target"), ([*HATCH, *HATCH], "a target is given twice")],
+)
+def test_a_target_the_env_refuses_writes_nothing(policy_dir, targets, message, tmp_path, capsys):
+    argv = ["plan", str(policy_dir), *targets, "-o", str(tmp_path / "X")]
     assert route.main(argv) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "Traceback" not in err
+    assert err.count("\n") == 1 and message in err and "Traceback" not in err
     assert not (tmp_path / "X").exists()
