@@ -118,17 +118,6 @@ def test_a_policy_for_another_observation_is_refused(policy_dir, tmp_path, capsy
     assert not np.any([p.name == "trajectory.json" for p in tmp_path.rglob("*")])
 
 
-def test_the_shipped_policy_reaches_a_corner_and_check_passes(tmp_path, capsys):
-    out = tmp_path / "corner"
-    argv = ["plan", "--pretrained", "route-bay2", "--target", "230", "140", "90", "-o", str(out)]
-    assert route.main(argv) == 0
-    assert "1/1 reached" in capsys.readouterr().out
-    (folder,) = out.iterdir()
-    assert check.main([str(folder)]) == 0
-    summary = json.loads((folder / "summary.json").read_text())
-    assert summary["policy"] == "route-bay2" and summary["complete"]
-
-
 @pytest.mark.slow
 def test_the_shipped_policy_meets_its_card_on_its_first_test_targets():
     """The card's test (500 targets from seed 4,000,000, all reached with the search): its

@@ -15,16 +15,24 @@ ROOT = Path(__file__).parents[2]
 
 
 def test_route_dagger_runs_and_writes_its_rounds(tmp_path):
-    out = tmp_path / "rounds.json"
-    args = ["--routes", "4", "--rounds", "1", "--eval", "4", "--updates", "20", "--json", str(out)]
+    out = tmp_path / "runs.json"
+    args = ["--routes", "3", "--rounds", "1", "--eval", "3", "--updates", "20", "--budget", "10"]
     script = ROOT / "experiments" / "route_dagger.py"
     done = subprocess.run(
-        [sys.executable, str(script), *args], capture_output=True, text=True, timeout=600
+        [sys.executable, str(script), *args, "--json", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert done.returncode == 0, done.stderr[-2000:]
-    rounds = json.loads(out.read_text())["rounds"]
+    data = json.loads(out.read_text())
+    (run,) = data["runs"]
+    rounds = run["rounds"]
+    assert data["bay"] == 2 and run["seed"] == 0 and data["eval"]["budget"] == 10
     assert [r["round"] for r in rounds] == [0, 1]
     assert rounds[1]["states"] > rounds[0]["states"] > 0
     assert rounds[1]["teacher"]["answered"] >= rounds[0]["states"]
-    last = rounds[1]["backtrack"]
-    assert 0.0 <= last["motions_keeping_1cm"] <= last["success"] <= 1.0
+    last = rounds[1]
+    assert 0.0 <= last["greedy"]["success"] <= 1.0 and 0.0 <= last["search"]["success"] <= 1.0
+    assert sum(last["greedy_failures_go_wrong_at"].values()) == len(last["greedy"]["failed"])
+    assert len(last["corners"]) == 4 and data["frozenlake_8x8_steps_per_s"] > 0
