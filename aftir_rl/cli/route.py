@@ -23,7 +23,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from aftir_rl.cli.args import OneLineParser, add_seed_option, add_target_option, bounded_int
+from aftir_rl.cli.args import (
+    OneLineParser,
+    add_seed_option,
+    add_tank_option,
+    add_target_option,
+    bounded_int,
+    check_tank,
+)
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import CheckpointError, ConfigError
 
@@ -50,7 +57,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--rounds DAgger rounds (the policy's routes, labelled by the planner's continuation).",
     )
     train.add_argument("-o", "--output", required=True, metavar="DIR", help="the policy's folder")
-    train.add_argument("--bay", type=int, choices=(1, 2), default=2, help="the bay (default 2)")
+    add_tank_option(train, "the tank the routes are in (default the reference tank)")
+    train.add_argument(
+        "--tank-episodes",
+        type=bounded_int(1, 100_000),
+        metavar="N",
+        help="with a stream, routes in each wing (default the env's: 5)",
+    )
+    _add_bay_option(train)
     train.add_argument(
         "--routes",
         type=bounded_int(1, 100_000),
@@ -76,6 +90,12 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument(
         "--pretrained", metavar="NAME", help="a route policy shipped with the package instead"
     )
+    plan.add_argument(
+        "--tank",
+        help="the tank to plan in: a name, YAML path or generator spec such as wing:3:7 "
+        "(default the policy's own; needed where it was trained on a pool or a stream)",
+    )
+    _add_bay_option(plan, "the policy's")
     add_target_option(plan, "a target [cm] (repeatable)")
     plan.add_argument(
         "--random",
@@ -93,6 +113,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     plan.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
     return parser
+
+
+def _add_bay_option(parser: argparse.ArgumentParser, default: str = "2") -> None:
+    parser.add_argument(
+        "--bay",
+        type=bounded_int(0, 99),
+        metavar="N",
+        help=f"the bay targets are drawn in, 0 for the whole tank (default {default} in the "
+        "reference tank, else the whole tank)",
+    )
 
 
 def route_policy_dir(policy: str | None, pretrained: str | None) -> Path:
@@ -116,18 +146,28 @@ def _train(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from aftir_rl.core.files import check_output, check_writable_dir, write_json
+    from aftir_rl.envs.ftl.pool import stream_spec
     from aftir_rl.envs.ftl.route_env import ArmRouteEnv
     from aftir_rl.rl.route_policy import save_route_policy, train_route_policy
 
-    out = check_writable_dir(args.output, "--output")
+    if args.tank_episodes is not None and stream_spec(args.tank) is None:
+        raise ConfigError("--tank-episodes is a stream's: --tank wing:BAYS:FIRST+")
+    if args.tank is not None:
+        check_tank(args.tank)
+    env_kwargs = _env_kwargs(args.tank, args.bay)
+    if args.tank_episodes is not None:
+        env_kwargs["tank_episodes"] = args.tank_episodes
+    torch.set_num_threads(1)
+    env = ArmRouteEnv(**env_kwargs)
+    out = Path(args.output)
     for name in (POLICY_FILE, "config.json"):
         if check_output(out / name) is not None:
             raise ConfigError(f"{out / name}: exists; choose another --output")
-    torch.set_num_threads(1)
-    env = ArmRouteEnv(bay=args.bay)
+    out = check_writable_dir(args.output, "--output")
+    where = f"{args.tank or 'the reference tank'}, {_bay_words(env_kwargs.get('bay'))}"
     print(
         f"training on {args.routes} routes per round, {args.rounds} DAgger rounds "
-        f"(bay {args.bay}, seed {args.seed})",
+        f"({where}, seed {args.seed})",
         flush=True,
     )
     bar = tqdm(total=args.routes * (args.rounds + 1), unit="route", disable=args.no_progress)
@@ -153,7 +193,7 @@ def _train(args: argparse.Namespace) -> int:
     bar.close()
     config = {
         "env_id": "AFTIR-ArmRoute-v0",
-        "env_kwargs": {"bay": args.bay},
+        "env_kwargs": env_kwargs,
         "leads": list(env.leads),
         "routes": args.routes,
         "rounds": args.rounds,
@@ -168,16 +208,42 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _load(folder: Path) -> tuple[Any, dict[str, Any]]:
+def _env_kwargs(tank: str | None, bay: int | None) -> dict[str, Any]:
+    """The route env's arguments: ``tank`` (None: the reference tank) and its bay.
+
+    ``bay`` None: bay 2 of the reference tank, the whole of any other; 0: the whole tank.
+    """
+    kwargs: dict[str, Any] = {} if tank is None else {"tank": tank}
+    if bay is None:
+        bay = 2 if tank is None else 0
+    if bay:
+        kwargs["bay"] = bay
+    return kwargs
+
+
+def _bay_words(bay: int | None) -> str:
+    return f"bay {bay}" if bay else "the whole tank"
+
+
+def _trained_on(folder: Path) -> dict[str, Any]:
+    """What a policy's config says it was trained on: a generated tank or the reference, a bay.
+
+    A tank the config names by path is not read (a shared folder cannot point at a file):
+    ``plan --tank`` names it.
+    """
     from aftir_rl.core.files import read_json
-    from aftir_rl.rl.route_policy import load_route_policy
+    from aftir_rl.core.tank.loading import names_generated
 
     config = read_json(folder / "config.json", "route policy config")
     kwargs = config.get("env_kwargs") if isinstance(config, dict) else None
-    bay = kwargs.get("bay") if isinstance(kwargs, dict) else None
-    if type(bay) is not int or bay not in (1, 2):
-        raise CheckpointError(f"{folder}/config.json: no bay 1 or 2 in its env_kwargs")
-    return load_route_policy(folder / POLICY_FILE), {"bay": bay}
+    if not isinstance(kwargs, dict) or not set(kwargs) <= {"tank", "bay", "tank_episodes"}:
+        raise CheckpointError(f"{folder}/config.json: no env_kwargs of a route policy")
+    bay, tank = kwargs.get("bay"), kwargs.get("tank")
+    if bay is not None and (type(bay) is not int or not 1 <= bay <= 99):
+        raise CheckpointError(f"{folder}/config.json: its bay is not 1 to 99")
+    if tank is not None and not (isinstance(tank, str) and names_generated(tank)):
+        tank = "a tank file"  # named by --tank
+    return {"tank": tank, "bay": bay}
 
 
 def _name(target: Any) -> str:
@@ -187,18 +253,34 @@ def _name(target: Any) -> str:
 def _plan(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from aftir_rl.core.config import error_line
     from aftir_rl.core.files import check_outputs, check_writable_dir, write_json
     from aftir_rl.core.shipped import DEFAULT_TANK
     from aftir_rl.core.tank import keep_run_tank
     from aftir_rl.envs.ftl.route_env import ArmRouteEnv
     from aftir_rl.planning.ftl.plan import MotionPlan
-    from aftir_rl.rl.route_policy import route_search
+    from aftir_rl.rl.route_policy import load_route_policy, route_search
 
     folder = route_policy_dir(args.policy, args.pretrained)
     if bool(args.target) == bool(args.random):
         raise ConfigError("give --target X Y Z (repeatable) or --random N")
-    policy, env_kwargs = _load(folder)
-    env = ArmRouteEnv(**env_kwargs)
+    from aftir_rl.envs.ftl.pool import pool_specs, stream_spec
+
+    trained = _trained_on(folder)
+    tank = args.tank if args.tank is not None else trained["tank"]
+    if tank == "a tank file" or pool_specs(tank) is not None or stream_spec(tank) is not None:
+        raise ConfigError(f"{folder} was trained in {tank}: give --tank, the tank to plan in")
+    if args.tank is not None:
+        check_tank(args.tank)
+    bay = args.bay if args.bay is not None else (trained["bay"] if args.tank is None else None)
+    env_kwargs = _env_kwargs(tank, bay)
+    try:
+        env = ArmRouteEnv(**env_kwargs)
+    except ConfigError as exc:  # a bay the config names that the tank does not have
+        if args.tank is not None or args.bay is not None:
+            raise
+        raise CheckpointError(f"{folder}/config.json: {error_line(exc)}") from None
+    policy = load_route_policy(folder / POLICY_FILE)
     if policy.n_obs != env.n_obs:
         raise CheckpointError(f"{folder}: the policy reads {policy.n_obs} numbers, not {env.n_obs}")
     jobs: list[tuple[int | None, Any]]
@@ -234,10 +316,10 @@ def _plan(args: argparse.Namespace) -> int:
         (out / name).mkdir(exist_ok=True)
         write_json(paths[0], plan.to_json())
         summary = {
-            "tank": keep_run_tank(DEFAULT_TANK, out / name),
+            "tank": keep_run_tank(tank or DEFAULT_TANK, out / name),
             "method": "route-policy",
             "policy": args.pretrained or str(folder.resolve()),
-            "bay": env_kwargs["bay"],
+            "bay": env_kwargs.get("bay"),
             "budget": args.budget,
             "steps": result.steps,
             "complete": result.success,

@@ -359,7 +359,7 @@ def load_route_policy(path: str | Path) -> RoutePolicy:
         CheckpointError: not such a file (nothing but tensors is read; the size is bounded).
 
     """
-    state = load_tensors(path, "a route policy's weights")
+    state = load_tensors(path, "route policy's weights")
     try:
         n_obs, n_actions = int(state["n_obs"]), int(state["n_actions"])
         if not (1 <= n_obs <= MAX_OBS and 1 <= n_actions <= MAX_OBS):

@@ -140,3 +140,38 @@ def test_a_closing_whose_motion_loses_the_margin_is_not_a_success(env, monkeypat
         _, _, terminated, _, info = env.step(move)
         assert env.motion() is None and env.final_route() is None
     assert not info["is_success"]
+
+
+def test_a_stream_moves_on_to_the_next_wing_every_tank_episodes():
+    """``tank="wing:2:F+"``: the same wings in the same order whatever the reset seeds; each
+    episode's target, moves and observation are the new wing's (a clear move stays clear in
+    it: route_moves asked of that wing directly)."""
+    env = ArmRouteEnv(tank="wing:2:40+", tank_episodes=2, leads=(0.0,))
+    met = []
+    for seed in range(5):
+        obs, info = env.reset(seed=100 + seed)
+        met.append(info["tank"])
+        assert env.tank.distance(env.target[None])[0] >= 5.0  # drawn in this wing
+        assert env.observation_space.contains(obs)
+        moves = route_moves(env.tank, env.route, env.target, ROUTE_SETTINGS)
+        np.testing.assert_array_equal(env.action_masks(), moves.ok)
+    assert met == ["wing:2:40", "wing:2:40", "wing:2:41", "wing:2:41", "wing:2:42"]
+    assert env.tanks_met == 3
+
+
+def test_a_pools_episode_uses_its_own_tank():
+    env = ArmRouteEnv(tank="wing:2:40-41", leads=(0.0,))
+    for k in (0, 1, 0):
+        env.reset(seed=3, options={"tank": k})
+        assert env.tank is env.inner.tank and env.tank.source == f"wing:2:{40 + k}"
+        moves = route_moves(env.tank, env.route, env.target, ROUTE_SETTINGS, ahead=True)
+        np.testing.assert_array_equal(env.action_masks(), moves.ok)
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{"tank_episodes": 2}, {"tank": "wing:2:1+", "tank_episodes": 0},
+               {"tank": "wing:2:1-3", "tank_episodes": 1}],
+)  # fmt: skip
+def test_tank_episodes_is_a_streams_count(kwargs):
+    with pytest.raises(ConfigError, match="tank_episodes is a stream's"):
+        ArmRouteEnv(**kwargs)

@@ -29,7 +29,9 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError, InvalidActionError
 from aftir_rl.core.robot import body_points, forward_kinematics, kappa_to_angles
+from aftir_rl.core.tank.generate import MAX_SEED
 from aftir_rl.envs.ftl.env import ArmFTLEnv
+from aftir_rl.envs.ftl.pool import stream_spec
 from aftir_rl.planning.ftl.model import Route
 from aftir_rl.planning.ftl.plan import MotionPlan, deploy_route
 from aftir_rl.planning.ftl.route import (
@@ -39,7 +41,7 @@ from aftir_rl.planning.ftl.route import (
     route_moves,
 )
 
-__all__ = ["ArmRouteEnv", "ROUTE_LEADS", "ROUTE_SETTINGS"]
+__all__ = ["ArmRouteEnv", "ROUTE_LEADS", "ROUTE_SETTINGS", "STREAM_TANK_EPISODES"]
 
 #: The moves and clearance rule of the route env: the planner's first search setting (its
 #: ``leads`` are not used: the env's ``leads`` are the first decision).
@@ -47,6 +49,9 @@ ROUTE_SETTINGS = RouteSettings(clearance_weight=1.0, change_weight=20.0, leads=(
 
 #: The leads [cm] the first action chooses among: the route search's own.
 ROUTE_LEADS: tuple[float, ...] = RouteSettings().leads
+
+#: Episodes in each wing of a stream unless ``tank_episodes`` says otherwise.
+STREAM_TANK_EPISODES = 5
 
 #: Distance-to-go [cm] shown for a move that is not clear (and the cap of the others).
 _FAR = 1000.0
@@ -96,7 +101,13 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
     the motion keeps ``settings.margin``); ``leads`` (:data:`ROUTE_LEADS`, at most 25): the
     first decision's choices, ``(0.0,)`` for none; ``render_mode`` (``"rgb_array"``: the tank,
     the arm along the route, the target); every other keyword argument goes to the inner
-    ``AFTIR-ArmFTL-v0`` (``tank``, ``bay``, ``target``...).
+    ``AFTIR-ArmFTL-v0`` (``tank``, ``bay``, ``target``...). ``tank`` may be any one tank, a pool
+    ``"wing:BAYS:FIRST-LAST"`` (a wing drawn per episode, ``reset(options={"tank": k})``) or a
+    stream ``"wing:BAYS:FIRST+"``: every wing of ``BAYS`` bays from seed ``FIRST`` on, each
+    built when the episode after ``tank_episodes`` (:data:`STREAM_TANK_EPISODES`) ones in the
+    last begins, so the same calls meet the same wings whatever the reset seeds. ``reset``'s
+    ``info["tank"]`` names the episode's tank; the observation has the same columns in every
+    tank (the guide's way through that tank among them).
 
     ## Version History
 
@@ -110,11 +121,29 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
         settings: RouteSettings = ROUTE_SETTINGS,
         leads: Sequence[float] = ROUTE_LEADS,
         render_mode: str | None = None,
+        tank_episodes: int | None = None,
         **kwargs: Any,
     ) -> None:
         self.render_mode = render_mode
         self._renderer: Any = None
-        self.inner = ArmFTLEnv(**{**kwargs, "guide": True, "steer": "target"})
+        #: ``(bays, first seed)`` of a stream ``tank="wing:BAYS:FIRST+"``, or None.
+        self.stream = stream_spec(kwargs.get("tank"))
+        if tank_episodes is not None and not (
+            self.stream is not None and isinstance(tank_episodes, int) and tank_episodes >= 1
+        ):
+            raise ConfigError(
+                f"tank_episodes is a stream's (tank='wing:BAYS:FIRST+'): a count of at least 1, "
+                f"got {tank_episodes!r}"
+            )
+        #: Episodes in each of a stream's wings before the next reset takes the next wing.
+        self.tank_episodes = tank_episodes or STREAM_TANK_EPISODES
+        #: Wings of the stream met so far, and episodes begun in the last one.
+        self.tanks_met, self._episodes = 0, 0
+        self._inner_kwargs = {**kwargs, "guide": True, "steer": "target"}
+        if self.stream is not None:
+            self._inner_kwargs["tank"] = f"wing:{self.stream[0]}:{self.stream[1]}"
+            self.tanks_met = 1
+        self.inner = ArmFTLEnv(**self._inner_kwargs)
         self.tank, self.arm = self.inner.tank, self.inner.tank.arm
         self.settings = settings
         self.moves = move_set(settings)
@@ -145,10 +174,26 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
         """A new target (drawn as ``AFTIR-ArmFTL-v0`` draws it), the route empty."""
         super().reset(seed=seed)
+        if self.stream is not None and self._episodes >= self.tank_episodes:
+            self._next_wing()
+        self._episodes += 1
         _, info = self.inner.reset(seed=seed, options=options)
+        if self.inner.tank is not self.tank:  # a pool's episode in another tank
+            self.tank, self.arm, self._renderer = self.inner.tank, self.inner.tank.arm, None
         self.choosing = len(self.leads) > 1
         self._set(self._empty(self.leads[0]))
-        return self._obs.copy(), {"target": info["target"]}
+        return self._obs.copy(), {"target": info["target"], "tank": info["tank"]}
+
+    def _next_wing(self) -> None:
+        """Move a stream on to its next wing (built now; the last one is let go)."""
+        bays, first = self.stream  # type: ignore[misc]
+        seed = first + self.tanks_met
+        if seed > MAX_SEED:
+            raise ConfigError(f"the stream of wing:{bays}:{first}+ ran past seed {MAX_SEED:,}")
+        self.inner.close()
+        self.inner = ArmFTLEnv(**{**self._inner_kwargs, "tank": f"wing:{bays}:{seed}"})
+        self.tanks_met += 1
+        self._episodes = 0
 
     def action_masks(self) -> NDArray[np.bool_]:
         """Which actions are open from here (sb3-contrib's ``MaskablePPO`` reads it)."""

@@ -1,0 +1,162 @@
+"""One route policy for any tank: taught by the planner on a stream of generated wings.
+
+Run from a checkout: ``python experiments/route_anytank.py --seeds 0 1 --json OUT.json``.
+:func:`~aftir_rl.rl.route_policy.train_route_policy` clones a policy on ``AFTIR-ArmRoute-v0``
+with ``tank="wing:BAYS:FIRST+"``: a stream of generated wings, ``--tank-episodes`` routes in
+each (targets anywhere in the wing), ``--tanks`` wings in all; the stream of seed ``s`` starts
+at wing ``10,000 + 100,000·s``. The policy is then evaluated, greedily and best first within
+``--budget`` env steps (:func:`~aftir_rl.rl.route_policy.route_search`), on tanks no training
+used:
+
+- ``held_out_wings``: ``--wings`` generated 3-bay wings (seeds 900,000..), ``--wing-targets``
+  targets each (reset seeds 3,000,000 + n·w..; 20 x 10 = 200 by default);
+- ``b737``: the reference 737 tank, ``--eval`` targets anywhere in it and per bay (reset seeds
+  3,000,000..): no 737-like tank is in the stream;
+- ``suite``: every scene of ``aftir bench --suite`` with its own targets
+  (:func:`~aftir_rl.experiments.suite.suite_targets`, ``--suite-targets`` per scene).
+
+A success is a closed route whose motion keeps 1 cm along its whole length (python-fcl).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+from aftir_rl.experiments.bench import env_steps_per_second, machine_facts
+from aftir_rl.experiments.suite import SCENES, scene_tanks, suite_targets
+from aftir_rl.rl.route_policy import (
+    RoutePolicy,
+    route_search,
+    save_route_policy,
+    train_route_policy,
+)
+
+#: Held-out generated wings: seeds from here, none in any training stream.
+HELD_OUT_WINGS = 900_000
+
+
+def score(env: ArmRouteEnv, policy: RoutePolicy, jobs: list[Any], budget: int) -> dict[str, Any]:
+    """Greedy and searched success on ``jobs`` (reset seeds, or targets [cm]) in ``env``."""
+    out: dict[str, Any] = {"targets": len(jobs)}
+    for name, steps in (("greedy", 0), ("search", budget)):
+        reached, clearance = 0, []
+        for job in jobs:
+            seed, target = (job, None) if isinstance(job, int) else (None, np.asarray(job))
+            result = route_search(env, policy, seed, steps, target)
+            reached += result.success
+            if result.success:
+                plan = env.motion()
+                assert plan is not None and plan.min_clearance_cm is not None
+                clearance.append(plan.min_clearance_cm)
+        out[name] = reached / len(jobs)
+        if name == "search":
+            out["least_clearance_cm"] = round(min(clearance), 3) if clearance else None
+    return out
+
+
+def pooled(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Rows of equal weight per target, summed into one."""
+    n = sum(r["targets"] for r in rows)
+    least = [r["least_clearance_cm"] for r in rows if r["least_clearance_cm"] is not None]
+    return {
+        "targets": n,
+        "greedy": round(sum(r["greedy"] * r["targets"] for r in rows) / n, 4),
+        "search": round(sum(r["search"] * r["targets"] for r in rows) / n, 4),
+        "least_clearance_cm": min(least) if least else None,
+    }
+
+
+def evaluate(policy: RoutePolicy, args: argparse.Namespace) -> dict[str, Any]:
+    """The policy on the held-out wings, the 737 tank and the suite's scenes."""
+    start, out = time.perf_counter(), {}
+    rows = []
+    n = args.wing_targets
+    for w in range(args.wings):
+        env = ArmRouteEnv(tank=f"wing:3:{HELD_OUT_WINGS + w}")
+        seeds = list(range(3_000_000 + n * w, 3_000_000 + n * (w + 1)))
+        rows.append(score(env, policy, seeds, args.budget))
+    out["held_out_wings"] = pooled(rows)
+    seeds = list(range(3_000_000, 3_000_000 + args.eval))
+    out["b737"] = score(ArmRouteEnv(), policy, seeds, args.budget)
+    for bay in (1, 2):
+        out[f"b737_bay{bay}"] = score(ArmRouteEnv(bay=bay), policy, seeds, args.budget)
+    with tempfile.TemporaryDirectory() as folder:
+        for s, (name, tank) in enumerate(scene_tanks(Path(folder)).items()):
+            spec = SCENES[name] if isinstance(SCENES[name], str) else tank.source
+            targets = [t for t in suite_targets(tank, args.suite_targets, seed=s)]
+            out[f"suite_{name}"] = score(ArmRouteEnv(tank=str(spec)), policy, targets, args.budget)
+    out["seconds"] = round(time.perf_counter() - start, 1)
+    return out
+
+
+def run_seed(args: argparse.Namespace, seed: int) -> dict[str, Any]:
+    """Train one seed on its stream; its evaluation."""
+    first = 10_000 + 100_000 * seed
+    env = ArmRouteEnv(tank=f"wing:{args.bays}:{first}+", tank_episodes=args.tank_episodes)
+    start = time.perf_counter()
+    policy, stats = train_route_policy(
+        env,
+        routes=args.tanks * args.tank_episodes,
+        updates=args.updates,
+        seed=seed,
+        first_target_seed=10_000_000 + 100_000 * seed,
+    )
+    minutes = round((time.perf_counter() - start) / 60, 2)
+    if args.save:
+        save_route_policy(policy, f"{args.save}.seed{seed}.pt")
+    row = {
+        "seed": seed,
+        "stream": f"wing:{args.bays}:{first}+",
+        "wings_met": env.tanks_met,
+        "minutes": minutes,
+        **stats.rounds[-1],
+    }
+    row["eval"] = evaluate(policy, args)
+    print(json.dumps(row), flush=True)
+    return row
+
+
+def main() -> None:
+    """Train each seed on its stream, evaluate; print a JSON line per seed."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--bays", type=int, default=3, help="bays of the stream's wings")
+    parser.add_argument("--tanks", type=int, default=400, help="wings met in training")
+    parser.add_argument("--tank-episodes", type=int, default=5, help="routes in each wing")
+    parser.add_argument("--updates", type=int, default=3000, help="batches of the fit")
+    parser.add_argument("--wings", type=int, default=20, help="held-out wings")
+    parser.add_argument("--wing-targets", type=int, default=10, help="targets per held-out wing")
+    parser.add_argument("--eval", type=int, default=200, help="targets in the 737 tank")
+    parser.add_argument("--suite-targets", type=int, default=50, help="targets per scene")
+    parser.add_argument("--budget", type=int, default=100, help="env steps of the search")
+    parser.add_argument("--json", help="where the runs go")
+    parser.add_argument("--save", help="the policies' weights go to SAVE.seedN.pt")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    lake = env_steps_per_second("FrozenLake-v1", 50_000, map_name="8x8", is_slippery=False)
+    runs = [run_seed(args, seed) for seed in args.seeds]
+    if args.json:
+        out = {
+            "recipe": f"route policy cloned on {args.tanks} streamed {args.bays}-bay wings, "
+            f"{args.tank_episodes} routes each",
+            "env_id": "AFTIR-ArmRoute-v0",
+            "budget": args.budget,
+            "machine": machine_facts(),
+            "frozenlake_8x8_steps_per_s": lake,
+            "options": vars(args),
+            "runs": runs,
+        }
+        Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
