@@ -620,10 +620,12 @@ def test_field_guides_of_a_process_share_one_budget(monkeypatch):
     """A pool's tanks keep at most ``MAX_GUIDE_VALUES`` together, and every id stays valid."""
     import weakref
 
+    from aftir_rl.core.tank.generate import wing_tank
+    from aftir_rl.core.tank.loading import tank_from_mapping
     from aftir_rl.envs.ftl import fields
 
-    monkeypatch.setattr(fields, "_GUIDES", weakref.WeakKeyDictionary())
-    tanks = [load_tank("wing:2:0"), load_tank("wing:2:1")]
+    monkeypatch.setattr(fields, "_GUIDES", weakref.WeakSet())
+    tanks = [tank_from_mapping(wing_tank(2, s), f"wing:2:{s}") for s in (0, 1)]  # not cached
     guides = [fields.field_guide(t) for t in tanks]
     budget = 5 * guides[0].n_points  # about five fields in all
     monkeypatch.setattr(fields, "MAX_GUIDE_VALUES", budget)

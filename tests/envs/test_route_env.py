@@ -175,3 +175,19 @@ def test_a_pools_episode_uses_its_own_tank():
 def test_tank_episodes_is_a_streams_count(kwargs):
     with pytest.raises(ConfigError, match="tank_episodes is a stream's"):
         ArmRouteEnv(**kwargs)
+
+
+def test_a_stream_lets_go_of_the_wings_it_has_left():
+    """Each wing's guide and clearance grid refer back to it: kept in weak-key caches they
+    kept every wing a process met alive (12 GB after 200 wings). Past the loader's cache of
+    the last few, a wing left behind is freed."""
+    import gc
+    import weakref
+
+    env = ArmRouteEnv(tank="wing:2:60+", tank_episodes=1, leads=(0.0,))
+    env.reset(seed=0)
+    first = weakref.ref(env.tank)
+    for seed in range(1, 7):
+        env.reset(seed=seed)
+    gc.collect()
+    assert first() is None

@@ -114,9 +114,6 @@ class ClearanceGrid:
         return v
 
 
-_GRIDS: weakref.WeakKeyDictionary[Tank, ClearanceGrid] = weakref.WeakKeyDictionary()
-
-
 def clearance_grid(tank: Tank) -> ClearanceGrid:
     """The :class:`ClearanceGrid` of a tank, built once per tank.
 
@@ -126,8 +123,8 @@ def clearance_grid(tank: Tank) -> ClearanceGrid:
     that no node or point of it reaches the wall, down to the deepest base of the longest arm.
     Everything else is computed exactly.
     """
-    grid = _GRIDS.get(tank)
-    if grid is None:
+
+    def build() -> ClearanceGrid:
         lo, hi = np.asarray(tank.box_min, float) - 10.0, np.asarray(tank.box_max, float) + 10.0
         lo[2] = tank.box_min[2]
         c, r = np.asarray(tank.panel.center, float), float(tank.panel.radius)
@@ -135,10 +132,11 @@ def clearance_grid(tank: Tank) -> ClearanceGrid:
         depth = tank.arm.max_sections * tank.arm.section_length + 10.0
         column = (c - [half, half, depth], c + [half, half, 0.0])
         steep = any(s.kind == "mesh" for s in tank.solids)
-        grid = _GRIDS[tank] = ClearanceGrid(
+        return ClearanceGrid(
             tank.distance, [(lo, hi), column], lipschitz=math.sqrt(3.0) if steep else 1.0
         )
-    return grid
+
+    return tank.memo("clearance_grid", build)
 
 
 _KERNEL_TANKS: weakref.WeakKeyDictionary[Tank, KernelTank] = weakref.WeakKeyDictionary()

@@ -12,10 +12,10 @@ distance (:class:`~aftir_rl.core.tank.distance.TankDistance`) and its scene expo
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -118,6 +118,9 @@ class Enclosure:
             if xb > xa and yb > ya:
                 slabs.append(([xa, ya, z0], [xb, yb, z1]))
         return [Box(_vec3(a), _vec3(b), "wall") for a, b in slabs]
+
+
+_T = TypeVar("_T")
 
 
 def _vec3(values: Iterable[float]) -> Vec3:
@@ -227,6 +230,18 @@ class Tank:
         if self.baffle is not None:
             out.append((self.baffle.index, self.baffle.position, self.baffle.thickness))
         return tuple(sorted(out))
+
+    def memo(self, key: str, build: Callable[[], _T]) -> _T:
+        """``build()``, once per tank, kept with the tank and let go with it.
+
+        For the caches of other layers whose values refer back to the tank (a guide, a
+        clearance grid): in a weak-key dictionary such a value would keep its key, and so
+        every tank a process ever met, alive.
+        """
+        store: dict[str, Any] = self.__dict__.setdefault("_memo", {})
+        if key not in store:
+            store[key] = build()
+        return store[key]  # type: ignore[no-any-return]
 
     def bay(self, number: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Corners [cm] of bay ``number`` (1 nearest the low end), between consecutive baffles.

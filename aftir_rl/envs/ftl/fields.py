@@ -153,7 +153,7 @@ class FieldGuide:
 
     def _over_budget(self, new: int) -> bool:
         """Whether ``new`` more fields would take the process's guides over the budget."""
-        kept = sum(g._count * g.n_points for g in list(_GUIDES.values()))
+        kept = sum(g._count * g.n_points for g in list(_GUIDES))
         return kept + new * self.n_points > MAX_GUIDE_VALUES
 
     def _flat(self, cell: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -260,7 +260,8 @@ class FieldGuide:
         return to_go, way
 
 
-_GUIDES: weakref.WeakKeyDictionary[Tank, FieldGuide] = weakref.WeakKeyDictionary()
+#: The guides :func:`field_guide` handed out that are alive (their tanks are): one budget.
+_GUIDES: weakref.WeakSet[FieldGuide] = weakref.WeakSet()
 
 
 def field_guide(tank: Tank, rows: int = 0) -> FieldGuide:
@@ -270,9 +271,8 @@ def field_guide(tank: Tank, rows: int = 0) -> FieldGuide:
         ConfigError: the guide keeps too few target fields for ``rows`` envs (two each).
 
     """
-    guide = _GUIDES.get(tank)
-    if guide is None:
-        guide = _GUIDES[tank] = FieldGuide(tank)
+    guide = tank.memo("field_guide", lambda: FieldGuide(tank))
+    _GUIDES.add(guide)
     if guide.capacity < 2 * rows:
         raise ConfigError(
             f"the guide keeps {guide.capacity} target fields of this tank's grid, too "
