@@ -104,7 +104,8 @@ def _obstacles(
     ribs: list[dict[str, Any]],
     tip: tuple[float, float],
 ) -> list[dict[str, Any]]:
-    """Stringers on the floor away from the panel; a pipe under the tip's ceiling.
+    """Stringers on the floor away from the panel; a pipe under the tip's ceiling (where the
+    access holes leave room for it beside them).
 
     ``tip`` is the half chord and depth at the tip: both run straight along the span inside it.
     """
@@ -127,7 +128,10 @@ def _obstacles(
             )  # fmt: skip
     radius = rng.uniform(*r.pipe_radius)
     side = 1.0 if rng.random() < 0.5 else -1.0
-    y = side * rng.uniform(max(abs(low), abs(high)) + radius + 4, half_chord - radius - 6)
+    near, far = max(abs(low), abs(high)) + radius + 4, half_chord - radius - 6
+    if near > far:  # the access holes leave no room beside them at the tip: no pipe
+        return out
+    y = side * rng.uniform(near, far)
     z = depth - radius - 8
     out.append({"name": "fuel_pipe", "type": "cylinder", "p0": [lo[0], round(y, 2), round(z, 2)],
                 "p1": [hi[0], round(y, 2), round(z, 2)], "radius": round(radius, 2)})  # fmt: skip
