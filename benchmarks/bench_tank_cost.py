@@ -13,8 +13,11 @@ shaping). Last, SB3's PPO (the wings recipe's network and batch) trains ``--trai
 one new 3-bay wing, on a pool of 8 (seeds 910,000-910,007), and on the stream that starts with
 those 8 (``wing:3:910000+``) moving on every 8, 32 or 128 episodes of a group's rows: steps/s,
 the wings met, and the share of the one wing's speed (each in a new process: every wing new, so
-each builds its guide's fields as training meets targets). ``--tables costs`` or ``training``
-prints one part.
+each builds its guide's fields as training meets targets). Then the route policy's teaching
+(``AFTIR-ArmRoute-v0``, the planner labelling each route it follows, as ``aftir route train``
+clones): ``--routes`` routes in one new 3-bay wing, and on a stream moving on every 5 routes
+or every route, each in a new process: routes/s and the share of the one wing's.
+``--tables costs``, ``training`` or ``route`` prints one part.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from aftir_rl.envs.ftl.env import ArmFTLVectorEnv
 from aftir_rl.envs.ftl.fields import raster_detour_table, raster_distance_table
 from aftir_rl.experiments.bench import machine_facts
 
-QUICK = {"seeds": 1, "bays": "2,3", "rows": 64, "train_steps": 32768}
+QUICK = {"seeds": 1, "bays": "2,3", "rows": 64, "train_steps": 32768, "routes": 20}
 
 
 def previous_distance_table(tank: Tank) -> np.ndarray:
@@ -111,12 +114,7 @@ def training_rate(steps: int, rows: int, tank: str, **stream: int) -> tuple[floa
 
     In a process of its own: no tank, grid or guide field of an earlier measurement is cached.
     """
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
-        return pool.submit(_training_rate, steps, rows, tank, stream).result()
+    return in_new_process(_training_rate, steps, rows, tank, stream)
 
 
 def _training_rate(steps: int, rows: int, tank: str, stream: dict[str, int]) -> tuple[float, int]:
@@ -141,6 +139,50 @@ def _training_rate(steps: int, rows: int, tank: str, stream: dict[str, int]) -> 
     used = getattr(batched, "tanks_met", 1)  # (one tank: the plain batched env)
     venv.close()
     return model.num_timesteps / seconds, used
+
+
+def in_new_process(fn, *args):  # noqa: ANN001, ANN201
+    """``fn(*args)`` in a process of its own: no tank, grid or field of earlier ones cached."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
+        return pool.submit(fn, *args).result()
+
+
+def _route_rate(routes: int, tank: str, stream: dict[str, int]) -> tuple[float, int]:
+    """Teacher-labelled routes/s on ``tank`` (its first wing's building included), wings met."""
+    import torch
+
+    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.rl.route_policy import RouteTeacher, collect
+
+    torch.set_num_threads(1)
+    warm = ArmRouteEnv(tank="wing:2:899999", leads=(0.0,))  # the kernels, compiled or loaded
+    collect(warm, 0, RouteTeacher(), None)
+    start = time.perf_counter()
+    env, teacher = ArmRouteEnv(tank=tank, **stream), RouteTeacher()
+    for i in range(routes):
+        collect(env, 20_000_000 + i, teacher, None)
+    return routes / (time.perf_counter() - start), env.tanks_met or 1
+
+
+def route_table(args: argparse.Namespace) -> None:
+    """Print the route teacher's routes/s in one new wing and on the stream moving on."""
+    print(f"\n| route policy's teaching, {args.routes} routes, 3-bay wings | routes/s | "
+          "wings met | share of one wing's |")  # fmt: skip
+    print("|---|---:|---:|---:|")
+    fixed, _ = in_new_process(_route_rate, args.routes, "wing:3:920000", {})
+    print(f"| one new wing (wing:3:920000) | {fixed:.2f} | 1 | 100% |")
+    for episodes in (5, 1):
+        rate, met = in_new_process(
+            _route_rate, args.routes, "wing:3:920000+", {"tank_episodes": episodes}
+        )
+        print(
+            f"| a stream, the next wing every {episodes} route{'s' * (episodes > 1)} | "
+            f"{rate:.2f} | {met} | {rate / fixed:.0%} |"
+        )
 
 
 def cost_tables(args: argparse.Namespace) -> None:
@@ -211,18 +253,21 @@ def main() -> None:
     parser.add_argument(
         "--train-steps", type=int, default=131072, help="PPO steps per training measurement"
     )
+    parser.add_argument("--routes", type=int, default=100, help="routes per route measurement")
     parser.add_argument(
-        "--tables", default="costs,training", help="which tables: costs, training (both)"
+        "--tables", default="costs,training,route", help="which tables: costs, training, route"
     )
     args = parse_args(parser, QUICK)
     print_header(args, QUICK)
     tables = set(args.tables.split(","))
-    if not tables <= {"costs", "training"}:
-        parser.error(f"--tables: costs and/or training, got {args.tables}")
+    if not tables <= {"costs", "training", "route"}:
+        parser.error(f"--tables: costs, training and/or route, got {args.tables}")
     if "costs" in tables:
         cost_tables(args)
     if "training" in tables:
         training_table(args)
+    if "route" in tables:
+        route_table(args)
     print()
     print(machine_facts())
 

@@ -6,6 +6,11 @@
 within ``--budget`` env steps, and the four reference corners (bay 2); every success is a
 closed route whose motion keeps 1 cm along its whole length (python-fcl). Writes
 ``card.json`` beside the policy (``--dry-run``: prints it only).
+
+A policy trained on generated wings (its config names a pool or a stream) is tested in tanks
+none of its training used: ``--wings`` generated 3-bay wings from seed ``--wing-seed`` with
+``--targets`` targets in all (each wing its share, reset seeds ``--seed``..), and ``--targets``
+targets anywhere in the reference 737 tank.
 """
 
 from __future__ import annotations
@@ -28,10 +33,16 @@ from aftir_rl.rl.route_policy import RoutePolicy, load_route_policy, route_searc
 CORNERS = ((230.0, 140.0, 90.0), (-50.0, 140.0, 10.0), (-50.0, 72.0, 90.0), (230.0, 72.0, 10.0))
 
 
-def measure(env: ArmRouteEnv, policy: RoutePolicy, seeds: range, budget: int) -> dict[str, Any]:
-    """Success, steps, least clearance and time on the targets of ``seeds``."""
+def measure(
+    envs: list[ArmRouteEnv], policy: RoutePolicy, seeds: range, budget: int
+) -> dict[str, Any]:
+    """Success, steps, least clearance and time on the targets of ``seeds``.
+
+    Target ``i`` is drawn in ``envs[i * len(envs) // len(seeds)]`` (one env: all of them).
+    """
     start, hits, steps, least = time.perf_counter(), 0, [], np.inf
-    for seed in seeds:
+    for i, seed in enumerate(seeds):
+        env = envs[i * len(envs) // len(seeds)]
         result = route_search(env, policy, seed, budget)
         hits += result.success
         steps.append(result.steps)
@@ -40,7 +51,7 @@ def measure(env: ArmRouteEnv, policy: RoutePolicy, seeds: range, budget: int) ->
             least = min(least, plan.min_clearance_cm)
     return {
         "budget": budget,
-        "success_rate": hits / len(seeds),
+        "success_rate": round(hits / len(seeds), 4),
         "steps_mean": round(float(np.mean(steps)), 2),
         "steps_max": int(np.max(steps)),
         "min_clearance_cm": round(float(least), 3),
@@ -56,15 +67,25 @@ def main() -> None:
     parser.add_argument("--targets", type=int, default=500)
     parser.add_argument("--seed", type=int, default=4_000_000)
     parser.add_argument("--budget", type=int, default=100)
+    parser.add_argument("--wings", type=int, default=20, help="held-out wings (wing policies)")
+    parser.add_argument("--wing-seed", type=int, default=950_000, help="the first one's seed")
     parser.add_argument("--recipe", default="")
     parser.add_argument("--dry-run", action="store_true")
     args = parser.parse_args()
     torch.set_num_threads(1)
     folder = Path(args.folder)
     config = read_json(folder / "config.json", "route policy config")
-    bay = config["env_kwargs"]["bay"]
-    env, policy = ArmRouteEnv(bay=bay), load_route_policy(folder / POLICY_FILE)
+    kwargs = config["env_kwargs"]
+    policy = load_route_policy(folder / POLICY_FILE)
     seeds = range(args.seed, args.seed + args.targets)
+    wings = "tank" in kwargs
+    if wings:  # tested in unseen tanks: held-out wings, and the 737 tank it never met
+        tests = {
+            "wings": [ArmRouteEnv(tank=f"wing:3:{args.wing_seed + w}") for w in range(args.wings)],
+            "b737": [ArmRouteEnv()],
+        }
+    else:
+        tests = {"bay": [ArmRouteEnv(bay=kwargs["bay"])]}
     card = {
         "name": args.name,
         "env_id": config["env_id"],
@@ -78,15 +99,17 @@ def main() -> None:
             "teacher": config["rows"][-1]["teacher"],
             "minutes": config["minutes"],
         },
-        "test": {
-            "targets": args.targets,
-            "seed": args.seed,
-            "greedy": measure(env, policy, seeds, 0),
-            "search": measure(env, policy, seeds, args.budget),
-        },
         "machine": machine_facts(),
     }
-    if bay == 2:
+    for name, envs in tests.items():
+        test: dict[str, Any] = {"targets": args.targets, "seed": args.seed}
+        if name == "wings":
+            test["tanks"] = f"wing:3:{args.wing_seed}-{args.wing_seed + args.wings - 1}"
+        test["greedy"] = measure(envs, policy, seeds, 0)
+        test["search"] = measure(envs, policy, seeds, args.budget)
+        card["test" if name == "bay" else f"test_{name}"] = test
+    env = tests["b737" if wings else "bay"][0]
+    if kwargs.get("bay") == 2 or wings:
         card["corners"] = {
             str(c): route_search(env, policy, None, args.budget, np.array(c)).success
             for c in CORNERS

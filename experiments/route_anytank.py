@@ -77,7 +77,8 @@ def pooled(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 def evaluate(policy: RoutePolicy, args: argparse.Namespace) -> dict[str, Any]:
     """The policy on the held-out wings, the 737 tank and the suite's scenes."""
-    start, out = time.perf_counter(), {}
+    start = time.perf_counter()
+    out: dict[str, Any] = {}
     rows = []
     n = args.wing_targets
     for w in range(args.wings):

@@ -5,11 +5,13 @@ route decided a section at a time):
 
 - ``aftir route train -o DIR``: clone a policy from the planner's routes to ``--routes``
   targets of the bay, then ``--rounds`` DAgger rounds; writes ``DIR/route_policy.pt`` (tensors
-  only) and ``DIR/config.json`` (the options, the minutes, the teacher's queries);
+  only) and ``DIR/config.json`` (the options, the minutes, the teacher's queries). ``--tank``
+  trains in another tank, a pool of wings or a stream of them (``--tank-episodes`` routes each);
 - ``aftir route plan DIR --target X Y Z -o OUT``: the policy's route to each target (best first
   within ``--budget`` env steps), deployed and checked along its whole motion; writes
   ``OUT/<target>/trajectory.json`` (the planner's contract, timed: ``aftir view`` and ``aftir
-  check`` read it) and ``summary.json``. ``--pretrained NAME`` takes a shipped route policy.
+  check`` read it) and ``summary.json``. ``--pretrained NAME`` takes a shipped route policy,
+  ``--tank`` plans in any one tank (a policy trained on a pool or a stream needs it).
 
 Neither replaces a file that is there: a policy or a target's motion already written is one
 line and exit 2.
@@ -257,6 +259,7 @@ def _plan(args: argparse.Namespace) -> int:
     from aftir_rl.core.files import check_outputs, check_writable_dir, write_json
     from aftir_rl.core.shipped import DEFAULT_TANK
     from aftir_rl.core.tank import keep_run_tank
+    from aftir_rl.envs.ftl.pool import pool_specs, stream_spec
     from aftir_rl.envs.ftl.route_env import ArmRouteEnv
     from aftir_rl.planning.ftl.plan import MotionPlan
     from aftir_rl.rl.route_policy import load_route_policy, route_search
@@ -264,8 +267,6 @@ def _plan(args: argparse.Namespace) -> int:
     folder = route_policy_dir(args.policy, args.pretrained)
     if bool(args.target) == bool(args.random):
         raise ConfigError("give --target X Y Z (repeatable) or --random N")
-    from aftir_rl.envs.ftl.pool import pool_specs, stream_spec
-
     trained = _trained_on(folder)
     tank = args.tank if args.tank is not None else trained["tank"]
     if tank == "a tank file" or pool_specs(tank) is not None or stream_spec(tank) is not None:

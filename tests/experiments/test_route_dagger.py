@@ -1,4 +1,4 @@
-"""experiments/route_dagger.py runs end to end: clone, one DAgger round, evaluations, JSON."""
+"""The route experiments run end to end: cloning, DAgger, a stream of wings, evaluations, JSON."""
 
 from __future__ import annotations
 
@@ -36,3 +36,24 @@ def test_route_dagger_runs_and_writes_its_rounds(tmp_path):
     assert 0.0 <= last["greedy"]["success"] <= 1.0 and 0.0 <= last["search"]["success"] <= 1.0
     assert sum(last["greedy_failures_go_wrong_at"].values()) == len(last["greedy"]["failed"])
     assert len(last["corners"]) == 4 and data["frozenlake_8x8_steps_per_s"] > 0
+
+
+def test_route_anytank_trains_on_a_stream_and_evaluates_every_kind_of_tank(tmp_path):
+    out = tmp_path / "anytank.json"
+    args = ["--tanks", "2", "--tank-episodes", "2", "--updates", "20", "--wings", "1"]
+    args += ["--wing-targets", "2", "--eval", "1", "--suite-targets", "1", "--budget", "5"]
+    script = ROOT / "experiments" / "route_anytank.py"
+    done = subprocess.run(
+        [sys.executable, str(script), *args, "--json", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    (run,) = json.loads(out.read_text())["runs"]
+    assert run["stream"] == "wing:3:10000+" and run["wings_met"] == 2 and run["states"] > 0
+    rows = run["eval"]
+    assert rows["held_out_wings"]["targets"] == 2 and rows["b737_bay2"]["targets"] == 1
+    suite = [k for k in rows if k.startswith("suite_")]
+    assert len(suite) == 8 and all(rows[k]["targets"] == 1 for k in suite)
+    assert all(0.0 <= rows[k]["search"] <= 1.0 for k in suite)

@@ -241,7 +241,7 @@ class Tank:
         store: dict[str, Any] = self.__dict__.setdefault("_memo", {})
         if key not in store:
             store[key] = build()
-        return store[key]  # type: ignore[no-any-return]
+        return store[key]
 
     def bay(self, number: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Corners [cm] of bay ``number`` (1 nearest the low end), between consecutive baffles.
