@@ -4,7 +4,9 @@ Run: ``python benchmarks/results_page.py [--results benchmarks/results] [-o docs
 Reads ``bench.json`` (``python -m aftir_rl.bench --json``: every method on the fixed target
 sets), every ``seeds_*.json`` (``benchmarks/bench_seeds.py``: an RL recipe from several
 seeds on the same held-out targets) and every ``route_*.json`` (``experiments/route_dagger.py``:
-route policies from several seeds), and writes one page of tables and the README's short table
+route policies from several seeds), every ``anytank_*.json`` (``experiments/route_anytank.py``:
+a route policy taught on a stream of wings, in unseen tanks), and writes one page of tables and
+the README's short table
 (between its ``results`` markers); no number is typed by hand. ``--check`` exits 1 when either
 differs from what the JSON gives.
 """
@@ -190,6 +192,54 @@ def route_section(files: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def anytank_section(files: list[dict[str, Any]]) -> str:
+    """One route policy for any tank: taught on a stream of wings, tested in unseen tanks."""
+    lines = [
+        "## One route policy for any tank\n",
+        "`python experiments/route_anytank.py --seeds 0 1 --json ...`: each seed clones a policy "
+        "of `AFTIR-ArmRoute-v0` on its own stream of generated 3-bay wings (the planner as the "
+        "teacher), then plays targets in tanks no training met: 20 held-out wings (10 targets "
+        "each), the 737 tank (200 targets anywhere, 200 per bay) and each scene of the suite (50 "
+        "each), greedily and best first within each budget of env steps. Success: a closed "
+        "route whose whole motion keeps 1 cm (python-fcl).\n",
+    ]
+    for d in files:
+        b = d["budgets"]
+        lines += [
+            f"{d['recipe']}; success in %, mean ± standard deviation over the seeds:\n",
+            f"| tanks | targets | {' | '.join(['greedy', *(f'best first {k}' for k in b)])} | "
+            "least clearance (cm) |",
+            "|---|---:|" + "---:|" * (len(b) + 2),
+        ]
+        names = [k for k, v in d["runs"][0]["eval"].items() if "targets" in v]
+        for name in names:
+            rows = [r["eval"][name] for r in d["runs"]]
+            rates = [
+                _mean_std([row[key] for row in rows], 100, ".1f")
+                for key in ["greedy", *(f"search_{k}" for k in b)]
+            ]
+            least = [row["least_clearance_cm"] for row in rows if row["least_clearance_cm"]]
+            lines.append(
+                f"| {name.replace('_', ' ')} | {rows[0]['targets']} | {' | '.join(rates)} | "
+                f"{min(least):.2f} |"
+            )
+        lines += [
+            "",
+            "| seed | stream | wings met | minutes | labelled states | teacher queries (s) | "
+            "machine | FrozenLake 8x8 steps/s (same run) |",
+            "|---:|---|---:|---:|---:|---:|---|---:|",
+        ]
+        for r in d["runs"]:
+            t = r["teacher"]
+            lines.append(
+                f"| {r['seed']} | `{r['stream']}` | {r['wings_met']} | {r['minutes']:.1f} | "
+                f"{r['states']:,} | {t['queries']:,} ({t['seconds']:.0f}) | "
+                f"{_machine(d['machine'])} | {r['frozenlake_8x8_steps_per_s']:,.0f} |"
+            )
+        lines.append("")
+    return "\n".join(lines)
+
+
 #: What each benchmark method is, for the README's table.
 METHODS = {
     "tsm": "a posture (three-segment method), no motion",
@@ -296,6 +346,9 @@ def render(results: Path) -> str:
     routes = [json.loads(p.read_text()) for p in sorted(results.glob("route_*.json"))]
     if routes:
         parts.append(route_section(routes))
+    anytank = [json.loads(p.read_text()) for p in sorted(results.glob("anytank_*.json"))]
+    if anytank:
+        parts.append(anytank_section(anytank))
     suite = results / "suite" / "suite.json"
     if suite.exists():
         parts.append(suite_section(json.loads(suite.read_text())))

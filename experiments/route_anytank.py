@@ -5,8 +5,8 @@ Run from a checkout: ``python experiments/route_anytank.py --seeds 0 1 --json OU
 with ``tank="wing:BAYS:FIRST+"``: a stream of generated wings, ``--tank-episodes`` routes in
 each (targets anywhere in the wing), ``--tanks`` wings in all; the stream of seed ``s`` starts
 at wing ``10,000 + 100,000·s``. The policy is then evaluated, greedily and best first within
-``--budget`` env steps (:func:`~aftir_rl.rl.route_policy.route_search`), on tanks no training
-used:
+each of ``--budgets`` env steps (:func:`~aftir_rl.rl.route_policy.route_search`), on tanks no
+training used:
 
 - ``held_out_wings``: ``--wings`` generated 3-bay wings (seeds 900,000..), ``--wing-targets``
   targets each (reset seeds 3,000,000 + n·w..; 20 x 10 = 200 by default);
@@ -35,6 +35,7 @@ from aftir_rl.experiments.bench import env_steps_per_second, machine_facts
 from aftir_rl.experiments.suite import SCENES, scene_tanks, suite_targets
 from aftir_rl.rl.route_policy import (
     RoutePolicy,
+    load_route_policy,
     route_search,
     save_route_policy,
     train_route_policy,
@@ -44,10 +45,15 @@ from aftir_rl.rl.route_policy import (
 HELD_OUT_WINGS = 900_000
 
 
-def score(env: ArmRouteEnv, policy: RoutePolicy, jobs: list[Any], budget: int) -> dict[str, Any]:
-    """Greedy and searched success on ``jobs`` (reset seeds, or targets [cm]) in ``env``."""
+def score(
+    env: ArmRouteEnv, policy: RoutePolicy, jobs: list[Any], budgets: list[int]
+) -> dict[str, Any]:
+    """Greedy success, and best first within each of ``budgets``, on ``jobs`` in ``env``.
+
+    ``jobs``: reset seeds, or targets [cm]. The least clearance is the largest budget's.
+    """
     out: dict[str, Any] = {"targets": len(jobs)}
-    for name, steps in (("greedy", 0), ("search", budget)):
+    for steps in [0, *budgets]:
         reached, clearance = 0, []
         for job in jobs:
             seed, target = (job, None) if isinstance(job, int) else (None, np.asarray(job))
@@ -57,9 +63,8 @@ def score(env: ArmRouteEnv, policy: RoutePolicy, jobs: list[Any], budget: int) -
                 plan = env.motion()
                 assert plan is not None and plan.min_clearance_cm is not None
                 clearance.append(plan.min_clearance_cm)
-        out[name] = reached / len(jobs)
-        if name == "search":
-            out["least_clearance_cm"] = round(min(clearance), 3) if clearance else None
+        out["greedy" if steps == 0 else f"search_{steps}"] = reached / len(jobs)
+    out["least_clearance_cm"] = round(min(clearance), 3) if clearance else None
     return out
 
 
@@ -67,12 +72,12 @@ def pooled(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Rows of equal weight per target, summed into one."""
     n = sum(r["targets"] for r in rows)
     least = [r["least_clearance_cm"] for r in rows if r["least_clearance_cm"] is not None]
-    return {
-        "targets": n,
-        "greedy": round(sum(r["greedy"] * r["targets"] for r in rows) / n, 4),
-        "search": round(sum(r["search"] * r["targets"] for r in rows) / n, 4),
-        "least_clearance_cm": min(least) if least else None,
-    }
+    out: dict[str, Any] = {"targets": n}
+    for key in rows[0]:
+        if key == "greedy" or key.startswith("search_"):
+            out[key] = round(sum(r[key] * r["targets"] for r in rows) / n, 4)
+    out["least_clearance_cm"] = min(least) if least else None
+    return out
 
 
 def evaluate(policy: RoutePolicy, args: argparse.Namespace) -> dict[str, Any]:
@@ -84,24 +89,32 @@ def evaluate(policy: RoutePolicy, args: argparse.Namespace) -> dict[str, Any]:
     for w in range(args.wings):
         env = ArmRouteEnv(tank=f"wing:3:{HELD_OUT_WINGS + w}")
         seeds = list(range(3_000_000 + n * w, 3_000_000 + n * (w + 1)))
-        rows.append(score(env, policy, seeds, args.budget))
+        rows.append(score(env, policy, seeds, args.budgets))
     out["held_out_wings"] = pooled(rows)
     seeds = list(range(3_000_000, 3_000_000 + args.eval))
-    out["b737"] = score(ArmRouteEnv(), policy, seeds, args.budget)
+    out["b737"] = score(ArmRouteEnv(), policy, seeds, args.budgets)
     for bay in (1, 2):
-        out[f"b737_bay{bay}"] = score(ArmRouteEnv(bay=bay), policy, seeds, args.budget)
+        out[f"b737_bay{bay}"] = score(ArmRouteEnv(bay=bay), policy, seeds, args.budgets)
     with tempfile.TemporaryDirectory() as folder:
         for s, (name, tank) in enumerate(scene_tanks(Path(folder)).items()):
             spec = SCENES[name] if isinstance(SCENES[name], str) else tank.source
             targets = [t for t in suite_targets(tank, args.suite_targets, seed=s)]
-            out[f"suite_{name}"] = score(ArmRouteEnv(tank=str(spec)), policy, targets, args.budget)
+            out[f"suite_{name}"] = score(ArmRouteEnv(tank=str(spec)), policy, targets, args.budgets)
     out["seconds"] = round(time.perf_counter() - start, 1)
     return out
 
 
 def run_seed(args: argparse.Namespace, seed: int) -> dict[str, Any]:
-    """Train one seed on its stream; its evaluation."""
+    """Train one seed on its stream (or load ``--policy``); its evaluation."""
     first = 10_000 + 100_000 * seed
+    if args.policy:
+        row = {
+            "seed": seed,
+            "policy": args.policy,
+            "eval": evaluate(load_route_policy(args.policy), args),
+        }
+        print(json.dumps(row), flush=True)
+        return row
     env = ArmRouteEnv(tank=f"wing:{args.bays}:{first}+", tank_episodes=args.tank_episodes)
     start = time.perf_counter()
     policy, stats = train_route_policy(
@@ -138,21 +151,25 @@ def main() -> None:
     parser.add_argument("--wing-targets", type=int, default=10, help="targets per held-out wing")
     parser.add_argument("--eval", type=int, default=200, help="targets in the 737 tank")
     parser.add_argument("--suite-targets", type=int, default=50, help="targets per scene")
-    parser.add_argument("--budget", type=int, default=100, help="env steps of the search")
+    parser.add_argument(
+        "--budgets", type=int, nargs="+", default=[100, 1000], help="env steps of the searches"
+    )
     parser.add_argument("--json", help="where the runs go")
     parser.add_argument("--save", help="the policies' weights go to SAVE.seedN.pt")
+    parser.add_argument("--policy", help="evaluate these weights instead of training (one seed)")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    lake = env_steps_per_second("FrozenLake-v1", 50_000, map_name="8x8", is_slippery=False)
-    runs = [run_seed(args, seed) for seed in args.seeds]
+    runs = []
+    for seed in args.seeds:  # the yardstick beside each seed: they may run side by side
+        lake = env_steps_per_second("FrozenLake-v1", 50_000, map_name="8x8", is_slippery=False)
+        runs.append({**run_seed(args, seed), "frozenlake_8x8_steps_per_s": lake})
     if args.json:
         out = {
             "recipe": f"route policy cloned on {args.tanks} streamed {args.bays}-bay wings, "
             f"{args.tank_episodes} routes each",
             "env_id": "AFTIR-ArmRoute-v0",
-            "budget": args.budget,
+            "budgets": args.budgets,
             "machine": machine_facts(),
-            "frozenlake_8x8_steps_per_s": lake,
             "options": vars(args),
             "runs": runs,
         }

@@ -148,7 +148,7 @@ def _train(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from aftir_rl.core.files import check_output, check_writable_dir, write_json
-    from aftir_rl.envs.ftl.pool import stream_spec
+    from aftir_rl.envs.ftl.pool import pool_specs, stream_spec
     from aftir_rl.envs.ftl.route_env import ArmRouteEnv
     from aftir_rl.rl.route_policy import save_route_policy, train_route_policy
 
@@ -206,7 +206,9 @@ def _train(args: argparse.Namespace) -> int:
     }
     save_route_policy(policy, out / POLICY_FILE)
     write_json(out / "config.json", config)
-    print(f"{out / POLICY_FILE}; aftir route plan {out} --random 10 -o OUT plans with it")
+    many = args.tank is not None and (pool_specs(args.tank) or stream_spec(args.tank))
+    where = " --tank TANK" if many else ""  # a pool's or stream's policy: which tank
+    print(f"{out / POLICY_FILE}; aftir route plan {out}{where} --random 10 -o OUT plans with it")
     return 0
 
 

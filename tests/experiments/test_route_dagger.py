@@ -41,7 +41,7 @@ def test_route_dagger_runs_and_writes_its_rounds(tmp_path):
 def test_route_anytank_trains_on_a_stream_and_evaluates_every_kind_of_tank(tmp_path):
     out = tmp_path / "anytank.json"
     args = ["--tanks", "2", "--tank-episodes", "2", "--updates", "20", "--wings", "1"]
-    args += ["--wing-targets", "2", "--eval", "1", "--suite-targets", "1", "--budget", "5"]
+    args += ["--wing-targets", "2", "--eval", "1", "--suite-targets", "1", "--budgets", "5"]
     script = ROOT / "experiments" / "route_anytank.py"
     done = subprocess.run(
         [sys.executable, str(script), *args, "--json", str(out)],
@@ -56,4 +56,4 @@ def test_route_anytank_trains_on_a_stream_and_evaluates_every_kind_of_tank(tmp_p
     assert rows["held_out_wings"]["targets"] == 2 and rows["b737_bay2"]["targets"] == 1
     suite = [k for k in rows if k.startswith("suite_")]
     assert len(suite) == 8 and all(rows[k]["targets"] == 1 for k in suite)
-    assert all(0.0 <= rows[k]["search"] <= 1.0 for k in suite)
+    assert all(0.0 <= rows[k]["search_5"] <= 1.0 for k in suite)

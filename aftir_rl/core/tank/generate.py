@@ -104,10 +104,10 @@ def _obstacles(
     ribs: list[dict[str, Any]],
     tip: tuple[float, float],
 ) -> list[dict[str, Any]]:
-    """Stringers on the floor away from the panel; a pipe under the tip's ceiling (where the
-    access holes leave room for it beside them).
+    """Stringers on the floor away from the panel; a pipe under the tip's ceiling.
 
     ``tip`` is the half chord and depth at the tip: both run straight along the span inside it.
+    The pipe keeps beside the ribs' access holes; where they leave it no room, there is none.
     """
     half_chord, depth = tip
     out: list[dict[str, Any]] = []
