@@ -164,10 +164,10 @@ def test_a_policy_trained_on_a_stream_plans_in_the_tank_it_is_given(tmp_path, ca
     assert route.main([*plan, "-o", str(tmp_path / "X")]) == 2
     assert "trained in wing:2:40+: give --tank" in capsys.readouterr().err
     assert not (tmp_path / "X").exists()
-    assert route.main([*plan, "--tank", "wing:2:50", "-o", str(tmp_path / "m")]) == 0
+    assert route.main([*plan, "--tank", "wing:2:41", "-o", str(tmp_path / "m")]) == 0
     (folder,) = (tmp_path / "m").iterdir()
     summary = json.loads((folder / "summary.json").read_text())
-    assert summary["tank"] == "wing:2:50" and summary["bay"] is None
+    assert summary["tank"] == "wing:2:41" and summary["bay"] is None
     data = json.loads((folder / "trajectory.json").read_text())
     if data["complete"]:  # re-checked in the wing the summary names
         assert check.main([str(folder)]) == 0

@@ -23,6 +23,11 @@ def test_check_env(env_id):
     sb3_check_env(env.unwrapped, warn=True)
 
 
+#: Random steps per rollout; the route env's episodes mostly end at a random first action
+#: (not a lead), and each reset weighs every lead with the planner's moves: fewer steps.
+ROLLOUT_STEPS = {"AFTIR-ArmRoute-v0": 30}
+
+
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_seeded_rollouts_are_identical(env_id):
     def rollout(seed):
@@ -34,7 +39,7 @@ def test_seeded_rollouts_are_identical(env_id):
         env.action_space.seed(seed)
         obs, _ = env.reset(seed=seed)
         out = [flat(obs)]
-        for _ in range(150):
+        for _ in range(ROLLOUT_STEPS.get(env_id, 150)):
             obs, r, term, trunc, _ = env.step(env.action_space.sample())
             out.append(np.concatenate([flat(obs), [r, term, trunc]]))
             if term or trunc:
