@@ -254,21 +254,13 @@ def _name(target: Any) -> str:
     return "target_" + "_".join(f"{v:.1f}" for v in target)
 
 
-def _plan(args: argparse.Namespace) -> int:
-    import numpy as np
-
+def _plan_env(args: argparse.Namespace, folder: Path) -> tuple[Any, Any, dict[str, Any]]:
+    """The env to plan in (``--tank`` and ``--bay``, else the policy's), the policy, its kwargs."""
     from aftir_rl.core.config import error_line
-    from aftir_rl.core.files import check_outputs, check_writable_dir, write_json
-    from aftir_rl.core.shipped import DEFAULT_TANK
-    from aftir_rl.core.tank import keep_run_tank
     from aftir_rl.envs.ftl.pool import pool_specs, stream_spec
     from aftir_rl.envs.ftl.route_env import ArmRouteEnv
-    from aftir_rl.planning.ftl.plan import MotionPlan
-    from aftir_rl.rl.route_policy import load_route_policy, route_search
+    from aftir_rl.rl.route_policy import load_route_policy
 
-    folder = route_policy_dir(args.policy, args.pretrained)
-    if bool(args.target) == bool(args.random):
-        raise ConfigError("give --target X Y Z (repeatable) or --random N")
     trained = _trained_on(folder)
     tank = args.tank if args.tank is not None else trained["tank"]
     if tank == "a tank file" or pool_specs(tank) is not None or stream_spec(tank) is not None:
@@ -286,6 +278,22 @@ def _plan(args: argparse.Namespace) -> int:
     policy = load_route_policy(folder / POLICY_FILE)
     if policy.n_obs != env.n_obs:
         raise CheckpointError(f"{folder}: the policy reads {policy.n_obs} numbers, not {env.n_obs}")
+    return env, policy, env_kwargs
+
+
+def _plan(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from aftir_rl.core.files import check_outputs, check_writable_dir, write_json
+    from aftir_rl.core.shipped import DEFAULT_TANK
+    from aftir_rl.core.tank import keep_run_tank
+    from aftir_rl.planning.ftl.plan import MotionPlan
+    from aftir_rl.rl.route_policy import route_search
+
+    folder = route_policy_dir(args.policy, args.pretrained)
+    if bool(args.target) == bool(args.random):
+        raise ConfigError("give --target X Y Z (repeatable) or --random N")
+    env, policy, env_kwargs = _plan_env(args, folder)
     jobs: list[tuple[int | None, Any]]
     if args.random:
         jobs = [(args.seed + i, None) for i in range(args.random)]
@@ -319,7 +327,7 @@ def _plan(args: argparse.Namespace) -> int:
         (out / name).mkdir(exist_ok=True)
         write_json(paths[0], plan.to_json())
         summary = {
-            "tank": keep_run_tank(tank or DEFAULT_TANK, out / name),
+            "tank": keep_run_tank(env_kwargs.get("tank", DEFAULT_TANK), out / name),
             "method": "route-policy",
             "policy": args.pretrained or str(folder.resolve()),
             "bay": env_kwargs.get("bay"),
