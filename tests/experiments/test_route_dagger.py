@@ -14,18 +14,21 @@ pytestmark = pytest.mark.slow
 ROOT = Path(__file__).parents[2]
 
 
-def test_route_dagger_runs_and_writes_its_rounds(tmp_path):
-    out = tmp_path / "runs.json"
-    args = ["--routes", "3", "--rounds", "1", "--eval", "3", "--updates", "20", "--budget", "10"]
-    script = ROOT / "experiments" / "route_dagger.py"
+def _run(script: str, args: list[str], out: Path) -> dict:
+    """``experiments/SCRIPT ARGS --json OUT`` in a new process; the JSON it wrote."""
     done = subprocess.run(
-        [sys.executable, str(script), *args, "--json", str(out)],
+        [sys.executable, str(ROOT / "experiments" / script), *args, "--json", str(out)],
         capture_output=True,
         text=True,
         timeout=600,
     )
     assert done.returncode == 0, done.stderr[-2000:]
-    data = json.loads(out.read_text())
+    return json.loads(out.read_text())
+
+
+def test_route_dagger_runs_and_writes_its_rounds(tmp_path):
+    args = ["--routes", "3", "--rounds", "1", "--eval", "3", "--updates", "20", "--budget", "10"]
+    data = _run("route_dagger.py", args, tmp_path / "runs.json")
     (run,) = data["runs"]
     rounds = run["rounds"]
     assert data["bay"] == 2 and run["seed"] == 0 and data["eval"]["budget"] == 10
@@ -39,18 +42,9 @@ def test_route_dagger_runs_and_writes_its_rounds(tmp_path):
 
 
 def test_route_anytank_trains_on_a_stream_and_evaluates_every_kind_of_tank(tmp_path):
-    out = tmp_path / "anytank.json"
     args = ["--tanks", "2", "--tank-episodes", "2", "--updates", "20", "--wings", "1"]
     args += ["--wing-targets", "2", "--eval", "1", "--suite-targets", "1", "--budgets", "5"]
-    script = ROOT / "experiments" / "route_anytank.py"
-    done = subprocess.run(
-        [sys.executable, str(script), *args, "--json", str(out)],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert done.returncode == 0, done.stderr[-2000:]
-    (run,) = json.loads(out.read_text())["runs"]
+    (run,) = _run("route_anytank.py", args, tmp_path / "anytank.json")["runs"]
     assert run["stream"] == "wing:3:10000+" and run["wings_met"] == 2 and run["states"] > 0
     rows = run["eval"]
     assert rows["held_out_wings"]["targets"] == 2 and rows["b737_bay2"]["targets"] == 1
