@@ -255,10 +255,11 @@ def add_tank_option(parser: argparse.ArgumentParser, what: str) -> None:
 def check_tank(tank: str) -> None:
     """One line (:class:`ConfigError`) unless ``tank`` loads (a pool's or stream's first)."""
     from aftir_rl.core.tank import load_tank
-    from aftir_rl.envs.ftl.pool import evaluation_tank, pool_specs
+    from aftir_rl.envs.ftl.pool import pool_specs, stream_spec
 
-    tank = str(evaluation_tank(tank))  # a stream: its first wings
-    specs = pool_specs(tank)
+    stream, specs = stream_spec(tank), pool_specs(tank)
+    if stream is not None:
+        tank = stream.spec_at(0)
     load_tank(tank if specs is None else specs[0])
 
 

@@ -6,7 +6,7 @@ A thin command line over :mod:`aftir_rl.core.tank`:
   :meth:`Tank.ascii() <aftir_rl.core.tank.geometry.Tank.ascii>` (z-slices of the raster) or the
   scene export (docs/design.md §5);
 - ``aftir tank generate --kind wing --bays N --seed S -o wing.yaml`` writes a generated wing
-  tank (:func:`~aftir_rl.core.tank.generate.wing_tank`);
+  tank (:func:`~aftir_rl.core.tank.generate.generated_tank`: ``--kind`` wing or round);
 - ``aftir tank export [--tank TANK] -o tank.stl [--walls walls.stl] [--yaml OUT.yaml]`` writes the
   tank's solids as one triangle mesh (needs ``aftir_rl[mesh]``), with ``--walls`` its inside
   (the box, narrowed by its taper) as a walls mesh, and with ``--yaml`` a tank file that reads
@@ -29,7 +29,7 @@ from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import AftirError
 from aftir_rl.core.files import atomic_open
 from aftir_rl.core.shipped import DEFAULT_TANK
-from aftir_rl.core.tank.generate import MAX_BAYS, MAX_SEED, wing_tank
+from aftir_rl.core.tank.generate import FAMILIES, MAX_BAYS, MAX_SEED, generated_tank
 from aftir_rl.core.tank.loading import load_tank, tank_files, tank_from_mapping
 
 __all__ = ["build_parser", "main"]
@@ -48,7 +48,12 @@ def build_parser() -> argparse.ArgumentParser:
     show = sub.add_parser("show", help="the raster as z-slices, or the scene as JSON")
     _add_show_options(show)
     gen = sub.add_parser("generate", help="a generated wing tank as YAML")
-    gen.add_argument("--kind", choices=("wing",), default="wing", help="what to generate (wing)")
+    gen.add_argument(
+        "--kind",
+        choices=tuple(FAMILIES),
+        default="wing",
+        help="the generator's family: wing, or round (ribs with only round and oval holes)",
+    )
     add_int_option(gen, "--bays", (1, MAX_BAYS), f"number of bays, 1 to {MAX_BAYS} (3)", 3)
     add_int_option(gen, "--seed", (0, MAX_SEED), "random seed (0)", 0)
     gen.add_argument("-o", "--output", required=True, help="the YAML file to write")
@@ -66,7 +71,7 @@ def _add_show_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _generate(args: argparse.Namespace) -> None:
-    data = wing_tank(args.bays, args.seed)
+    data = generated_tank(args.kind, args.bays, args.seed)
     tank_from_mapping(data, args.output)  # what is written reads back
     with atomic_open(args.output, "w") as fh:
         fh.write(f"# {data['description']}. Units: cm.\n")

@@ -1,7 +1,8 @@
 """The scene suite: eight tanks with fixed targets, every applicable planner, results as files.
 
 :data:`SCENES` are the reference 737 tank, that tank read back from its own exported mesh,
-generated wing tanks of 2 to 5 bays, a wing whose ribs have only round and oval holes, and a
+generated wing tanks of 2 to 5 bays, a wing whose ribs have only round and oval holes
+(the generator's ``round`` family), and a
 wing given only as meshes (its walls and its solids). :func:`suite_targets` draws a scene's
 targets (seeded, at least :data:`CLEARANCE` from every surface, in a raster cell reachable from
 the start);
@@ -22,14 +23,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError
 from aftir_rl.core.files import atomic_open, write_json
 from aftir_rl.core.shipped import DEFAULT_TANK
 from aftir_rl.core.tank import Tank, load_tank
-from aftir_rl.core.tank.generate import WingRanges, wing_tank
 from aftir_rl.core.tank.meshes import export_tank_mesh
 
 __all__ = ["SCENES", "CLEARANCE", "SuiteRow", "scene_tanks", "suite_targets", "run_suite"]
@@ -42,7 +41,7 @@ SCENES: dict[str, Any] = {
     "wing_3bay": "wing:3:2",
     "wing_4bay": "wing:4:3",
     "wing_5bay": "wing:5:4",
-    "wing_round_holes": ("round", 6),
+    "wing_round_holes": "round:3:6",
     "wing_mesh_only": ("mesh_only", "wing:3:5"),
 }
 #: How far every target lies from every surface [cm].
@@ -64,24 +63,18 @@ class SuiteRow:
 
 
 def scene_tanks(folder: Path, names: list[str] | None = None) -> dict[str, Tank]:
-    """The suite's tanks; the built ones (meshes, round holes) are written under ``folder``."""
+    """The suite's tanks; the built ones (meshes) are written under ``folder``."""
     folder.mkdir(parents=True, exist_ok=True)
     out = {}
     for name in names or list(SCENES):
         how = SCENES[name]
         if isinstance(how, str):
             out[name] = load_tank(how)
-        elif how[0] in ("mesh_of", "mesh_only"):
+        else:
             walls = folder / f"{name}_walls.stl" if how[0] == "mesh_only" else None
             export_tank_mesh(
                 load_tank(how[1]), folder / f"{name}.stl", folder / f"{name}.yaml", walls
             )
-            out[name] = load_tank(folder / f"{name}.yaml")
-        else:
-            ranges = WingRanges(access_shapes=("oval",), lightening_holes=(2, 3))
-            data = {**wing_tank(3, how[1], ranges), "name": name}
-            with atomic_open(folder / f"{name}.yaml", "w") as fh:
-                yaml.safe_dump(data, fh, sort_keys=False, default_flow_style=None, width=100)
             out[name] = load_tank(folder / f"{name}.yaml")
     return out
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from aftir_rl.core import kernel as core_kernel
-from aftir_rl.core.kernel.clearance import kernel_grid
+from aftir_rl.core.kernel.clearance import clearance_grid, compiled_distance, kernel_grid
 from aftir_rl.core.robot import _bend_rotations, body_points
 from aftir_rl.core.tank import load_tank
 from aftir_rl.core.tank.generate import wing_tank
@@ -80,7 +80,7 @@ def numpy_refresh(batch):
     return theta, phi, pts, heading, body, ray, use
 
 
-@pytest.mark.parametrize("name", TANKS)
+@pytest.mark.parametrize("name", [*TANKS, "round:4:9"])
 def test_sdf_is_the_tanks_signed_distance(name):
     tank = tank_named(name)
     rng = np.random.default_rng(0)
@@ -91,6 +91,19 @@ def test_sdf_is_the_tanks_signed_distance(name):
     packed = kernel_grid(tank)
     got = np.array([core_kernel.sdf(*p, packed) for p in pts])
     np.testing.assert_allclose(got, tank.distance(pts), rtol=0, atol=1e-9)
+    # what grids are filled with: the same, many points at once
+    np.testing.assert_allclose(compiled_distance(tank)(pts), tank.distance(pts), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["b737_center", "round:4:9"])
+def test_the_clearance_grid_holds_the_tanks_distance_at_its_nodes(name):
+    """The nodes are filled by the compiled distance; each is the exact distance there."""
+    tank = tank_named(name)
+    rng = np.random.default_rng(2)
+    for lo, g, shape, values in clearance_grid(tank).grids:
+        idx = rng.integers(0, shape, (3000, 3))
+        flat = (idx[:, 0] * shape[1] + idx[:, 1]) * shape[2] + idx[:, 2]
+        np.testing.assert_allclose(values[flat], tank.distance(lo + g * idx), rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("name", TANKS)

@@ -191,3 +191,13 @@ def test_a_stream_lets_go_of_the_wings_it_has_left():
         env.reset(seed=seed)
     gc.collect()
     assert first() is None
+
+
+def test_a_mixed_stream_meets_its_wings_in_order():
+    from aftir_rl.envs.ftl.pool import stream_spec
+
+    env = ArmRouteEnv(tank="mix:80+", tank_episodes=1, leads=(0.0,))
+    stream = stream_spec("mix:80+")
+    met = [env.reset(seed=s)[1]["tank"] for s in range(3)]
+    assert met == [stream.spec_at(k) for k in range(3)]
+    assert env.tank.source == met[-1] and env.observation_space.contains(env.observation())

@@ -229,3 +229,54 @@ def test_a_single_env_of_a_stream_is_its_first_wings_as_a_pool_with_the_streams_
         for key in ("achieved_goal", "desired_goal"):
             np.testing.assert_array_equal(single.observation_space[key].low, other[key].low)
             np.testing.assert_array_equal(single.observation_space[key].high, other[key].high)
+
+
+def test_the_round_family_has_only_round_ways_through_its_ribs():
+    """``round:BAYS:SEED``: every rib an oval access hole and the round ones of 2 or 3 tried
+    that fit beside it; named so."""
+    from aftir_rl.core.tank.plate import Plate
+
+    circles = {"wing": 0, "round": 0}
+    for seed in range(40):
+        for family in circles:
+            circles[family] += sum(
+                h.shape == "circle" for s in load_tank(f"{family}:3:{seed}").solids
+                if isinstance(s, Plate) for h in s.holes
+            )  # fmt: skip
+    for seed in range(6):
+        tank = load_tank(f"round:3:{seed}")
+        assert tank.name == f"round_3bay_s{seed}"
+        ribs = [s for s in tank.solids if isinstance(s, Plate)]
+        assert len(ribs) == 2
+        for rib in ribs:
+            shapes = sorted(h.shape for h in rib.holes)
+            assert shapes.count("oval") == 1 and set(shapes) <= {"oval", "circle"}
+            assert shapes.count("circle") <= 3
+    assert circles["round"] > 1.5 * circles["wing"]  # 87 and 52 in 80 ribs each
+    assert pool_specs("round:2:4-5") == ["round:2:4", "round:2:5"]
+
+
+def test_a_mixed_stream_draws_each_wings_family_and_bays_from_its_seed():
+    from aftir_rl.core.tank.generate import MIX_BAYS, mixed_kind, wing_family_box
+    from aftir_rl.envs.ftl.pool import stream_spec
+
+    stream = stream_spec("mix:300+")
+    assert (stream.first, stream.family, stream.bays, stream.text) == (300, None, None, "mix:300+")
+    kinds = [mixed_kind(300 + k) for k in range(200)]
+    assert [stream.spec_at(k) for k in range(200)] == [
+        f"{f}:{b}:{300 + k}" for k, (f, b) in enumerate(kinds)
+    ]
+    assert {f for f, _ in kinds} == {"wing", "round"}
+    assert {b for _, b in kinds} == set(range(MIX_BAYS[0], MIX_BAYS[1] + 1))
+    assert stream_spec("round:2:7+").spec_at(3) == "round:2:10"
+    # the batched env moves its groups along it; its goal space holds the largest wings
+    venv = gym.make_vec("AFTIR-ArmFTL-v0", 4, tank="mix:300+", tanks_at_once=2)
+    assert venv.row_tanks == [stream.spec_at(0)] * 2 + [stream.spec_at(1)] * 2
+    lo, hi = wing_family_box(MIX_BAYS[1])
+    goal = venv.single_observation_space["desired_goal"]
+    assert np.all(goal.low <= lo - 99) and np.all(goal.high >= hi + 99)
+    # one env cannot take it as a pool: it mixes families and bays
+    with pytest.raises(ConfigError, match="a mixed stream"):
+        gym.make("AFTIR-ArmFTL-v0", tank="mix:300+")
+    with pytest.raises(ConfigError, match="is a stream"):
+        load_tank("mix:300+")

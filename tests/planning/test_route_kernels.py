@@ -312,3 +312,24 @@ def test_guide_fields_are_kept_per_target_and_bounded():
     assert len(guide._FIELDS[tank]) == guide.GUIDE_CACHE_SIZE
     assert guide.guide_field(tank, [100.0, 90.0, 50.0]) is not first  # the oldest left
     np.testing.assert_array_equal(guide.guide_field(tank, [100.0, 90.0, 50.0]).dist, first.dist)
+
+
+@pytest.mark.parametrize("name", ["b737_center", "round:2:3"])
+def test_the_guides_grid_edges_are_their_definition(name):
+    """Filled a plane of the half-spacing grid at a time: equal to the definition, the exact
+    clearance of every grid point, and an edge where both ends and its midpoint are free."""
+    from aftir_rl.planning.ftl.guide import _grid_edges
+
+    tank = load_tank(name)
+    size = float(tank.raster.cell_size) / 2
+    free, edges, clear = _grid_edges(tank, size)
+    shape = tuple(int(n) * 2 for n in tank.raster.shape)
+    centres = np.array(tank.raster.origin) + (np.indices(shape).transpose(1, 2, 3, 0) + 0.5) * size
+    expected = point_clearance(tank, centres)
+    np.testing.assert_allclose(clear, expected, rtol=0, atol=1e-9)
+    r = tank.arm.radius
+    np.testing.assert_array_equal(free, expected >= r)
+    for e, d in enumerate(NEIGHBOURS):
+        ends = shifted(free.astype(float), -d) == 1.0
+        mid = point_clearance(tank, centres + 0.5 * size * d) >= r
+        np.testing.assert_array_equal(edges[e], free & ends & mid)

@@ -28,6 +28,7 @@ __all__ = [
     "wedge_sdf",
     "mesh_sdf",
     "sdf",
+    "sdf_points",
     "grid_value",
     "least_distance",
     "refresh",
@@ -227,6 +228,18 @@ def sdf(x: float, y: float, z: float, tank: KernelTank) -> float:
     """Signed distance [cm] of one point to the tank (:class:`TankDistance`'s, compiled)."""
     boxes, cylinders, spheres, walls = tank.boxes, tank.cylinders, tank.spheres, tank.walls
     best = math.inf
+    # the walls first: a near wall lets the plates and wedges farther than it be skipped
+    if walls[0] != 0.0:
+        side = min(min(x - walls[1], walls[4] - x), min(y - walls[2], walls[5] - y))
+        radial = _norm2(x - walls[7], y - walls[8])
+        height = z - walls[3]
+        if radial > walls[9]:
+            floor = height
+        elif height >= 0:
+            floor = _norm2(walls[9] - radial, height)
+        else:
+            floor = walls[9] - radial
+        best = min(best, min(min(side, walls[6] - z), floor))
     if walls[0] == 0.0 or z > walls[10]:
         for i in range(boxes.shape[0]):
             qx = abs(x - boxes[i, 0]) - boxes[i, 3]
@@ -250,24 +263,25 @@ def sdf(x: float, y: float, z: float, tank: KernelTank) -> float:
         for i in range(spheres.shape[0]):
             dx, dy, dz = x - spheres[i, 0], y - spheres[i, 1], z - spheres[i, 2]
             best = min(best, math.sqrt(dx * dx + dy * dy + dz * dz) - spheres[i, 3])
-        for i in range(tank.plates.shape[0]):
-            best = min(best, plate_sdf(x, y, z, tank.plates[i], tank.holes))
-        for i in range(tank.wedges.shape[0]):
-            best = min(best, wedge_sdf(x, y, z, tank.wedges[i]))
+        plates, wedges = tank.plates, tank.wedges
+        for i in range(plates.shape[0]):  # no nearer than its faces' planes: skipped if as far
+            k = int(plates[i, 0])
+            if abs((x if k == 0 else (y if k == 1 else z)) - plates[i, 1]) - plates[i, 2] < best:
+                best = min(best, plate_sdf(x, y, z, plates[i], tank.holes))
+        for i in range(wedges.shape[0]):
+            k = int(wedges[i, 0])
+            if abs((x if k == 0 else (y if k == 1 else z)) - wedges[i, 1]) - wedges[i, 2] < best:
+                best = min(best, wedge_sdf(x, y, z, wedges[i]))
         for i in range(tank.meshes.shape[0]):
             best = min(best, mesh_sdf(x, y, z, tank.meshes[i], tank.mesh_values))
-    if walls[0] != 0.0:
-        side = min(min(x - walls[1], walls[4] - x), min(y - walls[2], walls[5] - y))
-        radial = _norm2(x - walls[7], y - walls[8])
-        height = z - walls[3]
-        if radial > walls[9]:
-            floor = height
-        elif height >= 0:
-            floor = _norm2(walls[9] - radial, height)
-        else:
-            floor = walls[9] - radial
-        best = min(best, min(min(side, walls[6] - z), floor))
     return best
+
+
+@njit(cache=True)
+def sdf_points(points: NDArray[np.float64], tank: KernelTank, out: NDArray[np.float64]) -> None:
+    """:func:`sdf` of every point ``(P, 3)`` into ``out (P,)``: how grids of it are filled."""
+    for p in range(points.shape[0]):
+        out[p] = sdf(points[p, 0], points[p, 1], points[p, 2], tank)
 
 
 @njit(cache=True, inline="always")

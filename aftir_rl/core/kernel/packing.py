@@ -41,10 +41,11 @@ def _solid_rows(tank: Tank) -> tuple[dict[str, list[tuple[float, ...]]], NDArray
     return rows, values
 
 
-def kernel_tank(tank: Tank, grid: Any) -> KernelTank:
+def kernel_tank(tank: Tank, grid: Any = None) -> KernelTank:
     """The :class:`KernelTank` of a tank and its clearance grid.
 
-    ``grid`` is the tank's :class:`~aftir_rl.core.kernel.clearance.ClearanceGrid`.
+    ``grid`` is the tank's :class:`~aftir_rl.core.kernel.clearance.ClearanceGrid`, or None for
+    none (every distance then exact: what the grid itself is filled with).
     """
     rows, mesh_values = _solid_rows(tank)
 
@@ -58,8 +59,9 @@ def kernel_tank(tank: Tank, grid: Any) -> KernelTank:
          min(float(tank.box_min[2]), lowest) - r],
         dtype=np.float64,
     )  # fmt: skip
+    grids = [] if grid is None else grid.grids
     offsets, total = [], 0
-    for _, _, _, values in grid.grids:
+    for _, _, _, values in grids:
         offsets.append(total)
         total += len(values)
     return KernelTank(
@@ -72,10 +74,10 @@ def kernel_tank(tank: Tank, grid: Any) -> KernelTank:
         stack(rows["mesh"], 14),
         mesh_values,
         walls,
-        np.array([lo for lo, _, _, _ in grid.grids], dtype=np.float64).reshape(-1, 3),
-        np.array([g for _, g, _, _ in grid.grids], dtype=np.float64),
-        np.array([shape for _, _, shape, _ in grid.grids], dtype=np.int64).reshape(-1, 3),
+        np.array([lo for lo, _, _, _ in grids], dtype=np.float64).reshape(-1, 3),
+        np.array([g for _, g, _, _ in grids], dtype=np.float64),
+        np.array([shape for _, _, shape, _ in grids], dtype=np.int64).reshape(-1, 3),
         np.array(offsets, dtype=np.int64),
-        np.concatenate([values for _, _, _, values in grid.grids]).astype(np.float64),
-        float(grid.slack),
+        np.concatenate([np.zeros(0), *(values for _, _, _, values in grids)]).astype(np.float64),
+        0.0 if grid is None else float(grid.slack),
     )

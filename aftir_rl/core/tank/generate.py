@@ -20,7 +20,17 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError
 
-__all__ = ["WingRanges", "wing_tank", "wing_family_box", "MAX_BAYS", "MAX_SEED"]
+__all__ = [
+    "FAMILIES",
+    "MAX_BAYS",
+    "MAX_SEED",
+    "MIX_BAYS",
+    "WingRanges",
+    "generated_tank",
+    "mixed_kind",
+    "wing_family_box",
+    "wing_tank",
+]
 
 #: Most bays of a generated wing tank (12 sections of 50 cm reach about five).
 MAX_BAYS = 8
@@ -52,6 +62,43 @@ class WingRanges:
     taper_chord: tuple[float, float] = (0.85, 1.0)
     cell_size: float = 10.0
     panel_radius: float = 12.0
+
+
+#: The generator's families by name (the first word of a spec ``FAMILY:BAYS:SEED``): ``wing``
+#: draws every default range; ``round`` gives every rib an oval access hole and tries 2 or 3
+#: lightening holes beside it (those that fit), so the only ways through are round.
+FAMILIES: dict[str, WingRanges] = {
+    "wing": WingRanges(),
+    "round": WingRanges(access_shapes=("oval",), lightening_holes=(2, 3)),
+}
+#: The bays a mixed stream ``mix:FIRST+`` draws its wings with (each count alike).
+MIX_BAYS = (2, 5)
+
+
+def generated_tank(family: str, bays: int, seed: int) -> dict[str, Any]:
+    """The tank ``FAMILY:BAYS:SEED`` as a tank YAML mapping, named after its family.
+
+    Raises:
+        ConfigError: a family not in :data:`FAMILIES`, or what :func:`wing_tank` refuses.
+
+    """
+    if family not in FAMILIES:
+        raise ConfigError(f"family must be one of {', '.join(FAMILIES)}, got {family!r}")
+    data = wing_tank(bays, seed, FAMILIES[family])
+    if family != "wing":
+        data["name"] = f"{family}_{bays}bay_s{seed}"
+        data["description"] = data["description"].replace("wing tank", f"{family}-holed wing tank")
+    return data
+
+
+def mixed_kind(seed: int) -> tuple[str, int]:
+    """The family and bays of a mixed stream's wing ``seed``: each family and count alike.
+
+    Drawn from ``seed`` alone, so a mixed stream's wing is the same whoever draws it.
+    """
+    rng = np.random.default_rng([int(seed), 0])
+    family = sorted(FAMILIES)[int(rng.integers(len(FAMILIES)))]
+    return family, int(rng.integers(MIX_BAYS[0], MIX_BAYS[1] + 1))
 
 
 def _round_to(value: float, step: float) -> float:
@@ -139,7 +186,9 @@ def _obstacles(
 
 
 def wing_tank(bays: int, seed: int, ranges: WingRanges | None = None) -> dict[str, Any]:
-    """A wing tank of ``bays`` bays drawn with ``seed``, as a tank YAML mapping.
+    """A wing tank of ``bays`` bays drawn with ``seed`` from ``ranges``, as a tank YAML mapping.
+
+    ``ranges`` (default ``FAMILIES["wing"]``): :data:`FAMILIES` names the ones specs use.
 
     Raises:
         ConfigError: ``bays`` outside 1..:data:`MAX_BAYS`, or ``seed`` outside 0..:data:`MAX_SEED`.

@@ -35,7 +35,7 @@ from aftir_rl.core.files import atomic_open
 from aftir_rl.core.robot import ArmSpec
 from aftir_rl.core.rod import RodProperties
 from aftir_rl.core.shipped import DEFAULT_TANK
-from aftir_rl.core.tank.generate import wing_tank
+from aftir_rl.core.tank.generate import FAMILIES, generated_tank
 from aftir_rl.core.tank.geometry import Panel, Tank
 from aftir_rl.core.tank.parts import (
     MAX_CELLS,
@@ -65,6 +65,7 @@ __all__ = [
     "tank_from_mapping",
     "generated_spec",
     "names_generated",
+    "POOL_SPEC",
     "STREAM_SPEC",
     "MAX_COORD",
     "MAX_CELLS",
@@ -277,11 +278,14 @@ _CACHE_SIZE = 4
 
 #: The file a run directory keeps its tank in when it was trained in a tank that is not shipped.
 RUN_TANK_FILE = "tank.yaml"
-#: A generated tank by name: ``wing:BAYS:SEED`` (:func:`generated_spec`).
-_SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})")
-_POOL_SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})-([0-9]{1,10})")
-#: A stream of generated wings ``wing:BAYS:FIRST+`` (:func:`~aftir_rl.envs.ftl.pool.stream_spec`).
-STREAM_SPEC = re.compile(r"wing:([1-9][0-9]?):([0-9]{1,10})\+")
+#: A generated tank by name: ``FAMILY:BAYS:SEED`` (:func:`generated_spec`).
+_FAMILY = "(" + "|".join(FAMILIES) + ")"
+_SPEC = re.compile(_FAMILY + r":([1-9][0-9]?):([0-9]{1,10})")
+POOL_SPEC = re.compile(_FAMILY + r":([1-9][0-9]?):([0-9]{1,10})-([0-9]{1,10})")
+#: A stream of generated wings ``FAMILY:BAYS:FIRST+``, or ``mix:FIRST+`` (families and bays
+#: mixed: :func:`~aftir_rl.core.tank.generate.mixed_kind`); read by
+#: :class:`~aftir_rl.envs.ftl.pool.TankStream`.
+STREAM_SPEC = re.compile(r"(?:" + _FAMILY + r":([1-9][0-9]?)|mix):([0-9]{1,10})\+")
 
 
 _Source = tuple[Path, bytes, dict[str, Any], list[tuple[dict[str, Any], str]]]
@@ -373,26 +377,27 @@ def resolve_run_tank(name: object, run_dir: str | Path) -> str:
     return str(path)
 
 
-def generated_spec(text: str) -> tuple[int, int] | None:
-    """``(bays, seed)`` of a generator spec ``wing:BAYS:SEED``, or None for anything else."""
+def generated_spec(text: str) -> tuple[int, int, str] | None:
+    """``(bays, seed, family)`` of a generator spec ``FAMILY:BAYS:SEED``, or None otherwise."""
     match = _SPEC.fullmatch(text)
-    return (int(match[1]), int(match[2])) if match else None
+    return (int(match[2]), int(match[3]), match[1]) if match else None
 
 
 def names_generated(text: str) -> bool:
-    """Whether ``text`` names generated tanks: ``wing:BAYS:SEED``, a pool or a stream.
+    """Whether ``text`` names generated tanks: ``FAMILY:BAYS:SEED``, a pool or a stream.
 
-    A pool is ``wing:BAYS:A-B``, a stream ``wing:BAYS:A+``.
+    A pool is ``FAMILY:BAYS:A-B``, a stream ``FAMILY:BAYS:A+`` or ``mix:A+``.
     """
     return generated_spec(text) is not None or any(
-        spec.fullmatch(text) is not None for spec in (_POOL_SPEC, STREAM_SPEC)
+        spec.fullmatch(text) is not None for spec in (POOL_SPEC, STREAM_SPEC)
     )
 
 
 def load_tank(tank: str | Path | Tank = DEFAULT_TANK) -> Tank:
-    """Load a tank by name (``configs/tanks/NAME.yaml``), path, or spec ``wing:BAYS:SEED``.
+    """Load a tank by name (``configs/tanks/NAME.yaml``), path, or spec ``FAMILY:BAYS:SEED``.
 
-    A spec is :func:`~aftir_rl.core.tank.generate.wing_tank`'s tank, read no file. The last few
+    A spec is :func:`~aftir_rl.core.tank.generate.generated_tank`'s tank of that family
+    (``wing``, ``round``), read no file. The last few
     tanks loaded are cached by their file's content, so envs share one raster.
 
     Raises:
@@ -407,14 +412,14 @@ def load_tank(tank: str | Path | Tank = DEFAULT_TANK) -> Tank:
             f"tank {text!r} is a stream of generated wings: the batched AFTIR-ArmFTL-v0 moves its "
             "groups of rows from one to the next; everything else takes one tank, wing:BAYS:SEED"
         )
-    if _POOL_SPEC.fullmatch(text):
+    if POOL_SPEC.fullmatch(text):
         raise ConfigError(
             f"tank {text!r} is a pool of generated tanks: AFTIR-ArmFTL-v0 draws one per episode "
             "(tank=...); everything else takes one tank, wing:BAYS:SEED"
         )
     spec = generated_spec(text)
     if spec is not None:
-        return _cached(text, lambda: tank_from_mapping(wing_tank(*spec), text))
+        return _cached(text, lambda: tank_from_mapping(generated_tank(spec[2], *spec[:2]), text))
     path = Path(text)
     if not (path.suffix in (".yaml", ".yml") or path.exists()):
         path = TANK_DIR / f"{text}.yaml"

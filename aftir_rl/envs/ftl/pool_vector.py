@@ -6,9 +6,9 @@ as equal as can be, each group an :class:`~aftir_rl.envs.ftl.env.ArmFTLVectorEnv
 tank, stepped one after the other. Rows keep their tank: row ``i`` seeded ``seed + i`` draws its
 targets as row ``i - start`` of its group does. The goal space holds every wing of the pool's
 bays (:func:`~aftir_rl.core.tank.generate.wing_family_box`).
-With a stream ``tank="wing:BAYS:FIRST+"`` the groups' tanks are the stream's first ones, and a
-group whose rows have ended ``tank_episodes`` episodes moves on to the stream's next unused
-wing: its running episodes end there (truncated), and its rows start again in the new tank.
+With a stream ``tank="wing:BAYS:FIRST+"`` (or ``"mix:FIRST+"``) the groups' tanks are the
+stream's first ones, and a group whose rows have ended ``tank_episodes`` episodes moves on to
+the stream's next unused wing: its running episodes end there (truncated), and its rows start again in the new tank.
 :func:`make_vector_env` is the registered vector entry point: a pool or a stream gives this env,
 one tank the plain batched one.
 """
@@ -25,7 +25,6 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError, InvalidActionError, TargetError
 from aftir_rl.core.tank import load_tank
-from aftir_rl.core.tank.generate import MAX_SEED
 from aftir_rl.envs.ftl.env import ArmFTLVectorEnv, same_step_finals
 from aftir_rl.envs.ftl.pool import TankPool, pool_specs, stream_spec
 
@@ -70,13 +69,13 @@ class ArmFTLPoolVectorEnv(VectorEnv[Obs, NDArray[np.float32], Any]):
     ) -> None:
         if not isinstance(num_envs, int) or num_envs < 1:
             raise ConfigError("num_envs and max_episode_steps must be at least 1")
-        #: ``(bays, first seed)`` of a stream, or None for a pool.
+        #: The stream, or None for a pool.
         self.stream = stream_spec(kwargs.get("tank"))
         specs, self.tank_episodes = _first_tanks(
             kwargs.get("tank"), num_envs, tanks_at_once, tank_episodes
         )
         groups = min(len(specs), num_envs)
-        self.pool = TankPool(specs[:groups])
+        self.pool = TankPool(specs[:groups], None if self.stream is None else self.stream.max_bays)
         self.goal_bounds = self.pool.goal_bounds  # every wing of these bays: the stream's too
         sizes = [num_envs // groups + (g < num_envs % groups) for g in range(groups)]
         #: Each group's first row, and the end: group ``g`` holds rows ``starts[g]:starts[g+1]``.
@@ -164,10 +163,9 @@ class ArmFTLPoolVectorEnv(VectorEnv[Obs, NDArray[np.float32], Any]):
     def _restart_stream(self) -> None:
         """Every group back to its first wing of the stream, no episodes counted."""
         assert self.stream is not None
-        bays, first = self.stream
         for g in range(len(self.groups)):
-            if self.pool.names[g] != f"wing:{bays}:{first + g}":
-                self._replace_group(g, f"wing:{bays}:{first + g}")
+            if self.pool.names[g] != self.stream.spec_at(g):
+                self._replace_group(g, self.stream.spec_at(g))
         self._episodes[:] = 0
         self.tanks_met = len(self.groups)
 
@@ -194,13 +192,12 @@ class ArmFTLPoolVectorEnv(VectorEnv[Obs, NDArray[np.float32], Any]):
         self._episodes[g] += int(ended.sum())
         if self._episodes[g] < self.tank_episodes:
             return out
-        bays, first = self.stream  # type: ignore[misc]
-        seed = first + self.tanks_met
-        if seed > MAX_SEED:
-            raise ConfigError(f"the stream of wing:{bays}:{first}+ ran past seed {MAX_SEED:,}")
+        assert self.stream is not None
+        spec = self.stream.spec_at(self.tanks_met)
+        seed = self.stream.first + self.tanks_met
         self.tanks_met += 1
         self._episodes[g] = 0
-        new = self._replace_group(g, f"wing:{bays}:{seed}")
+        new = self._replace_group(g, spec)
         own = None
         if self._seed is not None:
             own = int(np.random.SeedSequence([self._seed, g, seed]).generate_state(1)[0])
@@ -245,8 +242,7 @@ def _first_tanks(
     for name, value in (("tanks_at_once", at_once), ("tank_episodes", episodes)):
         if not isinstance(value, int) or isinstance(value, bool) or value < 1:
             raise ConfigError(f"{name} must be a whole number of at least 1, got {value!r}")
-    bays, first = stream
-    return [f"wing:{bays}:{first + g}" for g in range(min(at_once, num_envs))], episodes
+    return [stream.spec_at(g) for g in range(min(at_once, num_envs))], episodes
 
 
 def _group_seed(seed: int | Sequence[int], rows: slice) -> int | list[int]:

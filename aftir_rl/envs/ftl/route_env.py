@@ -29,7 +29,6 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import ConfigError, InvalidActionError
 from aftir_rl.core.robot import body_points, forward_kinematics, kappa_to_angles
-from aftir_rl.core.tank.generate import MAX_SEED
 from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.envs.ftl.pool import stream_spec
 from aftir_rl.planning.ftl.model import Route
@@ -103,7 +102,9 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
     the arm along the route, the target); every other keyword argument goes to the inner
     ``AFTIR-ArmFTL-v0`` (``tank``, ``bay``, ``target``...). ``tank`` may be any one tank, a pool
     ``"wing:BAYS:FIRST-LAST"`` (a wing drawn per episode, ``reset(options={"tank": k})``) or a
-    stream ``"wing:BAYS:FIRST+"``: every wing of ``BAYS`` bays from seed ``FIRST`` on, each
+    stream ``"wing:BAYS:FIRST+"``: every wing of ``BAYS`` bays from seed ``FIRST`` on (or
+    ``"round:BAYS:FIRST+"``, the round-holed family, or ``"mix:FIRST+"``, both families with 2
+    to 5 bays: :class:`~aftir_rl.envs.ftl.pool.TankStream`), each
     built when the episode after ``tank_episodes`` (:data:`STREAM_TANK_EPISODES`) ones in the
     last begins, so the same calls meet the same wings whatever the reset seeds. ``reset``'s
     ``info["tank"]`` names the episode's tank; the observation has the same columns in every
@@ -126,14 +127,14 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
     ) -> None:
         self.render_mode = render_mode
         self._renderer: Any = None
-        #: ``(bays, first seed)`` of a stream ``tank="wing:BAYS:FIRST+"``, or None.
+        #: The stream ``tank="FAMILY:BAYS:FIRST+"`` or ``"mix:FIRST+"``, or None.
         self.stream = stream_spec(kwargs.get("tank"))
         if tank_episodes is not None and not (
             self.stream is not None and isinstance(tank_episodes, int) and tank_episodes >= 1
         ):
             raise ConfigError(
-                f"tank_episodes is a stream's (tank='wing:BAYS:FIRST+'): a count of at least 1, "
-                f"got {tank_episodes!r}"
+                "tank_episodes is a stream's (tank='wing:BAYS:FIRST+' or 'mix:FIRST+'): a count "
+                f"of at least 1, got {tank_episodes!r}"
             )
         #: Episodes in each of a stream's wings before the next reset takes the next wing.
         self.tank_episodes = tank_episodes or STREAM_TANK_EPISODES
@@ -141,7 +142,7 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
         self.tanks_met, self._episodes = 0, 0
         self._inner_kwargs = {**kwargs, "guide": True, "steer": "target"}
         if self.stream is not None:
-            self._inner_kwargs["tank"] = f"wing:{self.stream[0]}:{self.stream[1]}"
+            self._inner_kwargs["tank"] = self.stream.spec_at(0)
             self.tanks_met = 1
         self.inner = ArmFTLEnv(**self._inner_kwargs)
         self.tank, self.arm = self.inner.tank, self.inner.tank.arm
@@ -186,12 +187,10 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
 
     def _next_wing(self) -> None:
         """Move a stream on to its next wing (built now; the last one is let go)."""
-        bays, first = self.stream  # type: ignore[misc]
-        seed = first + self.tanks_met
-        if seed > MAX_SEED:
-            raise ConfigError(f"the stream of wing:{bays}:{first}+ ran past seed {MAX_SEED:,}")
+        assert self.stream is not None
+        spec = self.stream.spec_at(self.tanks_met)
         self.inner.close()
-        self.inner = ArmFTLEnv(**{**self._inner_kwargs, "tank": f"wing:{bays}:{seed}"})
+        self.inner = ArmFTLEnv(**{**self._inner_kwargs, "tank": spec})
         self.tanks_met += 1
         self._episodes = 0
 

@@ -17,7 +17,7 @@ from itertools import product
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aftir_rl.core.collision import point_clearance
+from aftir_rl.core.kernel.clearance import compiled_distance
 from aftir_rl.core.kernel.guide import field_query, relax_field
 from aftir_rl.core.tank import Tank
 
@@ -164,15 +164,33 @@ def _grid_edges(
     if size not in cache:
         shape = tuple(int(n) * 2 for n in tank.raster.shape)
         origin = np.array(tank.raster.origin, dtype=np.float64)
-        centres = origin + (np.indices(shape).transpose(1, 2, 3, 0) + 0.5) * size
-        r = tank.arm.radius
-        clear = point_clearance(tank, centres)
+        distance, r = compiled_distance(tank), tank.arm.radius
+        # every grid point and every edge's midpoint is a node of the grid of half the spacing:
+        # grid point i is node 2i + 1 along each axis, the midpoint towards d node 2i + 1 + d
+        across = np.meshgrid(
+            *(origin[k] + 0.5 * size * np.arange(2 * shape[k] + 1) for k in (1, 2)), indexing="ij"
+        )
+
+        def plane(m: int) -> NDArray[np.float64]:
+            x = np.full(across[0].shape, origin[0] + 0.5 * size * m)
+            return distance(np.stack([x, *across], -1))
+
+        clear = np.empty(shape)
+        mid_free = np.zeros((len(NEIGHBOURS),) + shape, dtype=bool)
+        below = plane(0)
+        for i in range(shape[0]):  # a plane of grid points at a time: memory of three planes
+            planes = (below, plane(2 * i + 1), plane(2 * i + 2))
+            clear[i] = planes[1][1::2, 1::2]
+            for e, (dx, dy, dz) in enumerate(NEIGHBOURS):
+                rows = slice(1 + dy, 1 + dy + 2 * shape[1], 2)
+                cols = slice(1 + dz, 1 + dz + 2 * shape[2], 2)
+                mid_free[e, i] = planes[dx + 1][rows, cols] >= r
+            below = planes[2]
         free = clear >= r
         edges = np.zeros((len(NEIGHBOURS),) + shape, dtype=bool)
         for e, d in enumerate(NEIGHBOURS):
-            mid = centres + 0.5 * size * d
             target_free = shifted(free.astype(np.float64), -d) == 1.0
-            edges[e] = free & target_free & (point_clearance(tank, mid) >= r)
+            edges[e] = free & target_free & mid_free[e]
         cache[size] = (free, edges, clear)
     return cache[size]
 
