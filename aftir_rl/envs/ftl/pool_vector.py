@@ -8,7 +8,8 @@ targets as row ``i - start`` of its group does. The goal space holds every wing 
 bays (:func:`~aftir_rl.core.tank.generate.wing_family_box`).
 With a stream ``tank="wing:BAYS:FIRST+"`` (or ``"mix:FIRST+"``) the groups' tanks are the
 stream's first ones, and a group whose rows have ended ``tank_episodes`` episodes moves on to
-the stream's next unused wing: its running episodes end there (truncated), and its rows start again in the new tank.
+the stream's next unused wing: its running episodes end there (truncated), and its rows start
+again in the new tank.
 :func:`make_vector_env` is the registered vector entry point: a pool or a stream gives this env,
 one tank the plain batched one.
 """
