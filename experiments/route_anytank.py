@@ -33,6 +33,7 @@ import torch
 from aftir_rl.envs.ftl.route_env import ArmRouteEnv
 from aftir_rl.experiments.bench import env_steps_per_second, machine_facts
 from aftir_rl.experiments.suite import SCENES, scene_tanks, suite_targets
+from aftir_rl.rl.level_replay import LevelReplay
 from aftir_rl.rl.route_policy import (
     RoutePolicy,
     load_route_policy,
@@ -107,15 +108,19 @@ def evaluate(policy: RoutePolicy, args: argparse.Namespace) -> dict[str, Any]:
 def run_seed(args: argparse.Namespace, seed: int) -> dict[str, Any]:
     """Train one seed on its stream (or load ``--policy``); its evaluation."""
     first = 10_000 + 100_000 * seed
-    if args.policy:
-        row = {
-            "seed": seed,
-            "policy": args.policy,
-            "eval": evaluate(load_route_policy(args.policy), args),
-        }
+    if args.policy:  # weights, or the folder aftir route train wrote (its config says how)
+        folder = Path(args.policy)
+        row = {"seed": seed, "policy": args.policy}
+        if folder.is_dir():
+            config = json.loads((folder / "config.json").read_text())
+            row.update(stream=config["env_kwargs"].get("tank"), minutes=config["minutes"])
+            row.update(config["rows"][-1])
+            folder = folder / "route_policy.pt"
+        row["eval"] = evaluate(load_route_policy(folder), args)
         print(json.dumps(row), flush=True)
         return row
-    env = ArmRouteEnv(tank=f"wing:{args.bays}:{first}+", tank_episodes=args.tank_episodes)
+    stream = f"mix:{first}+" if args.family == "mix" else f"{args.family}:{args.bays}:{first}+"
+    env = ArmRouteEnv(tank=stream, tank_episodes=args.tank_episodes)
     start = time.perf_counter()
     policy, stats = train_route_policy(
         env,
@@ -123,13 +128,14 @@ def run_seed(args: argparse.Namespace, seed: int) -> dict[str, Any]:
         updates=args.updates,
         seed=seed,
         first_target_seed=10_000_000 + 100_000 * seed,
+        level_replay=LevelReplay(replay=args.replay) if args.replay else None,
     )
     minutes = round((time.perf_counter() - start) / 60, 2)
     if args.save:
         save_route_policy(policy, f"{args.save}.seed{seed}.pt")
     row = {
         "seed": seed,
-        "stream": f"wing:{args.bays}:{first}+",
+        "stream": stream,
         "wings_met": env.tanks_met,
         "minutes": minutes,
         **stats.rounds[-1],
@@ -143,7 +149,13 @@ def main() -> None:
     """Train each seed on its stream, evaluate; print a JSON line per seed."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
-    parser.add_argument("--bays", type=int, default=3, help="bays of the stream's wings")
+    parser.add_argument(
+        "--family", choices=("wing", "round", "mix"), default="wing", help="the stream's wings"
+    )
+    parser.add_argument("--bays", type=int, default=3, help="bays of the stream's wings (not mix)")
+    parser.add_argument(
+        "--replay", type=float, default=0.0, help="level replay's probability (0: none)"
+    )
     parser.add_argument("--tanks", type=int, default=400, help="wings met in training")
     parser.add_argument("--tank-episodes", type=int, default=5, help="routes in each wing")
     parser.add_argument("--updates", type=int, default=3000, help="batches of the fit")
@@ -156,7 +168,11 @@ def main() -> None:
     )
     parser.add_argument("--json", help="where the runs go")
     parser.add_argument("--save", help="the policies' weights go to SAVE.seedN.pt")
-    parser.add_argument("--policy", help="evaluate these weights instead of training (one seed)")
+    parser.add_argument(
+        "--policy",
+        help="evaluate these weights, or the folder aftir route train wrote, instead of "
+        "training (one seed)",
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     runs = []
@@ -165,8 +181,9 @@ def main() -> None:
         runs.append({**run_seed(args, seed), "frozenlake_8x8_steps_per_s": lake})
     if args.json:
         out = {
-            "recipe": f"route policy cloned on {args.tanks} streamed {args.bays}-bay wings, "
-            f"{args.tank_episodes} routes each",
+            "recipe": f"route policy cloned on {args.tanks} streamed wings ({args.family}, "
+            f"{'2-5' if args.family == 'mix' else args.bays} bays), {args.tank_episodes} routes "
+            f"each" + (f", level replay {args.replay}" if args.replay else ""),
             "env_id": "AFTIR-ArmRoute-v0",
             "budgets": args.budgets,
             "machine": machine_facts(),

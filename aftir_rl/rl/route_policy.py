@@ -36,6 +36,7 @@ from aftir_rl.core.errors import CheckpointError, ConfigError, PlanningError
 from aftir_rl.envs.ftl.route_env import ROUTE_SETTINGS
 from aftir_rl.planning.ftl.route import plan_route
 from aftir_rl.planning.ftl.search import MAIN_VARIANTS
+from aftir_rl.rl.level_replay import LevelReplay
 from aftir_rl.rl.tensors import load_tensors, save_tensors
 
 if TYPE_CHECKING:
@@ -52,6 +53,7 @@ __all__ = [
     "route_search",
     "save_route_policy",
     "train_route_policy",
+    "REPLAY_FIT_EVERY",
 ]
 
 #: The teacher's search settings, tried in turn from the route as it is: the env's own, then
@@ -233,6 +235,8 @@ class TrainStats:
 
     rounds: list[dict[str, Any]] = field(default_factory=list)
     teacher: RouteTeacher = field(default_factory=RouteTeacher)
+    #: Visits that replayed a wing met before (level replay).
+    replays: int = 0
 
 
 def train_route_policy(
@@ -245,6 +249,7 @@ def train_route_policy(
     first_target_seed: int = 10_000_000,
     after_round: Any = None,
     on_route: Any = None,
+    level_replay: LevelReplay | None = None,
 ) -> tuple[RoutePolicy, TrainStats]:
     """A route policy cloned from the teacher, then ``rounds`` DAgger rounds.
 
@@ -254,6 +259,12 @@ def train_route_policy(
     ``after_round(r, policy, row)`` is called after each (for evaluations; its time is left out
     of the rows' ``minutes``), ``on_route()`` after each episode (for a progress bar). Seeds:
     torch and the batch order from ``seed``.
+
+    ``level_replay`` (an env on a stream only): round 0 goes wing by wing, ``tank_episodes``
+    routes a visit, each in a new wing of the stream or, as
+    :class:`~aftir_rl.rl.level_replay.LevelReplay` chooses, in one met before (new targets
+    there); the policy is fitted every :data:`REPLAY_FIT_EVERY` routes (``updates / 10``
+    batches) so that each visit can be scored by it.
     """
     import torch
 
@@ -264,7 +275,10 @@ def train_route_policy(
     stats, data, start, aside = TrainStats(), [], time.perf_counter(), 0.0
     for r in range(rounds + 1):
         learner = policy if r else None  # round 0: the teacher's own routes
-        for i in range(routes):
+        if r == 0 and level_replay is not None:
+            data = _replayed(env, policy, routes, updates, seed, first_target_seed, stats,
+                             level_replay, on_route)  # fmt: skip
+        for i in range(0 if r == 0 and level_replay is not None else routes):
             data += collect(env, first_target_seed + r * routes + i, stats.teacher, learner)
             if on_route is not None:
                 on_route()
@@ -280,12 +294,58 @@ def train_route_policy(
                 "seconds": round(stats.teacher.seconds, 1),
             },  # fmt: skip
         }
+        if r == 0 and level_replay is not None:
+            row["replayed_visits"] = stats.replays
         stats.rounds.append(row)
         if after_round is not None:
             begun = time.perf_counter()
             after_round(r, policy, row)
             aside += time.perf_counter() - begun
     return policy, stats
+
+
+#: Routes between the fits that score a level-replay run's visits.
+REPLAY_FIT_EVERY = 100
+
+
+def _replayed(
+    env: ArmRouteEnv,
+    policy: RoutePolicy,
+    routes: int,
+    updates: int,
+    seed: int,
+    first_target_seed: int,
+    stats: TrainStats,
+    plr: LevelReplay,
+    on_route: Any,
+) -> list[Any]:
+    """Round 0 of :func:`train_route_policy` with level replay: the labelled states."""
+    import torch
+
+    if env.stream is None:
+        raise ConfigError("level replay needs a stream of tanks: wing:BAYS:FIRST+ or mix:FIRST+")
+    rng = np.random.default_rng([seed, 7])
+    data: list[Any] = []
+    i = 0
+    while i < routes:
+        name = plr.choose(rng)
+        where = env if name is None else env.in_tank(name)
+        visit: list[Any] = []
+        for _ in range(min(env.tank_episodes, routes - i)):
+            visit += collect(where, first_target_seed + i, stats.teacher, None)
+            i += 1
+            if on_route is not None:
+                on_route()
+            if i % REPLAY_FIT_EVERY == 0:
+                fit(policy, data + visit, max(1, updates // 10), seed + i)
+        if visit:
+            obs, mask, label = (torch.as_tensor(np.array(c)) for c in zip(*visit, strict=True))
+            with torch.no_grad():
+                wrong = (policy.logits(obs, mask).argmax(1) != label).float().mean()
+            plr.update(str(where.tank.source if name is None else name), float(wrong))
+        stats.replays += name is not None
+        data += visit
+    return data
 
 
 @dataclass

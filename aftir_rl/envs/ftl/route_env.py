@@ -140,6 +140,7 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
         self.tank_episodes = tank_episodes or STREAM_TANK_EPISODES
         #: Wings of the stream met so far, and episodes begun in the last one.
         self.tanks_met, self._episodes = 0, 0
+        self._kwargs = kwargs
         self._inner_kwargs = {**kwargs, "guide": True, "steer": "target"}
         if self.stream is not None:
             self._inner_kwargs["tank"] = self.stream.spec_at(0)
@@ -193,6 +194,10 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
         self.inner = ArmFTLEnv(**{**self._inner_kwargs, "tank": spec})
         self.tanks_met += 1
         self._episodes = 0
+
+    def in_tank(self, tank: object) -> ArmRouteEnv:
+        """The same env (settings, leads, bay...) in another ``tank``: a wing revisited."""
+        return ArmRouteEnv(self.settings, self.leads, **{**self._kwargs, "tank": tank})
 
     def action_masks(self) -> NDArray[np.bool_]:
         """Which actions are open from here (sb3-contrib's ``MaskablePPO`` reads it)."""
