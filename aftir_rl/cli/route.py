@@ -30,6 +30,7 @@ from aftir_rl.cli.args import (
     add_seed_option,
     add_tank_option,
     add_target_option,
+    bounded_float,
     bounded_int,
     check_tank,
 )
@@ -65,6 +66,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=bounded_int(1, 100_000),
         metavar="N",
         help="with a stream, routes in each wing (default the env's: 5)",
+    )
+    train.add_argument(
+        "--replay",
+        type=bounded_float(0.0, 1.0),
+        metavar="P",
+        help="with a stream, level replay: the probability that a wing's routes are in one met "
+        "before, chosen by how much the policy has yet to learn there (PLR; default none)",
     )
     _add_bay_option(train)
     train.add_argument(
@@ -150,10 +158,12 @@ def _train(args: argparse.Namespace) -> int:
     from aftir_rl.core.files import check_output, check_writable_dir, write_json
     from aftir_rl.envs.ftl.pool import pool_specs, stream_spec
     from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.rl.level_replay import LevelReplay
     from aftir_rl.rl.route_policy import save_route_policy, train_route_policy
 
-    if args.tank_episodes is not None and stream_spec(args.tank) is None:
-        raise ConfigError("--tank-episodes is a stream's: --tank wing:BAYS:FIRST+")
+    for given, option in ((args.tank_episodes, "--tank-episodes"), (args.replay, "--replay")):
+        if given is not None and stream_spec(args.tank) is None:
+            raise ConfigError(f"{option} is a stream's: --tank wing:BAYS:FIRST+ or mix:FIRST+")
     if args.tank is not None:
         check_tank(args.tank)
     env_kwargs = _env_kwargs(args.tank, args.bay)
@@ -191,6 +201,7 @@ def _train(args: argparse.Namespace) -> int:
         first_target_seed=10_000_000 + 100_000 * args.seed,
         after_round=report,
         on_route=bar.update,
+        level_replay=None if args.replay is None else LevelReplay(replay=args.replay),
     )
     bar.close()
     config = {
@@ -201,6 +212,7 @@ def _train(args: argparse.Namespace) -> int:
         "rounds": args.rounds,
         "updates": args.updates,
         "seed": args.seed,
+        "replay": args.replay,
         "minutes": round((time.perf_counter() - start) / 60, 2),
         "rows": stats.rounds,
     }
