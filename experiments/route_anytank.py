@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+from aftir_rl.envs.ftl.route_env import STREAM_TANK_EPISODES, ArmRouteEnv
 from aftir_rl.experiments.bench import env_steps_per_second, machine_facts
 from aftir_rl.experiments.suite import SCENES, scene_tanks, suite_targets
 from aftir_rl.rl.level_replay import LevelReplay
@@ -113,7 +113,9 @@ def run_seed(args: argparse.Namespace, seed: int) -> dict[str, Any]:
         row = {"seed": seed, "policy": args.policy}
         if folder.is_dir():
             config = json.loads((folder / "config.json").read_text())
-            row.update(stream=config["env_kwargs"].get("tank"), minutes=config["minutes"])
+            kwargs = config["env_kwargs"]
+            met = config.get("tanks_met") or -(-config["routes"] // kwargs.get("tank_episodes", STREAM_TANK_EPISODES))
+            row.update(stream=kwargs["tank"], wings_met=met, minutes=config["minutes"])
             row.update(config["rows"][-1])
             folder = folder / "route_policy.pt"
         row["eval"] = evaluate(load_route_policy(folder), args)

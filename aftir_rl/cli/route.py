@@ -213,6 +213,7 @@ def _train(args: argparse.Namespace) -> int:
         "updates": args.updates,
         "seed": args.seed,
         "replay": args.replay,
+        "tanks_met": env.tanks_met or None,
         "minutes": round((time.perf_counter() - start) / 60, 2),
         "rows": stats.rounds,
     }
