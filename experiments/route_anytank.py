@@ -114,7 +114,8 @@ def run_seed(args: argparse.Namespace, seed: int) -> dict[str, Any]:
         if folder.is_dir():
             config = json.loads((folder / "config.json").read_text())
             kwargs = config["env_kwargs"]
-            met = config.get("tanks_met") or -(-config["routes"] // kwargs.get("tank_episodes", STREAM_TANK_EPISODES))
+            episodes = kwargs.get("tank_episodes", STREAM_TANK_EPISODES)
+            met = config.get("tanks_met") or -(-config["routes"] // episodes)
             row.update(stream=kwargs["tank"], wings_met=met, minutes=config["minutes"])
             row.update(config["rows"][-1])
             folder = folder / "route_policy.pt"
