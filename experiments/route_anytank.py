@@ -2,14 +2,19 @@
 
 Run from a checkout: ``python experiments/route_anytank.py --seeds 0 1 --json OUT.json``.
 :func:`~aftir_rl.rl.route_policy.train_route_policy` clones a policy on ``AFTIR-ArmRoute-v0``
-with ``tank="wing:BAYS:FIRST+"``: a stream of generated wings, ``--tank-episodes`` routes in
-each (targets anywhere in the wing), ``--tanks`` wings in all; the stream of seed ``s`` starts
-at wing ``10,000 + 100,000·s``. The policy is then evaluated, greedily and best first within
+with ``tank="wing:BAYS:FIRST+"`` (``--family round``: ``round:BAYS:FIRST+``; ``mix``:
+``mix:FIRST+``, both families with 2 to 5 bays): a stream of generated wings,
+``--tank-episodes`` routes in each (targets anywhere in the wing), ``--tanks`` visits in all,
+with ``--replay P`` level replay (:class:`~aftir_rl.rl.level_replay.LevelReplay`); the stream
+of seed ``s`` starts at wing ``10,000 + 100,000·s``. ``--policy`` evaluates a policy trained
+already (its weights, or the folder ``aftir route train`` wrote). The policy is then evaluated, greedily and best first within
 each of ``--budgets`` env steps (:func:`~aftir_rl.rl.route_policy.route_search`), on tanks no
 training used:
 
 - ``held_out_wings``: ``--wings`` generated 3-bay wings (seeds 900,000..), ``--wing-targets``
   targets each (reset seeds 3,000,000 + n·w..; 20 x 10 = 200 by default);
+- ``held_out_round_wings``: ``--round-wings`` 3-bay wings of the round family (the same seeds
+  and targets' seeds; 10 x 10 by default);
 - ``b737``: the reference 737 tank, ``--eval`` targets anywhere in it and per bay (reset seeds
   3,000,000..): no 737-like tank is in the stream;
 - ``suite``: every scene of ``aftir bench --suite`` with its own targets
@@ -92,6 +97,13 @@ def evaluate(policy: RoutePolicy, args: argparse.Namespace) -> dict[str, Any]:
         seeds = list(range(3_000_000 + n * w, 3_000_000 + n * (w + 1)))
         rows.append(score(env, policy, seeds, args.budgets))
     out["held_out_wings"] = pooled(rows)
+    rows = []
+    for w in range(args.round_wings):  # the round family: every way through a rib round
+        env = ArmRouteEnv(tank=f"round:3:{HELD_OUT_WINGS + w}")
+        seeds = list(range(3_000_000 + n * w, 3_000_000 + n * (w + 1)))
+        rows.append(score(env, policy, seeds, args.budgets))
+    if rows:
+        out["held_out_round_wings"] = pooled(rows)
     seeds = list(range(3_000_000, 3_000_000 + args.eval))
     out["b737"] = score(ArmRouteEnv(), policy, seeds, args.budgets)
     for bay in (1, 2):
@@ -164,6 +176,9 @@ def main() -> None:
     parser.add_argument("--updates", type=int, default=3000, help="batches of the fit")
     parser.add_argument("--wings", type=int, default=20, help="held-out wings")
     parser.add_argument("--wing-targets", type=int, default=10, help="targets per held-out wing")
+    parser.add_argument(
+        "--round-wings", type=int, default=10, help="held-out 3-bay wings of the round family"
+    )
     parser.add_argument("--eval", type=int, default=200, help="targets in the 737 tank")
     parser.add_argument("--suite-targets", type=int, default=50, help="targets per scene")
     parser.add_argument(
