@@ -9,8 +9,8 @@ closed route whose motion keeps 1 cm along its whole length (python-fcl). Writes
 
 A policy trained on generated wings (its config names a pool or a stream) is tested in tanks
 none of its training used: ``--wings`` generated 3-bay wings from seed ``--wing-seed`` with
-``--targets`` targets in all (each wing its share, reset seeds ``--seed``..), and ``--targets``
-targets anywhere in the reference 737 tank.
+``--targets`` targets in all (each wing its share, reset seeds ``--seed``..), as many of the
+round family (the same seeds), and ``--targets`` targets anywhere in the reference 737 tank.
 """
 
 from __future__ import annotations
@@ -81,9 +81,10 @@ def main() -> None:
     wings = "tank" in kwargs
     if wings:  # tested in unseen tanks: held-out wings, and the 737 tank it never met
         tests = {
-            "wings": [ArmRouteEnv(tank=f"wing:3:{args.wing_seed + w}") for w in range(args.wings)],
-            "b737": [ArmRouteEnv()],
+            family: [ArmRouteEnv(tank=f"{kind}:3:{args.wing_seed + w}") for w in range(args.wings)]
+            for family, kind in (("wings", "wing"), ("round_wings", "round"))
         }
+        tests["b737"] = [ArmRouteEnv()]
     else:
         tests = {"bay": [ArmRouteEnv(bay=kwargs["bay"])]}
     card = {
@@ -103,8 +104,9 @@ def main() -> None:
     }
     for name, envs in tests.items():
         test: dict[str, Any] = {"targets": args.targets, "seed": args.seed}
-        if name == "wings":
-            test["tanks"] = f"wing:3:{args.wing_seed}-{args.wing_seed + args.wings - 1}"
+        if name in ("wings", "round_wings"):
+            kind = "wing" if name == "wings" else "round"
+            test["tanks"] = f"{kind}:3:{args.wing_seed}-{args.wing_seed + args.wings - 1}"
         test["greedy"] = measure(envs, policy, seeds, 0)
         test["search"] = measure(envs, policy, seeds, args.budget)
         card["test" if name == "bay" else f"test_{name}"] = test

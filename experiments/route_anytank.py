@@ -7,9 +7,9 @@ with ``tank="wing:BAYS:FIRST+"`` (``--family round``: ``round:BAYS:FIRST+``; ``m
 ``--tank-episodes`` routes in each (targets anywhere in the wing), ``--tanks`` visits in all,
 with ``--replay P`` level replay (:class:`~aftir_rl.rl.level_replay.LevelReplay`); the stream
 of seed ``s`` starts at wing ``10,000 + 100,000·s``. ``--policy`` evaluates a policy trained
-already (its weights, or the folder ``aftir route train`` wrote). The policy is then evaluated, greedily and best first within
-each of ``--budgets`` env steps (:func:`~aftir_rl.rl.route_policy.route_search`), on tanks no
-training used:
+already (its weights, or the folder ``aftir route train`` wrote). The policy is then
+evaluated, greedily and best first within each of ``--budgets`` env steps
+(:func:`~aftir_rl.rl.route_policy.route_success`), on tanks no training used:
 
 - ``held_out_wings``: ``--wings`` generated 3-bay wings (seeds 900,000..), ``--wing-targets``
   targets each (reset seeds 3,000,000 + n·w..; 20 x 10 = 200 by default);
@@ -32,7 +32,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
 from aftir_rl.envs.ftl.route_env import STREAM_TANK_EPISODES, ArmRouteEnv
@@ -42,7 +41,7 @@ from aftir_rl.rl.level_replay import LevelReplay
 from aftir_rl.rl.route_policy import (
     RoutePolicy,
     load_route_policy,
-    route_search,
+    route_success,
     save_route_policy,
     train_route_policy,
 )
@@ -54,24 +53,8 @@ HELD_OUT_WINGS = 900_000
 def score(
     env: ArmRouteEnv, policy: RoutePolicy, jobs: list[Any], budgets: list[int]
 ) -> dict[str, Any]:
-    """Greedy success, and best first within each of ``budgets``, on ``jobs`` in ``env``.
-
-    ``jobs``: reset seeds, or targets [cm]. The least clearance is the largest budget's.
-    """
-    out: dict[str, Any] = {"targets": len(jobs)}
-    for steps in [0, *budgets]:
-        reached, clearance = 0, []
-        for job in jobs:
-            seed, target = (job, None) if isinstance(job, int) else (None, np.asarray(job))
-            result = route_search(env, policy, seed, steps, target)
-            reached += result.success
-            if result.success:
-                plan = env.motion()
-                assert plan is not None and plan.min_clearance_cm is not None
-                clearance.append(plan.min_clearance_cm)
-        out["greedy" if steps == 0 else f"search_{steps}"] = reached / len(jobs)
-    out["least_clearance_cm"] = round(min(clearance), 3) if clearance else None
-    return out
+    """Greedy success, and best first within each of ``budgets``, on ``jobs`` in ``env``."""
+    return route_success([env], policy, jobs, budgets)
 
 
 def pooled(rows: list[dict[str, Any]]) -> dict[str, Any]:

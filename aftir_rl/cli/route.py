@@ -122,6 +122,42 @@ def build_parser() -> argparse.ArgumentParser:
         help="env steps of the best-first search per target (0: greedy; default 100)",
     )
     plan.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+    ev = sub.add_parser(
+        "evaluate",
+        help="a route policy's success in tanks and pools, one row each, and every suite scene",
+        description="Evaluate a route policy: --random targets in each --tank (a pool's spread "
+        "over its tanks) and, with --suite, in each scene of aftir bench --suite (its own "
+        "targets); greedily and best first within each --budget; one table.",
+    )
+    ev.add_argument("policy", nargs="?", metavar="DIR", help="a folder aftir route train wrote")
+    ev.add_argument("--pretrained", metavar="NAME", help="a shipped route policy instead")
+    ev.add_argument(
+        "--tank",
+        action="append",
+        default=[],
+        help="a tank, or a pool such as wing:3:900000-900019 (repeatable; default the policy's "
+        "own tank and bay)",
+    )
+    _add_bay_option(ev, "the policy's in its own tank")
+    ev.add_argument("--suite", action="store_true", help="also every scene of the scene suite")
+    ev.add_argument(
+        "--random",
+        type=bounded_int(1, MAX_TARGETS),
+        default=100,
+        metavar="N",
+        help=f"targets per row (1..{MAX_TARGETS}; default 100)",
+    )
+    add_seed_option(ev, "first reset seed of the targets (default 3000000)", 3_000_000)
+    ev.add_argument(
+        "--budget",
+        type=bounded_int(1, 10_000),
+        nargs="+",
+        default=[100],
+        metavar="STEPS",
+        help="env steps of each best-first search per target (default 100); greedy is always run",
+    )
+    ev.add_argument("--json", metavar="FILE", help="also write the table as JSON")
+    ev.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return parser
 
 
@@ -272,7 +308,6 @@ def _plan_env(args: argparse.Namespace, folder: Path) -> tuple[Any, Any, dict[st
     from aftir_rl.core.config import error_line
     from aftir_rl.envs.ftl.pool import pool_specs, stream_spec
     from aftir_rl.envs.ftl.route_env import ArmRouteEnv
-    from aftir_rl.rl.route_policy import load_route_policy
 
     trained = _trained_on(folder)
     tank = args.tank if args.tank is not None else trained["tank"]
@@ -288,10 +323,17 @@ def _plan_env(args: argparse.Namespace, folder: Path) -> tuple[Any, Any, dict[st
         if args.tank is not None or args.bay is not None:
             raise
         raise CheckpointError(f"{folder}/config.json: {error_line(exc)}") from None
+    return env, _loaded(folder, env), env_kwargs
+
+
+def _loaded(folder: Path, env: Any) -> Any:
+    """The policy of ``folder``, checked to read ``env``'s observation."""
+    from aftir_rl.rl.route_policy import load_route_policy
+
     policy = load_route_policy(folder / POLICY_FILE)
     if policy.n_obs != env.n_obs:
         raise CheckpointError(f"{folder}: the policy reads {policy.n_obs} numbers, not {env.n_obs}")
-    return env, policy, env_kwargs
+    return policy
 
 
 def _plan(args: argparse.Namespace) -> int:
@@ -361,8 +403,69 @@ def _plan(args: argparse.Namespace) -> int:
     return 0
 
 
+def _evaluate(args: argparse.Namespace) -> int:
+    import tempfile
+
+    from tqdm import tqdm
+
+    from aftir_rl.core.files import check_output, write_json
+    from aftir_rl.core.shipped import DEFAULT_TANK
+    from aftir_rl.envs.ftl.pool import pool_specs
+    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.experiments.suite import SCENES, scene_tanks, suite_targets
+    from aftir_rl.rl.route_policy import route_success
+
+    folder = route_policy_dir(args.policy, args.pretrained)
+    if args.json is not None and check_output(Path(args.json)) is not None:
+        raise ConfigError(f"{args.json}: exists; choose another --json")
+    rows: list[tuple[str, list[Any], list[Any]]] = []  # name, envs, jobs
+    jobs = list(range(args.seed, args.seed + args.random))
+    for tank in args.tank or [None]:
+        specs = pool_specs(tank)
+        if specs is None:
+            env, policy, kwargs = _plan_env(argparse.Namespace(tank=tank, bay=args.bay), folder)
+            envs = [env]
+            tank = f"{kwargs.get('tank', DEFAULT_TANK)}, {_bay_words(kwargs.get('bay'))}"
+        else:  # a pool: target i in its tank i·K/N
+            check_tank(tank)
+            envs = [ArmRouteEnv(**_env_kwargs(spec, args.bay)) for spec in specs]
+            policy = _loaded(folder, envs[0])
+        rows.append((tank, envs, jobs))
+    with tempfile.TemporaryDirectory() as scratch:
+        if args.suite:
+            for s, (name, tank) in enumerate(scene_tanks(Path(scratch)).items()):
+                spec = SCENES[name] if isinstance(SCENES[name], str) else tank
+                targets = list(suite_targets(tank, args.random, seed=s))
+                rows.append((f"suite: {name}", [ArmRouteEnv(tank=spec)], targets))
+        bar = tqdm(
+            total=sum(len(jobs) for _, _, jobs in rows) * (1 + len(args.budget)),
+            unit="search",
+            disable=args.no_progress,
+        )
+        table = []
+        for name, envs, jobs in rows:
+            result = route_success(envs, policy, jobs, args.budget, on_search=bar.update)
+            table.append({"tanks": name, **result})
+        bar.close()
+    heads = ["greedy", *(f"best first {b}" for b in args.budget)]
+    print(f"| tanks | targets | {' | '.join(h + ' (%)' for h in heads)} | least clearance (cm) |")
+    print("|---|---:|" + "---:|" * (len(heads) + 1))
+    for row in table:
+        rates = [row["greedy"], *(row[f"search_{b}"] for b in args.budget)]
+        least = row["least_clearance_cm"]
+        print(
+            f"| {row['tanks']} | {row['targets']} | {' | '.join(f'{100 * r:.1f}' for r in rates)}"
+            f" | {'-' if least is None else f'{least:.2f}'} |"
+        )
+    if args.json is not None:
+        policy_name = args.pretrained or str(folder.resolve())
+        write_json(Path(args.json), {"policy": policy_name, "budgets": args.budget, "rows": table})
+    return 0
+
+
 @cli
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``aftir route``."""
     args = build_parser().parse_args(argv)
-    return _train(args) if args.command == "train" else _plan(args)
+    run = {"train": _train, "plan": _plan, "evaluate": _evaluate}[args.command]
+    return run(args)

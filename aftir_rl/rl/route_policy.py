@@ -14,7 +14,7 @@ section at a time, the planner's closing placing the tip). Here:
   (the policy's episodes, each state it visits labelled by the teacher);
 - :func:`route_search`: the policy at inference, greedily or best first over the cumulative
   log-probability of its choices within a budget of env steps (work, not time: the same
-  routes under any load).
+  routes under any load); :func:`route_success` its success over many targets.
 
 Weights are kept as tensors only (:mod:`aftir_rl.rl.tensors`): :func:`save_route_policy`,
 :func:`load_route_policy`.
@@ -25,6 +25,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -51,6 +52,7 @@ __all__ = [
     "SearchResult",
     "load_route_policy",
     "route_search",
+    "route_success",
     "save_route_policy",
     "train_route_policy",
     "REPLAY_FIT_EVERY",
@@ -404,6 +406,38 @@ def route_search(
         if not terminated:
             branch(-neg)
     return SearchResult(False, steps)
+
+
+def route_success(
+    envs: Sequence[ArmRouteEnv],
+    policy: RoutePolicy,
+    jobs: Sequence[Any],
+    budgets: Sequence[int],
+    on_search: Any = None,
+) -> dict[str, Any]:
+    """Greedy success, and best first within each of ``budgets``, of the policy on ``jobs``.
+
+    ``jobs``: reset seeds, or targets [cm]; job ``i`` is played in ``envs[i·len(envs)/len(jobs)]``
+    (one env: all of them). A success is a closed route whose motion keeps the margin; the
+    least clearance is that of the largest budget's successes. ``on_search()`` after each.
+    """
+    out: dict[str, Any] = {"targets": len(jobs)}
+    clearance: list[float] = []
+    for steps in [0, *budgets]:
+        reached, clearance = 0, []
+        for i, job in enumerate(jobs):
+            env = envs[i * len(envs) // len(jobs)]
+            seed, target = (job, None) if isinstance(job, int) else (None, np.asarray(job))
+            result = route_search(env, policy, seed, steps, target)
+            reached += result.success
+            plan = env.motion()
+            if result.success and plan is not None and plan.min_clearance_cm is not None:
+                clearance.append(plan.min_clearance_cm)
+            if on_search is not None:
+                on_search()
+        out["greedy" if steps == 0 else f"search_{steps}"] = reached / len(jobs)
+    out["least_clearance_cm"] = round(min(clearance), 3) if clearance else None
+    return out
 
 
 def save_route_policy(policy: RoutePolicy, path: str | Path) -> Path:

@@ -141,6 +141,36 @@ def test_the_shipped_policy_meets_its_card_on_its_first_test_targets():
         assert route_search(env, policy, None, test["search"]["budget"], target).success == ok
 
 
+@pytest.mark.slow
+def test_the_shipped_any_tank_policy_meets_its_card_in_wings_it_never_met(tmp_path):
+    """The card's held-out wings (200 targets from seed 4,000,000 across 20 wings): the first
+    20, in the first two wings, with the card's search; and it plans only where told."""
+    import torch
+
+    from aftir_rl.core.files import read_json
+    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.rl.route_policy import load_route_policy, route_search
+
+    torch.set_num_threads(1)
+    folder = route.route_policy_dir(None, "route-anytank")
+    card = read_json(folder / "card.json")
+    policy, test = load_route_policy(folder / route.POLICY_FILE), card["test_wings"]
+    first, last = (int(v) for v in test["tanks"].split(":")[2].split("-"))
+    envs = [ArmRouteEnv(tank=f"wing:3:{first + w}") for w in (0, 1)]
+    per_wing = test["targets"] // (last - first + 1)
+    seeds = range(test["seed"], test["seed"] + 2 * per_wing)
+    budget = test["search"]["budget"]
+    reached = sum(
+        route_search(envs[i // per_wing], policy, s, budget).success for i, s in enumerate(seeds)
+    )
+    assert reached >= round(len(seeds) * test["search"]["success_rate"]) - 1
+    out = tmp_path / "X"
+    assert (
+        route.main(["plan", "--pretrained", "route-anytank", "--random", "1", "-o", str(out)]) == 2
+    )
+    assert not out.exists()
+
+
 @pytest.mark.parametrize(
     "targets, message",
     [(["--target", "1e4", "0", "0"], "target"), ([*HATCH, *HATCH], "a target is given twice")],
@@ -185,3 +215,28 @@ def test_a_tank_or_bay_training_cannot_use_is_one_line(argv, message, tmp_path, 
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err and "Traceback" not in err
     assert not (tmp_path / "X").exists()
+
+
+def test_evaluate_prints_one_row_per_tank_and_pool_as_the_search_scores_them(tmp_path, capsys):
+    """Each row is route_success of the policy on its targets (a pool's spread over its wings);
+    the JSON holds the same; an existing --json is refused before any search."""
+    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.rl.route_policy import load_route_policy, route_success
+
+    out = tmp_path / "eval.json"
+    argv = ["evaluate", "--pretrained", "route-bay2", "--tank", "b737_center", "--tank"]
+    argv += ["wing:2:5-6", "--random", "3", "--seed", "11", "--budget", "5", "20"]
+    assert route.main([*argv, "--no-progress", "--json", str(out)]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[0].startswith("| tanks | targets | greedy (%) | best first 5 (%) | best first 20")
+    names = [row.split(" | ")[0] for row in lines[2:]]
+    assert names == ["| b737_center, the whole tank", "| wing:2:5-6"]
+    rows = json.loads(out.read_text())["rows"]
+    policy = load_route_policy(route.route_policy_dir(None, "route-bay2") / route.POLICY_FILE)
+    envs = [[ArmRouteEnv(tank="b737_center")], [ArmRouteEnv(tank=f"wing:2:{s}") for s in (5, 6)]]
+    for row, env in zip(rows, envs, strict=True):
+        expected = route_success(env, policy, [11, 12, 13], [5, 20])
+        assert {k: v for k, v in row.items() if k != "tanks"} == expected
+    before = out.read_bytes()
+    assert route.main([*argv, "--json", str(out)]) == 2
+    assert out.read_bytes() == before and "exists" in capsys.readouterr().err
