@@ -197,11 +197,12 @@ def anytank_section(files: list[dict[str, Any]]) -> str:
     lines = [
         "## One route policy for any tank\n",
         "`python experiments/route_anytank.py --seeds 0 1 --json ...`: each seed clones a policy "
-        "of `AFTIR-ArmRoute-v0` on its own stream of generated 3-bay wings (the planner as the "
-        "teacher), then plays targets in tanks no training met: 20 held-out wings (10 targets "
-        "each), the 737 tank (200 targets anywhere, 200 per bay) and each scene of the suite (50 "
-        "each), greedily and best first within each budget of env steps. Success: a closed "
-        "route whose whole motion keeps 1 cm (python-fcl).\n",
+        "of `AFTIR-ArmRoute-v0` on its own stream of generated wings (the planner as the "
+        "teacher; the recipe says which wings, and whether level replay chose some), then plays "
+        "targets in tanks no training met: held-out 3-bay wings (default 20 with 10 targets "
+        "each), held-out wings of the round family, the 737 tank (anywhere and per bay) and each "
+        "scene of the suite, greedily and best first within each budget of env steps. Success: "
+        "a closed route whose whole motion keeps 1 cm (python-fcl).\n",
     ]
     for d in files:
         b = d["budgets"]
@@ -225,14 +226,15 @@ def anytank_section(files: list[dict[str, Any]]) -> str:
             )
         lines += [
             "",
-            "| seed | stream | wings met | minutes | labelled states | teacher queries (s) | "
-            "machine | FrozenLake 8x8 steps/s (same run) |",
-            "|---:|---|---:|---:|---:|---:|---|---:|",
+            "| seed | stream | wings met | replayed visits | minutes | labelled states | "
+            "teacher queries (s) | machine | FrozenLake 8x8 steps/s (same run) |",
+            "|---:|---|---:|---:|---:|---:|---:|---|---:|",
         ]
         for r in d["runs"]:
             t = r["teacher"]
             lines.append(
-                f"| {r['seed']} | `{r['stream']}` | {r['wings_met']} | {r['minutes']:.1f} | "
+                f"| {r['seed']} | `{r['stream']}` | {r['wings_met']} | "
+                f"{r.get('replayed_visits', 0)} | {r['minutes']:.1f} | "
                 f"{r['states']:,} | {t['queries']:,} ({t['seconds']:.0f}) | "
                 f"{_machine(d['machine'])} | {r['frozenlake_8x8_steps_per_s']:,.0f} |"
             )
