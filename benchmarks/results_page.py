@@ -212,7 +212,9 @@ def anytank_section(files: list[dict[str, Any]]) -> str:
             "least clearance (cm) |",
             "|---|---:|" + "---:|" * (len(b) + 2),
         ]
-        names = [k for k, v in d["runs"][0]["eval"].items() if "targets" in v]
+        names = [
+            k for k, v in d["runs"][0]["eval"].items() if isinstance(v, dict) and "targets" in v
+        ]
         for name in names:
             rows = [r["eval"][name] for r in d["runs"]]
             rates = [
