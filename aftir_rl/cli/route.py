@@ -23,7 +23,7 @@ import argparse
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from aftir_rl.cli.args import (
     OneLineParser,
@@ -36,6 +36,10 @@ from aftir_rl.cli.args import (
 )
 from aftir_rl.cli.guard import cli
 from aftir_rl.core.errors import CheckpointError, ConfigError
+
+if TYPE_CHECKING:
+    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.rl.route_policy import RoutePolicy
 
 __all__ = ["POLICY_FILE", "build_parser", "main", "route_policy_dir"]
 
@@ -326,7 +330,7 @@ def _plan_env(args: argparse.Namespace, folder: Path) -> tuple[Any, Any, dict[st
     return env, _loaded(folder, env), env_kwargs
 
 
-def _loaded(folder: Path, env: Any) -> Any:
+def _loaded(folder: Path, env: ArmRouteEnv) -> RoutePolicy:
     """The policy of ``folder``, checked to read ``env``'s observation."""
     from aftir_rl.rl.route_policy import load_route_policy
 
