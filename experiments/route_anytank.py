@@ -182,9 +182,9 @@ def main() -> None:
         runs.append({**run_seed(args, seed), "frozenlake_8x8_steps_per_s": lake})
     if args.json:
         out = {
-            "recipe": f"route policy cloned on {args.tanks} streamed wings ({args.family}, "
-            f"{'2-5' if args.family == 'mix' else args.bays} bays), {args.tank_episodes} routes "
-            f"each" + (f", level replay {args.replay}" if args.replay else ""),
+            "recipe": f"route policy cloned on {args.tanks} visits of {args.tank_episodes} routes "
+            f"to streamed wings ({args.family}, {'2-5' if args.family == 'mix' else args.bays} "
+            "bays)" + (f", level replay {args.replay}" if args.replay else ""),
             "env_id": "AFTIR-ArmRoute-v0",
             "budgets": args.budgets,
             "machine": machine_facts(),
