@@ -201,15 +201,24 @@ def _route_policies() -> str:
     rows = []
     for folder in sorted(p for p in POLICY_DIR.iterdir() if (p / POLICY_FILE).is_file()):
         c = read_json(folder / "card.json", "card")
-        t, train = c["test"], c["training"]
+        train, kwargs = c["training"], c["env_kwargs"]
+        where = f"bay {kwargs['bay']}" if "bay" in kwargs else f"`tank={kwargs['tank']}`"
         corners = sum(c.get("corners", {}).values())
-        rows.append(
-            f"| `{c['name']}` | `{c['env_id']}` bay {c['env_kwargs']['bay']} | "
-            f"{train['routes']} routes, {train['rounds']} DAgger rounds | {train['minutes']:.1f} | "
-            f"{t['targets']} (seed {t['seed']}..) | {t['greedy']['success_rate']:.1%} | "
-            f"{t['search']['success_rate']:.1%} ({t['search']['budget']} env steps) | "
-            f"{t['search']['min_clearance_cm']:.2f} | {corners}/4 |"
-        )
+        keys = ("test", "test_wings", "test_round_wings", "test_b737")
+        tests = [(k, c[k]) for k in keys if k in c]
+        for i, (key, t) in enumerate(tests):
+            tanks = {"test": where, "test_b737": "the 737 tank"}.get(key, f"`{t.get('tanks')}`")
+            first = i == 0
+            rows.append(
+                (f"| `{c['name']}` | `{c['env_id']}` {where} | " if first else "| | | ")
+                + (f"{train['routes']} routes, {train['rounds']} DAgger rounds | "
+                   f"{train['minutes']:.1f} | " if first else "| | ")
+                + f"{t['targets']} in {tanks} (seed {t['seed']}..) | "
+                f"{t['greedy']['success_rate']:.1%} | "
+                f"{t['search']['success_rate']:.1%} ({t['search']['budget']} env steps) | "
+                f"{t['search']['min_clearance_cm']:.2f} | "
+                + (f"{corners}/4 |" if first else "|")
+            )  # fmt: skip
     return (
         "\n## Route policies\n\n"
         "Policies of `AFTIR-ArmRoute-v0` (the route planner's decision level), cloned from the "
