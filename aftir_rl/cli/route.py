@@ -53,10 +53,17 @@ def build_parser() -> argparse.ArgumentParser:
     """The options of ``aftir route``."""
     parser = OneLineParser(
         prog="aftir route",
-        description="Route policies on AFTIR-ArmRoute-v0: train one from the planner, or plan "
-        "motions with one.",
+        description="Route policies on AFTIR-ArmRoute-v0: train one from the planner, plan "
+        "motions with one, or evaluate one across tanks.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_train_parser(sub)
+    _add_plan_parser(sub)
+    _add_evaluate_parser(sub)
+    return parser
+
+
+def _add_train_parser(sub: Any) -> None:
     train = sub.add_parser(
         "train",
         help="clone a route policy from the planner's routes, then DAgger rounds",
@@ -94,16 +101,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_seed_option(train, "torch's seed and the training targets' (10,000,000 + 100,000 SEED..)")
     train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+def _add_policy_arguments(parser: argparse.ArgumentParser) -> None:
+    """``DIR`` or ``--pretrained NAME``: the route policy a command uses."""
+    parser.add_argument("policy", nargs="?", metavar="DIR", help="a folder aftir route train wrote")
+    parser.add_argument(
+        "--pretrained", metavar="NAME", help="a route policy shipped with the package instead"
+    )
+
+
+def _add_plan_parser(sub: Any) -> None:
     plan = sub.add_parser(
         "plan",
         help="a route policy's motions to targets, as trajectory.json",
         description="Plan motions with a route policy: its route to each target, searched best "
         "first within --budget env steps, deployed and checked along its whole motion.",
     )
-    plan.add_argument("policy", nargs="?", metavar="DIR", help="a folder aftir route train wrote")
-    plan.add_argument(
-        "--pretrained", metavar="NAME", help="a route policy shipped with the package instead"
-    )
+    _add_policy_arguments(plan)
     plan.add_argument(
         "--tank",
         help="the tank to plan in: a name, YAML path or generator spec such as wing:3:7 "
@@ -126,6 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="env steps of the best-first search per target (0: greedy; default 100)",
     )
     plan.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+
+
+def _add_evaluate_parser(sub: Any) -> None:
     ev = sub.add_parser(
         "evaluate",
         help="a route policy's success in tanks and pools, one row each, and every suite scene",
@@ -133,8 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
         "over its tanks) and, with --suite, in each scene of aftir bench --suite (its own "
         "targets); greedily and best first within each --budget; one table.",
     )
-    ev.add_argument("policy", nargs="?", metavar="DIR", help="a folder aftir route train wrote")
-    ev.add_argument("--pretrained", metavar="NAME", help="a shipped route policy instead")
+    _add_policy_arguments(ev)
     ev.add_argument(
         "--tank",
         action="append",
@@ -162,7 +179,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ev.add_argument("--json", metavar="FILE", help="also write the table as JSON")
     ev.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    return parser
 
 
 def _add_bay_option(parser: argparse.ArgumentParser, default: str = "2") -> None:
@@ -316,6 +332,8 @@ def _plan_env(args: argparse.Namespace, folder: Path) -> tuple[Any, Any, dict[st
     trained = _trained_on(folder)
     tank = args.tank if args.tank is not None else trained["tank"]
     if tank == "a tank file" or pool_specs(tank) is not None or stream_spec(tank) is not None:
+        if args.tank is not None:
+            raise ConfigError(f"--tank {tank}: names many tanks; give one tank, such as wing:3:7")
         raise ConfigError(f"{folder} was trained in {tank}: give --tank, the tank to plan in")
     if args.tank is not None:
         check_tank(args.tank)
