@@ -18,6 +18,10 @@ def test_generate_writes_a_tank_that_reads_back(tmp_path, capsys):
     tank = load_tank(out)
     assert len(tank.baffles) == 2 and tank.scene_dict() == load_tank("wing:3:7").scene_dict()
     assert yaml.safe_load(out.read_text())["name"] == "wing_3bay_s7"
+    rounded = tmp_path / "round.yaml"  # the round family, the same tank as its spec
+    assert main(["generate", "--kind", "round", "--seed", "6", "-o", str(rounded)]) == 0
+    assert load_tank(rounded).scene_dict() == load_tank("round:3:6").scene_dict()
+    assert yaml.safe_load(rounded.read_text())["name"] == "round_3bay_s6"
 
 
 def test_show_takes_a_generator_spec_and_the_old_form(capsys):

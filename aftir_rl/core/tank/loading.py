@@ -409,8 +409,8 @@ def load_tank(tank: str | Path | Tank = DEFAULT_TANK) -> Tank:
     text = str(tank)
     if STREAM_SPEC.fullmatch(text):
         raise ConfigError(
-            f"tank {text!r} is a stream of generated wings: the batched AFTIR-ArmFTL-v0 moves its "
-            "groups of rows from one to the next; everything else takes one tank, wing:BAYS:SEED"
+            f"tank {text!r} is a stream of generated wings: the batched AFTIR-ArmFTL-v0 and "
+            "AFTIR-ArmRoute-v0 move along it; everything else takes one tank, wing:BAYS:SEED"
         )
     if POOL_SPEC.fullmatch(text):
         raise ConfigError(
