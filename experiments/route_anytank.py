@@ -50,13 +50,6 @@ from aftir_rl.rl.route_policy import (
 HELD_OUT_WINGS = 900_000
 
 
-def score(
-    env: ArmRouteEnv, policy: RoutePolicy, jobs: list[Any], budgets: list[int]
-) -> dict[str, Any]:
-    """Greedy success, and best first within each of ``budgets``, on ``jobs`` in ``env``."""
-    return route_success([env], policy, jobs, budgets)
-
-
 def pooled(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Rows of equal weight per target, summed into one."""
     n = sum(r["targets"] for r in rows)
@@ -78,24 +71,25 @@ def evaluate(policy: RoutePolicy, args: argparse.Namespace) -> dict[str, Any]:
     for w in range(args.wings):
         env = ArmRouteEnv(tank=f"wing:3:{HELD_OUT_WINGS + w}")
         seeds = list(range(3_000_000 + n * w, 3_000_000 + n * (w + 1)))
-        rows.append(score(env, policy, seeds, args.budgets))
+        rows.append(route_success([env], policy, seeds, args.budgets))
     out["held_out_wings"] = pooled(rows)
     rows = []
     for w in range(args.round_wings):  # the round family: every way through a rib round
         env = ArmRouteEnv(tank=f"round:3:{HELD_OUT_WINGS + w}")
         seeds = list(range(3_000_000 + n * w, 3_000_000 + n * (w + 1)))
-        rows.append(score(env, policy, seeds, args.budgets))
+        rows.append(route_success([env], policy, seeds, args.budgets))
     if rows:
         out["held_out_round_wings"] = pooled(rows)
     seeds = list(range(3_000_000, 3_000_000 + args.eval))
-    out["b737"] = score(ArmRouteEnv(), policy, seeds, args.budgets)
+    out["b737"] = route_success([ArmRouteEnv()], policy, seeds, args.budgets)
     for bay in (1, 2):
-        out[f"b737_bay{bay}"] = score(ArmRouteEnv(bay=bay), policy, seeds, args.budgets)
+        out[f"b737_bay{bay}"] = route_success([ArmRouteEnv(bay=bay)], policy, seeds, args.budgets)
     with tempfile.TemporaryDirectory() as folder:
         for s, (name, tank) in enumerate(scene_tanks(Path(folder)).items()):
             spec = SCENES[name] if isinstance(SCENES[name], str) else tank.source
-            targets = [t for t in suite_targets(tank, args.suite_targets, seed=s)]
-            out[f"suite_{name}"] = score(ArmRouteEnv(tank=str(spec)), policy, targets, args.budgets)
+            targets = list(suite_targets(tank, args.suite_targets, seed=s))
+            env = ArmRouteEnv(tank=str(spec))
+            out[f"suite_{name}"] = route_success([env], policy, targets, args.budgets)
     out["seconds"] = round(time.perf_counter() - start, 1)
     return out
 

@@ -444,15 +444,15 @@ def _evaluate(args: argparse.Namespace) -> int:
     jobs = list(range(args.seed, args.seed + args.random))
     for tank in args.tank or [None]:
         specs = pool_specs(tank)
-        if specs is None:
+        if specs is None:  # one tank, checked as plan checks it (the policy's, if not given)
             env, policy, kwargs = _plan_env(argparse.Namespace(tank=tank, bay=args.bay), folder)
             envs = [env]
             tank = f"{kwargs.get('tank', DEFAULT_TANK)}, {_bay_words(kwargs.get('bay'))}"
         else:  # a pool: target i in its tank i·K/N
             check_tank(tank)
             envs = [ArmRouteEnv(**_env_kwargs(spec, args.bay)) for spec in specs]
-            policy = _loaded(folder, envs[0])
         rows.append((tank, envs, jobs))
+    policy = _loaded(folder, rows[0][1][0])  # every route env reads the same observation
     with tempfile.TemporaryDirectory() as scratch:
         if args.suite:
             for s, (name, tank) in enumerate(scene_tanks(Path(scratch)).items()):
