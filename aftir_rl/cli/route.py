@@ -1,6 +1,6 @@
 """``aftir route train|plan``: route policies, taught by the planner, planning motions.
 
-A thin command line over :mod:`aftir_rl.rl.route_policy` on ``AFTIR-ArmRoute-v0`` (the arm's
+A thin command line over :mod:`aftir_rl.rl.route_policy` on ``AFTIR-ArmRoute-v1`` (the arm's
 route decided a section at a time):
 
 - ``aftir route train -o DIR``: clone a policy from the planner's routes to ``--routes``
@@ -53,7 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The options of ``aftir route``."""
     parser = OneLineParser(
         prog="aftir route",
-        description="Route policies on AFTIR-ArmRoute-v0: train one from the planner, plan "
+        description="Route policies on AFTIR-ArmRoute-v1: train one from the planner, plan "
         "motions with one, or evaluate one across tanks.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -213,7 +213,8 @@ def _train(args: argparse.Namespace) -> int:
 
     from aftir_rl.core.files import check_output, check_writable_dir, write_json
     from aftir_rl.envs.ftl.pool import pool_specs, stream_spec
-    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.envs.ftl.route_env import route_env
+    from aftir_rl.envs.registration import ROUTE
     from aftir_rl.rl.level_replay import LevelReplay
     from aftir_rl.rl.route_policy import save_route_policy, train_route_policy
 
@@ -226,7 +227,7 @@ def _train(args: argparse.Namespace) -> int:
     if args.tank_episodes is not None:
         env_kwargs["tank_episodes"] = args.tank_episodes
     torch.set_num_threads(1)
-    env = ArmRouteEnv(**env_kwargs)
+    env = route_env(ROUTE, **env_kwargs)
     out = Path(args.output)
     for name in (POLICY_FILE, "config.json"):
         if check_output(out / name) is not None:
@@ -261,9 +262,10 @@ def _train(args: argparse.Namespace) -> int:
     )
     bar.close()
     config = {
-        "env_id": "AFTIR-ArmRoute-v0",
+        "env_id": ROUTE,
         "env_kwargs": env_kwargs,
         "leads": list(env.leads),
+        "max_change": env.settings.max_change,
         "routes": args.routes,
         "rounds": args.rounds,
         "updates": args.updates,
@@ -299,15 +301,24 @@ def _bay_words(bay: int | None) -> str:
 
 
 def _trained_on(folder: Path) -> dict[str, Any]:
-    """What a policy's config says it was trained on: a generated tank or the reference, a bay.
+    """What a policy's config says it was trained on: the env's version, a tank, a bay.
 
-    A tank the config names by path is not read (a shared folder cannot point at a file):
-    ``plan --tank`` names it.
+    The tank is a generated one or the reference; one the config names by path is not read
+    (a shared folder cannot point at a file): ``plan --tank`` names it.
     """
     from aftir_rl.core.files import read_json
     from aftir_rl.core.tank.loading import names_generated
+    from aftir_rl.envs.registration import ROUTE_IDS, registered_env_id
 
     config = read_json(folder / "config.json", "route policy config")
+    where = f"{folder}/config.json"
+    try:
+        env_id = registered_env_id(
+            config.get("env_id") if isinstance(config, dict) else None, where, ROUTE_IDS
+        )
+    except ConfigError:
+        ids = ", ".join(ROUTE_IDS)
+        raise CheckpointError(f"{where}: no env_id of a route env ({ids})") from None
     kwargs = config.get("env_kwargs") if isinstance(config, dict) else None
     if not isinstance(kwargs, dict) or not set(kwargs) <= {"tank", "bay", "tank_episodes"}:
         raise CheckpointError(f"{folder}/config.json: no env_kwargs of a route policy")
@@ -316,7 +327,7 @@ def _trained_on(folder: Path) -> dict[str, Any]:
         raise CheckpointError(f"{folder}/config.json: its bay is not 1 to 99")
     if tank is not None and not (isinstance(tank, str) and names_generated(tank)):
         tank = "a tank file"  # named by --tank
-    return {"tank": tank, "bay": bay}
+    return {"env_id": env_id, "tank": tank, "bay": bay}
 
 
 def _name(target: Any) -> str:
@@ -327,7 +338,7 @@ def _plan_env(args: argparse.Namespace, folder: Path) -> tuple[Any, Any, dict[st
     """The env to plan in (``--tank`` and ``--bay``, else the policy's), the policy, its kwargs."""
     from aftir_rl.core.config import error_line
     from aftir_rl.envs.ftl.pool import pool_specs, stream_spec
-    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.envs.ftl.route_env import route_env
 
     trained = _trained_on(folder)
     tank = args.tank if args.tank is not None else trained["tank"]
@@ -340,7 +351,7 @@ def _plan_env(args: argparse.Namespace, folder: Path) -> tuple[Any, Any, dict[st
     bay = args.bay if args.bay is not None else (trained["bay"] if args.tank is None else None)
     env_kwargs = _env_kwargs(tank, bay)
     try:
-        env = ArmRouteEnv(**env_kwargs)
+        env = route_env(trained["env_id"], **env_kwargs)
     except ConfigError as exc:  # a bay the config names that the tank does not have
         if args.tank is not None or args.bay is not None:
             raise
@@ -433,7 +444,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     from aftir_rl.core.files import check_output, write_json
     from aftir_rl.core.shipped import DEFAULT_TANK
     from aftir_rl.envs.ftl.pool import pool_specs
-    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.envs.ftl.route_env import route_env
     from aftir_rl.experiments.suite import SCENES, scene_tanks, suite_targets
     from aftir_rl.rl.route_policy import route_success
 
@@ -450,7 +461,8 @@ def _evaluate(args: argparse.Namespace) -> int:
             tank = f"{kwargs.get('tank', DEFAULT_TANK)}, {_bay_words(kwargs.get('bay'))}"
         else:  # a pool: target i in its tank i·K/N
             check_tank(tank)
-            envs = [ArmRouteEnv(**_env_kwargs(spec, args.bay)) for spec in specs]
+            env_id = _trained_on(folder)["env_id"]
+            envs = [route_env(env_id, **_env_kwargs(spec, args.bay)) for spec in specs]
         rows.append((tank, envs, jobs))
     policy = _loaded(folder, rows[0][1][0])  # every route env reads the same observation
     with tempfile.TemporaryDirectory() as scratch:
@@ -458,7 +470,8 @@ def _evaluate(args: argparse.Namespace) -> int:
             for s, (name, tank) in enumerate(scene_tanks(Path(scratch)).items()):
                 spec = SCENES[name] if isinstance(SCENES[name], str) else tank
                 targets = list(suite_targets(tank, args.random, seed=s))
-                rows.append((f"suite: {name}", [ArmRouteEnv(tank=spec)], targets))
+                env = route_env(_trained_on(folder)["env_id"], tank=spec)
+                rows.append((f"suite: {name}", [env], targets))
         bar = tqdm(
             total=sum(len(jobs) for _, _, jobs in rows) * (1 + len(args.budget)),
             unit="search",

@@ -22,6 +22,8 @@ __all__ = [
     "PREFIX",
     "REACH_REGION",
     "REGISTRATIONS",
+    "ROUTE",
+    "ROUTE_IDS",
     "bare_env_id",
     "register_envs",
     "registered_env_id",
@@ -29,6 +31,10 @@ __all__ = [
 
 #: The follow-the-leader arm env (:mod:`aftir_rl.envs.ftl`): the one that takes a tank or pool.
 ARM_FTL = "AFTIR-ArmFTL-v0"
+#: The route env (:mod:`aftir_rl.envs.ftl.route_env`), its latest version.
+ROUTE = "AFTIR-ArmRoute-v1"
+#: Every version of the route env, latest first.
+ROUTE_IDS = (ROUTE, "AFTIR-ArmRoute-v0")
 #: The prefix of an env id that ``gym.make`` imports this package by (``aftir_rl:ID``).
 PREFIX = "aftir_rl:"
 
@@ -63,9 +69,15 @@ REGISTRATIONS: dict[str, dict[str, Any]] = {
         "vector_entry_point": "aftir_rl.envs.ftl.pool_vector:make_vector_env",
         "max_episode_steps": 300,
     },
+    ROUTE: {
+        "entry_point": "aftir_rl.envs.ftl.route_env:ArmRouteEnv",
+        "max_episode_steps": 30,
+    },
+    # v0's leads and moves (before the deeper leads and sharper turns of v1)
     "AFTIR-ArmRoute-v0": {
         "entry_point": "aftir_rl.envs.ftl.route_env:ArmRouteEnv",
         "max_episode_steps": 30,
+        "kwargs": {"leads": (-20.0, -10.0, 0.0, 15.0, 30.0), "max_change": 0.75},
     },
 }
 

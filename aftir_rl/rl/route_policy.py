@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from aftir_rl.core.errors import CheckpointError, ConfigError, PlanningError
 from aftir_rl.envs.ftl.route_env import ROUTE_SETTINGS
-from aftir_rl.planning.ftl.route import plan_route
+from aftir_rl.planning.ftl.route import RouteSettings, plan_route
 from aftir_rl.planning.ftl.search import MAIN_VARIANTS
 from aftir_rl.rl.level_replay import LevelReplay
 from aftir_rl.rl.tensors import load_tensors, save_tensors
@@ -59,8 +59,17 @@ __all__ = [
 ]
 
 #: The teacher's search settings, tried in turn from the route as it is: the env's own, then
-#: the planner's next three.
+#: the planner's next three; each searches with the env's moves (its ``max_change``), so
+#: that the section it plans next is one of them.
 TEACHER_SETTINGS = (ROUTE_SETTINGS, *MAIN_VARIANTS[1:4])
+
+
+def _teacher_settings(env: ArmRouteEnv, leads: tuple[float, ...]) -> list[RouteSettings]:
+    """:data:`TEACHER_SETTINGS` with the env's moves and ``leads``."""
+    change = env.settings.max_change
+    return [replace(v, max_change=change, leads=leads) for v in TEACHER_SETTINGS]
+
+
 #: Width of the policy's two hidden layers.
 HIDDEN = 256
 #: The longest observation (and most actions) a saved policy may declare (the bay-2 env's: 192).
@@ -89,10 +98,9 @@ class RouteTeacher:
         self.queries += 1
         k, ok = env.route.n_route_sections, env.action_masks()
         label = None
-        for settings in TEACHER_SETTINGS if ok.any() else ():
+        for settings in _teacher_settings(env, (env.route.lead,)) if ok.any() else []:
             try:
                 prefix = env.route if k else None
-                settings = replace(settings, leads=(env.route.lead,))
                 route = plan_route(env.tank, env.target, None, settings, env.arm, prefix).route
             except PlanningError:
                 continue
@@ -125,9 +133,9 @@ class RouteTeacher:
     def _lead(self, env: ArmRouteEnv) -> int | None:
         start, first = time.perf_counter(), None
         self.queries += 1
-        for settings in TEACHER_SETTINGS:
+        for settings in _teacher_settings(env, env.leads):
             try:
-                found = plan_route(env.tank, env.target, None, replace(settings, leads=env.leads))
+                found = plan_route(env.tank, env.target, None, settings)
             except PlanningError:
                 continue
             first = int(np.argmin(np.abs(np.array(env.leads) - found.route.lead)))

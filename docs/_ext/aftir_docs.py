@@ -60,7 +60,7 @@ def _staged(env_id: str) -> tuple[Any, str]:
     choices to it (its online teacher's).
     """
     env = gym.make(env_id, render_mode="rgb_array")
-    if env_id == "AFTIR-ArmRoute-v0":
+    if env_id.startswith("AFTIR-ArmRoute-"):
         from aftir_rl.rl.route_policy import RouteTeacher
 
         teacher, route_env = RouteTeacher(), env.unwrapped

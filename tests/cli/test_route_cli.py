@@ -24,7 +24,8 @@ def policy_dir(tmp_path_factory):
 
 def test_train_writes_the_policy_and_its_config_and_never_replaces_them(policy_dir, capsys):
     config = json.loads((policy_dir / "config.json").read_text())
-    assert config["env_id"] == "AFTIR-ArmRoute-v0" and config["env_kwargs"] == {"bay": 2}
+    assert config["env_id"] == "AFTIR-ArmRoute-v1" and config["env_kwargs"] == {"bay": 2}
+    assert config["leads"][:2] == [-40.0, -30.0] and config["max_change"] == 1.0
     assert config["routes"] == 4 and config["rows"][0]["states"] > 4
     before = (policy_dir / route.POLICY_FILE).read_bytes()
     capsys.readouterr()
@@ -94,7 +95,9 @@ def test_refused_command_lines_are_one_line(argv, message, tmp_path, capsys, mon
 @pytest.mark.parametrize(
     "config",
     [b"[]", b'{"env_kwargs": []}', b'{"env_kwargs": {"bay": "2"}}', b'{"env_kwargs": {"bay": 1.0}}',
-     b"\xff\xfe{", b"{" * 100_000, b'{"env_kwargs": {"bay": 3}}'],
+     b"\xff\xfe{", b"{" * 100_000, b'{"env_kwargs": {"bay": 3}}',
+     b'{"env_id": "AFTIR-Tank-v0", "env_kwargs": {"bay": 2}}',
+     b'{"env_id": "os:AFTIR-ArmRoute-v1", "env_kwargs": {"bay": 2}}'],
 )  # fmt: skip
 def test_a_policy_folder_with_a_broken_config_is_one_line(config, tmp_path, capsys):
     (tmp_path / "P").mkdir()
@@ -104,6 +107,21 @@ def test_a_policy_folder_with_a_broken_config_is_one_line(config, tmp_path, caps
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "config" in err and "Traceback" not in err
     assert not (tmp_path / "X").exists()
+
+
+def test_a_policy_of_the_first_version_plans_in_that_version(policy_dir, tmp_path, capsys):
+    """A v0 policy's config names AFTIR-ArmRoute-v0: its leads and moves, not v1's."""
+    import argparse
+
+    old = tmp_path / "v0"
+    old.mkdir()
+    config = json.loads((policy_dir / "config.json").read_text())
+    (old / "config.json").write_text(json.dumps({**config, "env_id": "AFTIR-ArmRoute-v0"}))
+    (old / route.POLICY_FILE).write_bytes((policy_dir / route.POLICY_FILE).read_bytes())
+    env, _, _ = route._plan_env(argparse.Namespace(tank=None, bay=None), old)
+    assert env.leads == (-20.0, -10.0, 0.0, 15.0, 30.0) and env.settings.max_change == 0.75
+    new, _, _ = route._plan_env(argparse.Namespace(tank=None, bay=None), policy_dir)
+    assert new.leads[:2] == (-40.0, -30.0) and new.settings.max_change == 1.0
 
 
 def test_a_policy_for_another_observation_is_refused(policy_dir, tmp_path, capsys):
@@ -220,7 +238,7 @@ def test_a_tank_or_bay_training_cannot_use_is_one_line(argv, message, tmp_path, 
 def test_evaluate_prints_one_row_per_tank_and_pool_as_the_search_scores_them(tmp_path, capsys):
     """Each row is route_success of the policy on its targets (a pool's spread over its wings);
     the JSON holds the same; an existing --json is refused before any search."""
-    from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+    from aftir_rl.envs.ftl.route_env import route_env
     from aftir_rl.rl.route_policy import load_route_policy, route_success
 
     out = tmp_path / "eval.json"
@@ -232,8 +250,11 @@ def test_evaluate_prints_one_row_per_tank_and_pool_as_the_search_scores_them(tmp
     names = [row.split(" | ")[0] for row in lines[2:]]
     assert names == ["| b737_center, the whole tank", "| wing:2:5-6"]
     rows = json.loads(out.read_text())["rows"]
-    policy = load_route_policy(route.route_policy_dir(None, "route-bay2") / route.POLICY_FILE)
-    envs = [[ArmRouteEnv(tank="b737_center")], [ArmRouteEnv(tank=f"wing:2:{s}") for s in (5, 6)]]
+    folder = route.route_policy_dir(None, "route-bay2")
+    policy = load_route_policy(folder / route.POLICY_FILE)
+    env_id = json.loads((folder / "config.json").read_text())["env_id"]  # its version's env
+    envs = [[route_env(env_id, tank="b737_center")]]
+    envs.append([route_env(env_id, tank=f"wing:2:{s}") for s in (5, 6)])
     for row, env in zip(rows, envs, strict=True):
         expected = route_success(env, policy, [11, 12, 13], [5, 20])
         assert {k: v for k, v in row.items() if k != "tanks"} == expected

@@ -25,7 +25,7 @@ def test_check_env(env_id):
 
 #: Random steps per rollout; the route env's episodes mostly end at a random first action
 #: (not a lead), and each reset weighs every lead with the planner's moves: fewer steps.
-ROLLOUT_STEPS = {"AFTIR-ArmRoute-v0": 30}
+ROLLOUT_STEPS = {"AFTIR-ArmRoute-v1": 30, "AFTIR-ArmRoute-v0": 30}
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)

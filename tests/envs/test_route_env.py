@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pickle
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -42,20 +43,26 @@ def test_targets_are_the_ftl_envs_for_the_same_seeds(env):
 
 @pytest.mark.parametrize("seed", [3_000_000, 3_000_001, 3_000_002])
 def test_the_planners_moves_reach_the_target_and_its_motion_keeps_the_margin(env, seed):
-    """The planner's own route, its moves taken one by one: the env closes it onto the target,
-    and the deployed motion keeps 1 cm by python-fcl at every posture."""
+    """The planner's route, a section at a time: from each route the env is at, the move
+    nearest the next section of the planner's continuation (lead and sections kept); the env
+    closes it onto the target, and the deployed motion keeps 1 cm by python-fcl at every
+    posture."""
     env.reset(seed=seed)
     route = plan_route(env.tank, env.target, None, ROUTE_SETTINGS).route
+    lead = int(np.argmin(np.abs(np.array(ROUTE_LEADS) - route.lead)))
+    _, reward, terminated, _, info = env.step(lead)
     moves = move_set(ROUTE_SETTINGS)
-    _, reward, terminated, _, info = env.step(ROUTE_LEADS.index(route.lead))
-    for k in range(route.n_route_sections):
-        last = route.kappa[k - 1] if k else np.zeros(2)
-        move = int(np.argmin(np.abs(moves + last - route.kappa[k]).sum(axis=1)))
-        if not env.action_masks()[move]:
-            break  # the route's last sections come from the closing, not from moves
-        _, reward, terminated, truncated, info = env.step(move)
-        if terminated or truncated:
-            break
+    settings = replace(ROUTE_SETTINGS, leads=(ROUTE_LEADS[lead],))
+    while not terminated:
+        k = env.route.n_route_sections
+        route = plan_route(
+            env.tank, env.target, None, settings, env.arm, env.route if k else None
+        ).route
+        last = env.route.kappa[-1] if k else np.zeros(2)
+        far = np.abs(moves + last - route.kappa[k]).sum(axis=1)
+        _, reward, terminated, _, info = env.step(
+            int(np.argmin(np.where(env.action_masks(), far, np.inf)))
+        )
     assert info["is_success"], "the env closes the planner's route before its moves run out"
     assert reward == 1.0
     final = env.final_route()
@@ -117,6 +124,32 @@ def test_the_first_action_chooses_the_lead(env):
             ArmRouteEnv(bay=2, leads=bad)
 
 
+def test_each_version_has_its_leads_and_moves():
+    """v1: 7 leads and moves changing κ by 1/3, 2/3 and all of 1.0 rad; v0 (registered with
+    its kwargs): 5 leads and 0.75 rad. ``route_env`` makes either; nothing else is a version."""
+    import gymnasium as gym
+
+    from aftir_rl.envs.ftl.route_env import route_env
+
+    for env_id, leads, change in [
+        ("AFTIR-ArmRoute-v1", ROUTE_LEADS, 1.0),
+        ("AFTIR-ArmRoute-v0", (-20.0, -10.0, 0.0, 15.0, 30.0), 0.75),
+    ]:
+        for env in (gym.make(env_id, bay=2).unwrapped, route_env(env_id, bay=2)):
+            assert env.leads == leads and env.settings.max_change == change
+            sizes = np.linalg.norm(env.moves, axis=1)
+            np.testing.assert_allclose(
+                sorted(set(np.round(sizes, 9))), [0, change / 3, 2 * change / 3, change]
+            )
+            assert env.observation_space.shape == (192,) and env.action_space.n == 25
+    assert ROUTE_LEADS[:2] == (-40.0, -30.0)
+    with pytest.raises(ConfigError, match="env_id must be one of"):
+        route_env("AFTIR-ArmFTL-v0")
+    for bad in (0, -1.0, 4.0, True, "1", float("nan")):
+        with pytest.raises(ConfigError, match="max_change"):
+            ArmRouteEnv(bay=2, max_change=bad)
+
+
 def test_a_closing_whose_motion_loses_the_margin_is_not_a_success(env, monkeypatch):
     """The planner's route closes, but with its deployment refused the episode goes on."""
     env.reset(seed=3_000_000)
@@ -130,7 +163,7 @@ def test_a_closing_whose_motion_loses_the_margin_is_not_a_success(env, monkeypat
 
     monkeypatch.setattr(route_env, "deploy_route", refused)
     env.reset(seed=3_000_000)
-    _, _, terminated, _, info = env.step(ROUTE_LEADS.index(route.lead))
+    _, _, terminated, _, info = env.step(int(np.argmin(np.abs(np.array(ROUTE_LEADS) - route.lead))))
     moves = move_set(ROUTE_SETTINGS)
     for k in range(route.n_route_sections):
         if terminated:

@@ -1,4 +1,4 @@
-"""``AFTIR-ArmRoute-v0``: the follow-the-leader arm decided a route section at a time.
+"""``AFTIR-ArmRoute-v1``: the follow-the-leader arm decided a route section at a time.
 
 The decision level of the route planner: the first action chooses the route's lead (how far the
 arm travels straight above the floor, or bends inside the panel's guide, before its first
@@ -21,6 +21,7 @@ levels are compared on the same targets.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any, cast
 
 import gymnasium as gym
@@ -31,6 +32,7 @@ from aftir_rl.core.errors import ConfigError, InvalidActionError
 from aftir_rl.core.robot import body_points, forward_kinematics, kappa_to_angles
 from aftir_rl.envs.ftl.env import ArmFTLEnv
 from aftir_rl.envs.ftl.pool import stream_spec
+from aftir_rl.envs.registration import REGISTRATIONS, ROUTE, ROUTE_IDS
 from aftir_rl.planning.ftl.model import Route
 from aftir_rl.planning.ftl.plan import MotionPlan, deploy_route
 from aftir_rl.planning.ftl.route import (
@@ -40,14 +42,30 @@ from aftir_rl.planning.ftl.route import (
     route_moves,
 )
 
-__all__ = ["ArmRouteEnv", "ROUTE_LEADS", "ROUTE_SETTINGS", "STREAM_TANK_EPISODES"]
+__all__ = [
+    "ArmRouteEnv",
+    "ROUTE_LEADS",
+    "ROUTE_MAX_CHANGE",
+    "ROUTE_SETTINGS",
+    "STREAM_TANK_EPISODES",
+    "route_env",
+]
 
-#: The moves and clearance rule of the route env: the planner's first search setting (its
-#: ``leads`` are not used: the env's ``leads`` are the first decision).
-ROUTE_SETTINGS = RouteSettings(clearance_weight=1.0, change_weight=20.0, leads=(0.0,))
+#: The largest change of ``κ`` between neighbouring sections [rad] of the env's moves: turns
+#: as sharp as the planner's last resorts' first (its main searches change at most 0.75).
+ROUTE_MAX_CHANGE = 1.0
 
-#: The leads [cm] the first action chooses among: the route search's own.
-ROUTE_LEADS: tuple[float, ...] = RouteSettings().leads
+#: The moves and clearance rule of the route env: the planner's first search setting with
+#: :data:`ROUTE_MAX_CHANGE` (its ``leads`` are not used: the env's ``leads`` are the first
+#: decision).
+ROUTE_SETTINGS = RouteSettings(
+    clearance_weight=1.0, change_weight=20.0, leads=(0.0,), max_change=ROUTE_MAX_CHANGE
+)
+
+#: The leads [cm] the first action chooses among: the route search's own and two deeper in
+#: the panel's guide (those of its last resorts: the arm leaves the panel at a slant, for
+#: targets low and beside it).
+ROUTE_LEADS: tuple[float, ...] = (-40.0, -30.0, *RouteSettings().leads)
 
 #: Episodes in each wing of a stream unless ``tank_episodes`` says otherwise.
 STREAM_TANK_EPISODES = 5
@@ -97,7 +115,9 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
     ## Arguments
 
     ``settings`` (:data:`ROUTE_SETTINGS`): the route search's knobs (moves, margin, slack;
-    the motion keeps ``settings.margin``); ``leads`` (:data:`ROUTE_LEADS`, at most 25): the
+    the motion keeps ``settings.margin``); ``max_change`` (None: ``settings.max_change``, 1.0
+    rad): the largest move, the moves' changes being a third, two thirds and all of it;
+    ``leads`` (:data:`ROUTE_LEADS`, at most 25): the
     first decision's choices, ``(0.0,)`` for none; ``render_mode`` (``"rgb_array"``: the tank,
     the arm along the route, the target); every other keyword argument goes to the inner
     ``AFTIR-ArmFTL-v0`` (``tank``, ``bay``, ``target``...). ``tank`` may be any one tank, a pool
@@ -112,6 +132,9 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
 
     ## Version History
 
+    - v1: leads of -40 and -30 cm as well, moves up to 1.0 rad (v0: 0.75); the same
+      observation and action spaces. ``AFTIR-ArmRoute-v0`` is this class with v0's leads
+      and moves (:func:`route_env` makes either).
     - v0: initial version.
     """
 
@@ -123,6 +146,7 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
         leads: Sequence[float] = ROUTE_LEADS,
         render_mode: str | None = None,
         tank_episodes: int | None = None,
+        max_change: float | None = None,
         **kwargs: Any,
     ) -> None:
         self.render_mode = render_mode
@@ -147,6 +171,14 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
             self.tanks_met = 1
         self.inner = ArmFTLEnv(**self._inner_kwargs)
         self.tank, self.arm = self.inner.tank, self.inner.tank.arm
+        if max_change is not None:
+            if (
+                isinstance(max_change, bool)
+                or not isinstance(max_change, (int, float))
+                or not (0 < max_change <= np.pi)
+            ):
+                raise ConfigError(f"max_change must be in (0, pi] rad, got {max_change!r}")
+            settings = replace(settings, max_change=float(max_change))
         self.settings = settings
         self.moves = move_set(settings)
         n_moves = len(self.moves)
@@ -320,3 +352,18 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
         tail = [float(self.choosing), route.lead / 100.0, *end]
         parts = [b.observation()[0], slots.reshape(-1), tail]
         self._obs = np.clip(np.concatenate(parts), -10.0, 10.0).astype(np.float32)
+
+
+def route_env(env_id: str = ROUTE, **kwargs: Any) -> ArmRouteEnv:
+    """The route env registered as ``env_id`` (any of :data:`ROUTE_IDS`), unwrapped.
+
+    ``kwargs`` (``tank``, ``bay``...) go to :class:`ArmRouteEnv` after the id's registered
+    ones (v0's leads and moves): the env a policy of that version was taught in.
+
+    Raises:
+        ConfigError: ``env_id`` is not a version of the route env.
+
+    """
+    if env_id not in ROUTE_IDS:
+        raise ConfigError(f"env_id must be one of {', '.join(ROUTE_IDS)}, got {env_id!r}")
+    return ArmRouteEnv(**{**REGISTRATIONS[env_id].get("kwargs", {}), **kwargs})
