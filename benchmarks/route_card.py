@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,7 @@ import torch
 
 from aftir_rl.cli.route import POLICY_FILE
 from aftir_rl.core.files import read_json, write_json
-from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+from aftir_rl.envs.ftl.route_env import ArmRouteEnv, route_env
 from aftir_rl.experiments.bench import machine_facts
 from aftir_rl.rl.route_policy import RoutePolicy, load_route_policy, route_search
 
@@ -76,17 +77,18 @@ def main() -> None:
     folder = Path(args.folder)
     config = read_json(folder / "config.json", "route policy config")
     kwargs = config["env_kwargs"]
+    make = partial(route_env, config["env_id"])  # the env of the policy's version
     policy = load_route_policy(folder / POLICY_FILE)
     seeds = range(args.seed, args.seed + args.targets)
     wings = "tank" in kwargs
     if wings:  # tested in unseen tanks: held-out wings, and the 737 tank it never met
         tests = {
-            family: [ArmRouteEnv(tank=f"{kind}:3:{args.wing_seed + w}") for w in range(args.wings)]
+            family: [make(tank=f"{kind}:3:{args.wing_seed + w}") for w in range(args.wings)]
             for family, kind in (("wings", "wing"), ("round_wings", "round"))
         }
-        tests["b737"] = [ArmRouteEnv()]
+        tests["b737"] = [make()]
     else:
-        tests = {"bay": [ArmRouteEnv(bay=kwargs["bay"])]}
+        tests = {"bay": [make(bay=kwargs["bay"])]}
     card = {
         "name": args.name,
         "env_id": config["env_id"],

@@ -1,13 +1,14 @@
 """One route policy for any tank: taught by the planner on a stream of generated wings.
 
 Run from a checkout: ``python experiments/route_anytank.py --seeds 0 1 --json OUT.json``.
-:func:`~aftir_rl.rl.route_policy.train_route_policy` clones a policy on ``AFTIR-ArmRoute-v0``
-with ``tank="wing:BAYS:FIRST+"`` (``--family round``: ``round:BAYS:FIRST+``; ``mix``:
-``mix:FIRST+``, both families with 2 to 5 bays): a stream of generated wings,
-``--tank-episodes`` routes in each (targets anywhere in the wing), ``--tanks`` visits in all,
-with ``--replay P`` level replay (:class:`~aftir_rl.rl.level_replay.LevelReplay`); the stream
-of seed ``s`` starts at wing ``10,000 + 100,000·s``. ``--policy`` evaluates a policy trained
-already (its weights, or the folder ``aftir route train`` wrote). The policy is then
+:func:`~aftir_rl.rl.route_policy.train_route_policy` clones a policy on ``AFTIR-ArmRoute-v1``
+(``--env-id`` another version) with ``tank="wing:BAYS:FIRST+"`` (``--family round``:
+``round:BAYS:FIRST+``; ``mix``: ``mix:FIRST+``, both families with 2 to 5 bays): a stream of
+generated wings, ``--tank-episodes`` routes in each (targets anywhere in the wing), ``--tanks``
+visits in all, with ``--replay P`` level replay
+(:class:`~aftir_rl.rl.level_replay.LevelReplay`); the stream of seed ``s`` starts at wing
+``10,000 + 100,000·s``. ``--policy`` evaluates a policy trained already (its weights, or the
+folder ``aftir route train`` wrote: its config names the env's version). The policy is then
 evaluated, greedily and best first within each of ``--budgets`` env steps
 (:func:`~aftir_rl.rl.route_policy.route_success`), on tanks no training used:
 
@@ -29,12 +30,14 @@ import argparse
 import json
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import torch
 
-from aftir_rl.envs.ftl.route_env import STREAM_TANK_EPISODES, ArmRouteEnv
+from aftir_rl.envs.ftl.route_env import STREAM_TANK_EPISODES, route_env
+from aftir_rl.envs.registration import ROUTE, ROUTE_IDS
 from aftir_rl.experiments.bench import env_steps_per_second, machine_facts
 from aftir_rl.experiments.suite import SCENES, scene_tanks, suite_targets
 from aftir_rl.rl.level_replay import LevelReplay
@@ -68,27 +71,29 @@ def evaluate(policy: RoutePolicy, args: argparse.Namespace) -> dict[str, Any]:
     out: dict[str, Any] = {}
     rows = []
     n = args.wing_targets
+    make = partial(route_env, args.env_id)  # the env of the policy's version
+
     for w in range(args.wings):
-        env = ArmRouteEnv(tank=f"wing:3:{HELD_OUT_WINGS + w}")
+        env = make(tank=f"wing:3:{HELD_OUT_WINGS + w}")
         seeds = list(range(3_000_000 + n * w, 3_000_000 + n * (w + 1)))
         rows.append(route_success([env], policy, seeds, args.budgets))
     out["held_out_wings"] = pooled(rows)
     rows = []
     for w in range(args.round_wings):  # the round family: every way through a rib round
-        env = ArmRouteEnv(tank=f"round:3:{HELD_OUT_WINGS + w}")
+        env = make(tank=f"round:3:{HELD_OUT_WINGS + w}")
         seeds = list(range(3_000_000 + n * w, 3_000_000 + n * (w + 1)))
         rows.append(route_success([env], policy, seeds, args.budgets))
     if rows:
         out["held_out_round_wings"] = pooled(rows)
     seeds = list(range(3_000_000, 3_000_000 + args.eval))
-    out["b737"] = route_success([ArmRouteEnv()], policy, seeds, args.budgets)
+    out["b737"] = route_success([make()], policy, seeds, args.budgets)
     for bay in (1, 2):
-        out[f"b737_bay{bay}"] = route_success([ArmRouteEnv(bay=bay)], policy, seeds, args.budgets)
+        out[f"b737_bay{bay}"] = route_success([make(bay=bay)], policy, seeds, args.budgets)
     with tempfile.TemporaryDirectory() as folder:
         for s, (name, tank) in enumerate(scene_tanks(Path(folder)).items()):
             spec = SCENES[name] if isinstance(SCENES[name], str) else tank.source
             targets = list(suite_targets(tank, args.suite_targets, seed=s))
-            env = ArmRouteEnv(tank=str(spec))
+            env = make(tank=str(spec))
             out[f"suite_{name}"] = route_success([env], policy, targets, args.budgets)
     out["seconds"] = round(time.perf_counter() - start, 1)
     return out
@@ -102,7 +107,7 @@ def run_seed(args: argparse.Namespace, seed: int) -> dict[str, Any]:
         row = {"seed": seed, "policy": args.policy}
         if folder.is_dir():
             config = json.loads((folder / "config.json").read_text())
-            kwargs = config["env_kwargs"]
+            args.env_id, kwargs = config["env_id"], config["env_kwargs"]
             episodes = kwargs.get("tank_episodes", STREAM_TANK_EPISODES)
             met = config.get("tanks_met") or -(-config["routes"] // episodes)
             row.update(stream=kwargs["tank"], wings_met=met, minutes=config["minutes"])
@@ -112,7 +117,7 @@ def run_seed(args: argparse.Namespace, seed: int) -> dict[str, Any]:
         print(json.dumps(row), flush=True)
         return row
     stream = f"mix:{first}+" if args.family == "mix" else f"{args.family}:{args.bays}:{first}+"
-    env = ArmRouteEnv(tank=stream, tank_episodes=args.tank_episodes)
+    env = route_env(args.env_id, tank=stream, tank_episodes=args.tank_episodes)
     start = time.perf_counter()
     policy, stats = train_route_policy(
         env,
@@ -141,6 +146,7 @@ def main() -> None:
     """Train each seed on its stream, evaluate; print a JSON line per seed."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--env-id", choices=ROUTE_IDS, default=ROUTE, help="the route env")
     parser.add_argument(
         "--family", choices=("wing", "round", "mix"), default="wing", help="the stream's wings"
     )
@@ -179,7 +185,7 @@ def main() -> None:
             "recipe": f"route policy cloned on {args.tanks} visits of {args.tank_episodes} routes "
             f"to streamed wings ({args.family}, {'2-5' if args.family == 'mix' else args.bays} "
             "bays)" + (f", level replay {args.replay}" if args.replay else ""),
-            "env_id": "AFTIR-ArmRoute-v0",
+            "env_id": args.env_id,
             "budgets": args.budgets,
             "machine": machine_facts(),
             "options": vars(args),

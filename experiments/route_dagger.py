@@ -2,17 +2,17 @@
 
 Run from a checkout: ``python experiments/route_dagger.py --seeds 0 1 2 --json OUT.json`` (about 4
 minutes per seed on 2 cores with the defaults). :func:`~aftir_rl.rl.route_policy.train_route_policy`
-clones a policy (a 2 x 256 MLP over ``AFTIR-ArmRoute-v0``'s observation, logits over its 25
-actions, the closed ones masked) from the planner's routes to ``--routes`` training targets,
-then runs ``--rounds`` DAgger rounds (each the policy's episodes to ``--routes`` new targets,
-every state labelled by the planner's continuation). After each round the policy is
-evaluated on ``--eval`` held-out targets of the bay (reset seeds ``--eval-seed``.., the ones
-``aftir evaluate --random N --seed 3000000`` draws), greedily and best first within
-``--budget`` env steps (:func:`~aftir_rl.rl.route_policy.route_search`); a success is a closed
-route whose motion keeps 1 cm along its whole length (python-fcl). The last round also
-evaluates the four reference corners (bay 2) and says where the greedy failures go wrong: the
-first decision after which the teacher, followed from there, no longer reaches the target.
-Seeds: training targets 10,000,000 + 100,000·seed.., torch and the batch order from the seed.
+clones a policy (a 2 x 256 MLP over ``AFTIR-ArmRoute-v1``'s observation, ``--env-id`` another
+version; logits over its 25 actions, the closed ones masked) from the planner's routes to
+``--routes`` training targets, then runs ``--rounds`` DAgger rounds (each the policy's episodes to
+``--routes`` new targets, every state labelled by the planner's continuation). After each round the
+policy is evaluated on ``--eval`` held-out targets of the bay (reset seeds ``--eval-seed``.., the
+ones ``aftir evaluate --random N --seed 3000000`` draws), greedily and best first within
+``--budget`` env steps (:func:`~aftir_rl.rl.route_policy.route_search`); a success is a closed route
+whose motion keeps 1 cm along its whole length (python-fcl). The last round also evaluates the four
+reference corners (bay 2) and says where the greedy failures go wrong: the first decision after
+which the teacher, followed from there, no longer reaches the target. Seeds: training targets
+10,000,000 + 100,000·seed.., torch and the batch order from the seed.
 """
 
 from __future__ import annotations
@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from aftir_rl.envs.ftl.route_env import ArmRouteEnv
+from aftir_rl.envs.ftl.route_env import ArmRouteEnv, route_env
+from aftir_rl.envs.registration import ROUTE, ROUTE_IDS
 from aftir_rl.experiments.bench import env_steps_per_second, machine_facts
 from aftir_rl.rl.route_policy import (
     RoutePolicy,
@@ -70,7 +71,7 @@ def diagnose(env: ArmRouteEnv, policy: RoutePolicy, seeds: list[int]) -> dict[st
     the target (``lead``, ``section 1``...; ``start`` where it cannot from the empty route
     either), or ``at the end`` where it still could from the last route the policy left.
     """
-    teacher, where = RouteTeacher(), {}
+    teacher, where = RouteTeacher(), dict[str, int]()
     names = ["start", *(["lead"] if len(env.leads) > 1 else [])]
     for seed in seeds:
         env.reset(seed=seed)
@@ -92,7 +93,7 @@ def diagnose(env: ArmRouteEnv, policy: RoutePolicy, seeds: list[int]) -> dict[st
 
 def run_seed(args: argparse.Namespace, seed: int) -> dict[str, Any]:
     """Train one seed, evaluating each round; its rows."""
-    env, rows = ArmRouteEnv(bay=args.bay), []
+    env, rows = route_env(args.env_id, bay=args.bay), []
     held_out = range(args.eval_seed, args.eval_seed + args.eval)
 
     def after_round(r: int, policy: RoutePolicy, row: dict[str, Any]) -> None:
@@ -129,6 +130,7 @@ def main() -> None:
     """Train each seed, evaluate each round; print a JSON line per round."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--env-id", choices=ROUTE_IDS, default=ROUTE, help="the route env")
     parser.add_argument("--bay", type=int, default=2, choices=(1, 2))
     parser.add_argument("--routes", type=int, default=600, help="training targets per round")
     parser.add_argument("--rounds", type=int, default=0, help="DAgger rounds after cloning")
@@ -145,7 +147,7 @@ def main() -> None:
     if args.json:
         out = {
             "recipe": f"route policy, {args.routes} routes cloned, {args.rounds} DAgger rounds",
-            "env_id": "AFTIR-ArmRoute-v0",
+            "env_id": args.env_id,
             "bay": args.bay,
             "eval": {"targets": args.eval, "seed": args.eval_seed, "budget": args.budget},
             "machine": machine_facts(),
