@@ -151,7 +151,8 @@ def route_section(files: list[dict[str, Any]]) -> str:
     lines = [
         "## Route policies over seeds\n",
         "`python experiments/route_dagger.py --seeds 0 1 2 --bay B --json ...`: each seed clones "
-        "a policy of `AFTIR-ArmRoute-v0` from the planner's routes to its own training targets "
+        "a policy of the route env (the version each row names) from the planner's routes to its "
+        "own training targets "
         "(the planner as the teacher: its queries are in the minutes), then plays each "
         "held-out target greedily, and best first within a budget of env steps. Success: a "
         "closed route whose whole motion keeps 1 cm (python-fcl). Mean ± standard deviation "
@@ -165,7 +166,8 @@ def route_section(files: list[dict[str, Any]]) -> str:
         least = min(_last(r)["search"]["least_clearance_cm"] for r in runs)
         corners = [sum(_last(r).get("corners", [])) for r in runs]
         lines.append(
-            f"| {d['recipe']} | {d['bay']} | {len(runs)} | {e['targets']} (seeds {e['seed']}..) "
+            f"| {d['recipe']}, `{d['env_id']}` | {d['bay']} | {len(runs)} | "
+            f"{e['targets']} (seeds {e['seed']}..) "
             f"| {_mean_std([_last(r)['greedy']['success'] for r in runs], 100, '.1f')} | "
             f"{_mean_std([_last(r)['search']['success'] for r in runs], 100, '.1f')} | "
             f"{e['budget']} | {least:.2f} | "
@@ -197,7 +199,8 @@ def anytank_section(files: list[dict[str, Any]]) -> str:
     lines = [
         "## One route policy for any tank\n",
         "`python experiments/route_anytank.py --seeds 0 1 --json ...`: each seed clones a policy "
-        "of `AFTIR-ArmRoute-v0` on its own stream of generated wings (the planner as the "
+        "of the route env (the version each table names) on its own stream of generated wings "
+        "(the planner as the "
         "teacher; the recipe says which wings, and whether level replay chose some), then plays "
         "targets in tanks no training met: held-out 3-bay wings (default 20 with 10 targets "
         "each), held-out wings of the round family, the 737 tank (anywhere and per bay) and each "
@@ -207,7 +210,8 @@ def anytank_section(files: list[dict[str, Any]]) -> str:
     for d in files:
         b = d["budgets"]
         lines += [
-            f"{d['recipe']}; success in %, mean ± standard deviation over the seeds:\n",
+            f"{d['recipe']} (`{d['env_id']}`); success in %, mean ± standard deviation over the "
+            "seeds:\n",
             f"| tanks | targets | {' | '.join(['greedy', *(f'best first {k}' for k in b)])} | "
             "least clearance (cm) |",
             "|---|---:|" + "---:|" * (len(b) + 2),
