@@ -14,7 +14,7 @@ one new 3-bay wing, on a pool of 8 (seeds 910,000-910,007), and on the stream th
 those 8 (``wing:3:910000+``) moving on every 8, 32 or 128 episodes of a group's rows: steps/s,
 the wings met, and the share of the one wing's speed (each in a new process: every wing new, so
 each builds its guide's fields as training meets targets). Then the route policy's teaching
-(``AFTIR-ArmRoute-v0``, the planner labelling each route it follows, as ``aftir route train``
+(``AFTIR-ArmRoute-v1``, the planner labelling each route it follows, as ``aftir route train``
 clones): ``--routes`` routes in one new 3-bay wing, and on a stream moving on every 5 routes
 or every route, each in a new process: routes/s and the share of the one wing's.
 ``--tables costs``, ``training`` or ``route`` prints one part.

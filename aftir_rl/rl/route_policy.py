@@ -1,4 +1,4 @@
-"""Route policies for ``AFTIR-ArmRoute-v0``: taught by the planner, searched at inference.
+"""Route policies for ``AFTIR-ArmRoute-v1``: taught by the planner, searched at inference.
 
 The route env puts the learner where the route planner decides (the lead, then one route
 section at a time, the planner's closing placing the tip). Here:

@@ -410,7 +410,7 @@ def load_tank(tank: str | Path | Tank = DEFAULT_TANK) -> Tank:
     if STREAM_SPEC.fullmatch(text):
         raise ConfigError(
             f"tank {text!r} is a stream of generated wings: the batched AFTIR-ArmFTL-v0 and "
-            "AFTIR-ArmRoute-v0 move along it; everything else takes one tank, wing:BAYS:SEED"
+            "AFTIR-ArmRoute-v1 move along it; everything else takes one tank, wing:BAYS:SEED"
         )
     if POOL_SPEC.fullmatch(text):
         raise ConfigError(
