@@ -117,8 +117,8 @@ class ArmRouteEnv(gym.Env[NDArray[np.float32], np.int64]):
     ``settings`` (:data:`ROUTE_SETTINGS`): the route search's knobs (moves, margin, slack;
     the motion keeps ``settings.margin``); ``max_change`` (None: ``settings.max_change``, 1.0
     rad): the largest move, the moves' changes being a third, two thirds and all of it;
-    ``leads`` (:data:`ROUTE_LEADS`, at most 25): the
-    first decision's choices, ``(0.0,)`` for none; ``render_mode`` (``"rgb_array"``: the tank,
+    ``leads`` (:data:`ROUTE_LEADS`, at most 25): the first decision's choices, ``(0.0,)`` for
+    none; ``render_mode`` (``"rgb_array"``: the tank,
     the arm along the route, the target); every other keyword argument goes to the inner
     ``AFTIR-ArmFTL-v0`` (``tank``, ``bay``, ``target``...). ``tank`` may be any one tank, a pool
     ``"wing:BAYS:FIRST-LAST"`` (a wing drawn per episode, ``reset(options={"tank": k})``) or a
