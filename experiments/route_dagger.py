@@ -1,18 +1,19 @@
 """A route policy at the planner's decision level: cloned, DAgger, searched at inference.
 
-Run from a checkout: ``python experiments/route_dagger.py --seeds 0 1 2 --json OUT.json`` (about 4
-minutes per seed on 2 cores with the defaults). :func:`~aftir_rl.rl.route_policy.train_route_policy`
-clones a policy (a 2 x 256 MLP over ``AFTIR-ArmRoute-v1``'s observation, ``--env-id`` another
-version; logits over its 25 actions, the closed ones masked) from the planner's routes to
-``--routes`` training targets, then runs ``--rounds`` DAgger rounds (each the policy's episodes to
-``--routes`` new targets, every state labelled by the planner's continuation). After each round the
-policy is evaluated on ``--eval`` held-out targets of the bay (reset seeds ``--eval-seed``.., the
-ones ``aftir evaluate --random N --seed 3000000`` draws), greedily and best first within
-``--budget`` env steps (:func:`~aftir_rl.rl.route_policy.route_search`); a success is a closed route
-whose motion keeps 1 cm along its whole length (python-fcl). The last round also evaluates the four
-reference corners (bay 2) and says where the greedy failures go wrong: the first decision after
-which the teacher, followed from there, no longer reaches the target. Seeds: training targets
-10,000,000 + 100,000·seed.., torch and the batch order from the seed.
+Run from a checkout: ``python experiments/route_dagger.py --seeds 0 1 2 --json OUT.json`` (about 6.5
+minutes per seed in bay 2 on 2 cores with the defaults, 4.5 in bay 1).
+:func:`~aftir_rl.rl.route_policy.train_route_policy` clones a policy (a 2 x 256 MLP over
+``AFTIR-ArmRoute-v1``'s observation, ``--env-id`` another version; logits over its 25 actions, the
+closed ones masked) from the planner's routes to ``--routes`` training targets, then runs
+``--rounds`` DAgger rounds (each the policy's episodes to ``--routes`` new targets, every state
+labelled by the planner's continuation). After each round the policy is evaluated on ``--eval``
+held-out targets of the bay (reset seeds ``--eval-seed``.., the ones ``aftir evaluate --random N
+--seed 3000000`` draws), greedily and best first within ``--budget`` env steps
+(:func:`~aftir_rl.rl.route_policy.route_search`); a success is a closed route whose motion keeps 1
+cm along its whole length (python-fcl). The last round also evaluates the four reference corners
+(bay 2) and says where the greedy failures go wrong: the first decision after which the teacher,
+followed from there, no longer reaches the target. Seeds: training targets 10,000,000 +
+100,000·seed.., torch and the batch order from the seed.
 """
 
 from __future__ import annotations

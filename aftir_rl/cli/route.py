@@ -453,6 +453,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         raise ConfigError(f"{args.json}: exists; choose another --json")
     rows: list[tuple[str, list[Any], list[Any]]] = []  # name, envs, jobs
     jobs = list(range(args.seed, args.seed + args.random))
+    env_id = _trained_on(folder)["env_id"]  # the version the policy was taught in
     for tank in args.tank or [None]:
         specs = pool_specs(tank)
         if specs is None:  # one tank, checked as plan checks it (the policy's, if not given)
@@ -461,7 +462,6 @@ def _evaluate(args: argparse.Namespace) -> int:
             tank = f"{kwargs.get('tank', DEFAULT_TANK)}, {_bay_words(kwargs.get('bay'))}"
         else:  # a pool: target i in its tank i·K/N
             check_tank(tank)
-            env_id = _trained_on(folder)["env_id"]
             envs = [route_env(env_id, **_env_kwargs(spec, args.bay)) for spec in specs]
         rows.append((tank, envs, jobs))
     policy = _loaded(folder, rows[0][1][0])  # every route env reads the same observation
@@ -470,8 +470,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             for s, (name, tank) in enumerate(scene_tanks(Path(scratch)).items()):
                 spec = SCENES[name] if isinstance(SCENES[name], str) else tank
                 targets = list(suite_targets(tank, args.random, seed=s))
-                env = route_env(_trained_on(folder)["env_id"], tank=spec)
-                rows.append((f"suite: {name}", [env], targets))
+                rows.append((f"suite: {name}", [route_env(env_id, tank=spec)], targets))
         bar = tqdm(
             total=sum(len(jobs) for _, _, jobs in rows) * (1 + len(args.budget)),
             unit="search",

@@ -34,7 +34,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aftir_rl.core.errors import CheckpointError, ConfigError, PlanningError
-from aftir_rl.envs.ftl.route_env import ROUTE_SETTINGS
 from aftir_rl.planning.ftl.route import RouteSettings, plan_route
 from aftir_rl.planning.ftl.search import MAIN_VARIANTS
 from aftir_rl.rl.level_replay import LevelReplay
@@ -58,16 +57,16 @@ __all__ = [
     "REPLAY_FIT_EVERY",
 ]
 
-#: The teacher's search settings, tried in turn from the route as it is: the env's own, then
-#: the planner's next three; each searches with the env's moves (its ``max_change``), so
-#: that the section it plans next is one of them.
-TEACHER_SETTINGS = (ROUTE_SETTINGS, *MAIN_VARIANTS[1:4])
+#: The planner's search settings the teacher tries after the env's own, in turn, from the
+#: route as it is; each searches with the env's moves (its ``max_change``), so that the
+#: section it plans next is one of them.
+TEACHER_SETTINGS = MAIN_VARIANTS[1:4]
 
 
 def _teacher_settings(env: ArmRouteEnv, leads: tuple[float, ...]) -> list[RouteSettings]:
-    """:data:`TEACHER_SETTINGS` with the env's moves and ``leads``."""
+    """The env's settings, then :data:`TEACHER_SETTINGS`, with the env's moves and ``leads``."""
     change = env.settings.max_change
-    return [replace(v, max_change=change, leads=leads) for v in TEACHER_SETTINGS]
+    return [replace(v, max_change=change, leads=leads) for v in (env.settings, *TEACHER_SETTINGS)]
 
 
 #: Width of the policy's two hidden layers.
